@@ -1,0 +1,261 @@
+"""Common parts of every generated workbook: styles, the instruction sheet, named and validated
+input cells, formula cells with notes, text cells that never become formulas, the ``Results``
+sheet of the contract, sheet protection without password, and atomic saving.
+
+Writers lay out arrays with :class:`Book`; they never touch openpyxl styles directly.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import tempfile
+from pathlib import Path
+from typing import Iterable, Sequence
+
+from openpyxl import Workbook
+from openpyxl.comments import Comment
+from openpyxl.styles import Alignment, Border, Font, PatternFill, Protection, Side
+from openpyxl.workbook.defined_name import DefinedName
+from openpyxl.worksheet.datavalidation import DataValidation
+from openpyxl.worksheet.worksheet import Worksheet
+
+from . import __version__
+from .xlref import Block, array_formula, cell, check_name
+
+INPUT_FILL = PatternFill("solid", fgColor="FFF2CC")      # pale yellow: type here
+VALUE_FILL = PatternFill("solid", fgColor="EDEDED")      # grey: values computed by the core
+HEADER_FONT = Font(bold=True)
+TITLE_FONT = Font(bold=True, size=14)
+INPUT_FONT = Font(color="1F4E79")
+THIN = Side(style="thin", color="BFBFBF")
+BOX = Border(left=THIN, right=THIN, top=THIN, bottom=THIN)
+NUMBER_FORMAT = "0.000000"
+
+RESULTS = "Results"
+INSTRUCTIONS = "Instructions"
+
+
+def _finite(value: float, what: str) -> float:
+    value = float(value)
+    if not math.isfinite(value):
+        raise ValueError(f"{what}: {value!r} is not a finite number")
+    return value
+
+
+class Book:
+    """A workbook under construction.
+
+    ``kind`` and ``name`` go to the instruction sheet and the document properties.
+    """
+
+    def __init__(self, kind: str, name: str, title: str):
+        self.wb = Workbook()
+        self.kind = kind
+        self.name = name
+        ws = self.wb.active
+        ws.title = INSTRUCTIONS
+        self.instructions = ws
+        self._instr_row = 1
+        self.text(ws, 1, 1, title, font=TITLE_FONT)
+        self.text(ws, 2, 1, f"cmmwb {__version__} — task kind '{kind}', task '{name}'")
+        self._instr_row = 4
+        ws.column_dimensions["A"].width = 110
+        self.wb.properties.creator = f"cmmwb {__version__}"
+        self.wb.properties.title = title
+        self._validations: dict[tuple[str, float | None, float | None], DataValidation] = {}
+
+    # -- sheets ------------------------------------------------------------------------------
+    def sheet(self, title: str, *, protect: bool = True) -> Worksheet:
+        """A new sheet; formula cells are protected (no password), input cells stay editable."""
+        ws = self.wb.create_sheet(title)
+        if protect:
+            ws.protection.sheet = True
+            ws.protection.formatColumns = False
+            ws.protection.formatRows = False
+        return ws
+
+    def para(self, *lines: str, bold: bool = False) -> None:
+        """Lines of text on the instruction sheet."""
+        for line in lines:
+            self.text(self.instructions, self._instr_row, 1, line,
+                      font=HEADER_FONT if bold else None, wrap=True)
+            self._instr_row += 1
+
+    def gap(self) -> None:
+        self._instr_row += 1
+
+    # -- cells -------------------------------------------------------------------------------
+    @staticmethod
+    def text(ws: Worksheet, row: int, column: int, value: str, *, font: Font | None = None,
+             wrap: bool = False):
+        """A text cell.  Text is stored as a string even when it starts with ``=``, ``+``,
+        ``-`` or ``@``: it never becomes a formula."""
+        c = ws.cell(row=row, column=column)
+        c.value = str(value)
+        c.data_type = "s"
+        if font is not None:
+            c.font = font
+        if wrap:
+            c.alignment = Alignment(wrap_text=True, vertical="top")
+        return c
+
+    def header(self, ws: Worksheet, row: int, column: int, labels: Sequence[str],
+               notes: Sequence[str | None] | None = None) -> None:
+        """A row of bold column headers (each label carries its unit, e.g. ``u_um``)."""
+        for k, label in enumerate(labels):
+            c = self.text(ws, row, column + k, label, font=HEADER_FONT)
+            c.border = BOX
+            if notes and notes[k]:
+                self.note(c, notes[k])
+
+    def number(self, ws: Worksheet, row: int, column: int, value: float, *,
+               fmt: str | None = NUMBER_FORMAT, computed: bool = False):
+        """A plain number (an input without a name, e.g. a coordinate in a table).
+
+        ``computed=True`` marks a value computed by the core (grey), used only where a block is
+        too large for native formulas; the block's note says what produced it.
+        """
+        c = ws.cell(row=row, column=column)
+        c.value = _finite(value, f"{ws.title}!{cell(row, column, absolute=False)}")
+        if fmt:
+            c.number_format = fmt
+        if computed:
+            c.fill = VALUE_FILL
+        else:
+            self._style_input(ws, c)
+        return c
+
+    def _style_input(self, ws: Worksheet, c, lo: float | None = None, hi: float | None = None):
+        c.fill = INPUT_FILL
+        c.font = INPUT_FONT
+        c.border = BOX
+        c.protection = Protection(locked=False)
+        key = (ws.title, lo, hi)
+        dv = self._validations.get(key)
+        if dv is None:
+            if lo is not None and hi is not None:
+                dv = DataValidation(type="decimal", operator="between", formula1=repr(lo), formula2=repr(hi))
+            elif lo is not None:
+                dv = DataValidation(type="decimal", operator="greaterThanOrEqual", formula1=repr(lo))
+            else:
+                dv = DataValidation(type="decimal", operator="between", formula1="-1E+307", formula2="1E+307")
+            dv.error = "Enter a number" + (f" >= {lo}" if lo is not None else "") + (
+                f" and <= {hi}" if hi is not None else "") + "."
+            dv.errorTitle = "cmmwb input"
+            dv.showErrorMessage = True
+            ws.add_data_validation(dv)
+            self._validations[key] = dv
+        dv.add(c)
+
+    def input(self, ws: Worksheet, row: int, column: int, name: str | None, value: float, *,
+              lo: float | None = None, hi: float | None = None, note: str | None = None,
+              fmt: str | None = "General"):
+        """A named, validated, editable input cell bound to the workbook-level name ``name``."""
+        c = ws.cell(row=row, column=column)
+        c.value = _finite(value, name or cell(row, column, ws.title))
+        if fmt:
+            c.number_format = fmt
+        self._style_input(ws, c, lo, hi)
+        if name:
+            self.define(name, cell(row, column, ws.title))
+        if note:
+            self.note(c, note)
+        return c
+
+    def formula(self, ws: Worksheet, row: int, column: int, formula: str, *, note: str | None = None,
+                fmt: str | None = NUMBER_FORMAT, name: str | None = None):
+        """A single-cell formula (plain, non-array)."""
+        if not formula.startswith("="):
+            raise ValueError("a formula starts with '='")
+        c = ws.cell(row=row, column=column)
+        c.value = formula
+        if fmt:
+            c.number_format = fmt
+        if note:
+            self.note(c, note)
+        if name:
+            self.define(name, cell(row, column, ws.title))
+        return c
+
+    def array(self, target: Block, formula: str, *, note: str | None = None,
+              fmt: str | None = NUMBER_FORMAT) -> None:
+        """A legacy array formula filling ``target`` (also for single cells that do array
+        arithmetic, e.g. SUMPRODUCT over a product of ranges)."""
+        ws = self.wb[target.sheet]
+        ws.cell(row=target.row, column=target.column).value = array_formula(target, formula)
+        if fmt:
+            for r in target.rows():
+                for c in target.columns():
+                    ws.cell(row=r, column=c).number_format = fmt
+        if note:
+            self.note(ws.cell(row=target.row, column=target.column), note)
+
+    def define(self, name: str, ref: str) -> None:
+        """A workbook-level defined name for a cell or range (``ref`` includes the sheet)."""
+        check_name(name)
+        if name in self.wb.defined_names:
+            raise ValueError(f"defined name {name!r} used twice")
+        self.wb.defined_names[name] = DefinedName(name, attr_text=ref)
+
+    @staticmethod
+    def note(c, text: str) -> None:
+        """A cell note (comment): where the formula comes from (paper and equation)."""
+        cm = Comment(text, "cmmwb")
+        cm.width = 320
+        cm.height = 120
+        c.comment = cm
+
+    # -- the Results sheet ---------------------------------------------------------------------
+    def results(self, columns: Sequence[str], rows: Iterable[Sequence[str | float]],
+                notes: Sequence[str | None] | None = None) -> Worksheet:
+        """The contract's ``Results`` sheet: first row column names, one row per JSON entry.
+
+        Entries that start with ``=`` are formulas (the computed columns); any other string is
+        written as text (labels such as point ids), numbers as numbers.
+        """
+        ws = self.sheet(RESULTS)
+        self.header(ws, 1, 1, columns, notes)
+        for r, row in enumerate(rows, start=2):
+            for c, value in enumerate(row, start=1):
+                if isinstance(value, Formula):
+                    self.formula(ws, r, c, value)
+                elif isinstance(value, str):
+                    self.text(ws, r, c, value)
+                else:
+                    ws.cell(row=r, column=c).value = value
+        for k in range(len(columns)):
+            ws.column_dimensions[ws.cell(row=1, column=k + 1).column_letter].width = 14
+        ws.freeze_panes = "A2"
+        return ws
+
+    # -- saving --------------------------------------------------------------------------------
+    def save(self, path: Path) -> Path:
+        """Write the workbook atomically (temporary file in the same folder, then rename)."""
+        path = Path(path)
+        self.wb.move_sheet(INSTRUCTIONS, offset=-self.wb.sheetnames.index(INSTRUCTIONS))
+        self.wb.active = 0
+        return save_atomic(self.wb, path)
+
+
+class Formula(str):
+    """A string that *is* a formula: only these become formulas in :meth:`Book.results`.
+
+    Plain ``str`` values are always written as text, so a point label ``=SUM(A1)`` stays text.
+    """
+
+
+def save_atomic(wb: Workbook, path: Path) -> Path:
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=".xlsx.tmp", dir=path.parent)
+    os.close(fd)
+    try:
+        wb.save(tmp)
+        os.chmod(tmp, 0o644)
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+    return path

@@ -1,0 +1,212 @@
+"""The ``cmmwb`` command line (thin: parsing, output folders, error reporting).
+
+Exit status: 0 success, 2 bad input (one message naming the file and line/key/sheet/cell),
+1 an internal error (a bug: please report it with the task file).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import shutil
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+from xlfuncs.errors import ModelError
+
+from . import __version__
+from .errors import InputError
+from .jobs import available, job
+from .taskfile import KINDS, read_toml, task_kind_and_name
+
+EXAMPLES_DIR = Path(__file__).parent / "examples"
+
+
+class _Staging:
+    """A private folder inside DIR; its files move into DIR only when the whole run succeeded."""
+
+    def __init__(self, out_dir: Path):
+        self.out_dir = Path(out_dir)
+        self.created = not self.out_dir.exists()
+
+    def __enter__(self) -> Path:
+        try:
+            self.out_dir.mkdir(parents=True, exist_ok=True)
+        except OSError as e:
+            raise InputError(f"cannot create the output folder: {e.strerror}", file=self.out_dir) from None
+        self.tmp = Path(tempfile.mkdtemp(prefix=".cmmwb-", dir=self.out_dir))
+        return self.tmp
+
+    def __exit__(self, exc_type, exc, tb) -> None:
+        try:
+            if exc_type is None:
+                for f in sorted(self.tmp.iterdir()):
+                    os.replace(f, self.out_dir / f.name)
+        finally:
+            shutil.rmtree(self.tmp, ignore_errors=True)
+            if exc_type is not None and self.created:
+                shutil.rmtree(self.out_dir, ignore_errors=True)
+
+
+def build_task(task_path: Path, out_dir: Path, *, plots: bool = True) -> tuple[dict, list[Path]]:
+    """Build one task into ``out_dir``: workbook, JSON and plots, all or nothing."""
+    task_path = Path(task_path)
+    doc = read_toml(task_path)
+    kind, _ = task_kind_and_name(task_path, doc)
+    mod = job(kind)
+    try:
+        task = mod.load(task_path, doc)
+        results = mod.compute(task)
+    except ModelError as e:
+        raise InputError(str(e), file=task_path) from None
+    with _Staging(out_dir) as tmp:
+        name = results["name"]
+        mod.write_book(task, results, tmp / f"{name}.xlsx")
+        (tmp / f"{name}.json").write_text(json.dumps(results, indent=1, ensure_ascii=False) + "\n",
+                                          encoding="utf-8")
+        made = [tmp / f"{name}.xlsx", tmp / f"{name}.json"]
+        if plots:
+            made += list(mod.write_plots(task, results, tmp))
+    return results, [Path(out_dir) / p.name for p in made]
+
+
+# -- commands ----------------------------------------------------------------------------------
+
+def cmd_build(args) -> int:
+    results, files = build_task(Path(args.task), Path(args.out), plots=not args.no_plots)
+    for f in files:
+        print(f)
+    return 0
+
+
+def cmd_new(args) -> int:
+    if args.kind not in available():
+        raise InputError(f"task kind {args.kind!r} is not available in this installation")
+    out = Path(args.out)
+    if out.exists() and not args.force:
+        raise InputError("exists already (use --force to overwrite)", file=out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    text = job(args.kind).NEW_TASK
+    tmp = out.with_name(f".{out.name}.tmp")
+    tmp.write_text(text, encoding="utf-8")
+    os.replace(tmp, out)
+    for extra in getattr(job(args.kind), "NEW_TASK_FILES", {}).items():
+        (out.parent / extra[0]).write_text(extra[1], encoding="utf-8")
+    print(out)
+    return 0
+
+
+def cmd_demo(args) -> int:
+    out = Path(args.out)
+    t0 = time.perf_counter()
+    print(f"cmmwb {__version__} demo: building the worked examples of the three papers into {out}/")
+    for kind in available():
+        mod = job(kind)
+        for example in mod.EXAMPLES:
+            t = time.perf_counter()
+            results, files = build_task(EXAMPLES_DIR / example, out / kind)
+            print(f"\n[{kind}] {results['name']}  ({time.perf_counter() - t:.1f} s)")
+            for line in mod.summary(results):
+                print(f"    {line}")
+            for f in files:
+                print(f"    -> {f}")
+    try:
+        from . import diagnose_cli
+    except ModuleNotFoundError:
+        diagnose_cli = None
+    if diagnose_cli is not None:
+        diagnose_cli.demo(out / "diagnose")
+    print(f"\nDone in {time.perf_counter() - t0:.1f} s. Open the .xlsx files in Excel or LibreOffice; "
+          "every number is a formula you can follow back to the inputs.")
+    return 0
+
+
+def cmd_recalc(args) -> int:
+    from .recalc import RecalcError, recalculate, results_rows
+
+    path = Path(args.book)
+    if not path.exists():
+        raise InputError("no such file", file=path)
+    try:
+        values = recalculate(path, args.engine)
+    except RecalcError as e:
+        raise InputError(str(e), file=path) from None
+    if "Results" not in values:
+        raise InputError("no sheet named 'Results'", file=path, where="sheet Results")
+    rows = results_rows(values)
+    if args.json:
+        print(json.dumps(rows, indent=1, ensure_ascii=False, default=str))
+        return 0
+    if rows:
+        keys = list(rows[0])
+        print("\t".join(keys))
+        for r in rows:
+            print("\t".join(f"{v:.6g}" if isinstance(v, float) else str(v) for v in r.values()))
+    errors = [(k, v) for r in rows for k, v in r.items() if isinstance(v, str) and v.startswith("#")]
+    if errors:
+        print(f"cmmwb: {len(errors)} Results cells evaluate to errors, e.g. {errors[0][0]} = {errors[0][1]}",
+              file=sys.stderr)
+        return 1
+    return 0
+
+
+def parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="cmmwb", description=(
+        "Task-specific uncertainty of CMM measurements as live spreadsheet workbooks "
+        "(Forbes 2025, Wojtyla/Plowucha 2023, Forbes 2022)."))
+    p.add_argument("--version", action="version", version=f"cmmwb {__version__}")
+    sub = p.add_subparsers(dest="command", required=True)
+
+    s = sub.add_parser("demo", help="build every worked example of the three papers")
+    s.add_argument("--out", default="cmmwb-demo", help="output folder (default: cmmwb-demo)")
+    s.set_defaults(func=cmd_demo)
+
+    s = sub.add_parser("new", help="write a commented task file to start from")
+    s.add_argument("kind", choices=KINDS)
+    s.add_argument("--out", required=True, help="task file to write")
+    s.add_argument("--force", action="store_true", help="overwrite an existing file")
+    s.set_defaults(func=cmd_new)
+
+    s = sub.add_parser("build", help="task file -> workbook + JSON (+ plots)")
+    s.add_argument("task")
+    s.add_argument("--out", required=True, help="output folder")
+    s.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
+    s.set_defaults(func=cmd_build)
+
+    s = sub.add_parser("recalc", help="recompute a workbook headlessly and print its Results")
+    s.add_argument("book")
+    s.add_argument("--engine", choices=("formulas", "libreoffice"), default="formulas")
+    s.add_argument("--json", action="store_true", help="print the Results rows as JSON")
+    s.set_defaults(func=cmd_recalc)
+
+    for extra in ("read_cli", "diagnose_cli"):
+        try:
+            mod = __import__(f"generator.{extra}", fromlist=["register"])
+        except ModuleNotFoundError:
+            continue
+        mod.register(sub)
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = parser().parse_args(argv)
+    try:
+        return args.func(args)
+    except InputError as e:
+        print(f"cmmwb: error: {e}", file=sys.stderr)
+        return 2
+    except ModelError as e:
+        print(f"cmmwb: error: {e}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("cmmwb: interrupted", file=sys.stderr)
+        return 130
+    except Exception as e:  # a bug: say so plainly
+        if os.environ.get("CMMWB_DEBUG"):
+            raise
+        print(f"cmmwb: internal error ({type(e).__name__}: {e}); rerun with CMMWB_DEBUG=1 for a "
+              "traceback and please report it", file=sys.stderr)
+        return 1

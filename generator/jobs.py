@@ -1,0 +1,29 @@
+"""The task kinds and the modules that handle them (load, compute, write_book, write_plots)."""
+
+from __future__ import annotations
+
+import importlib
+from types import ModuleType
+
+JOB_MODULES = {
+    "pointcloud": "generator.pointcloud_job",
+    "budget": "generator.budget_job",
+    "feature": "generator.feature_job",
+}
+
+
+def job(kind: str) -> ModuleType:
+    """The job module of a task kind."""
+    return importlib.import_module(JOB_MODULES[kind])
+
+
+def available() -> list[str]:
+    """Kinds whose job module is present in this installation."""
+    out = []
+    for kind in JOB_MODULES:
+        try:
+            job(kind)
+        except ModuleNotFoundError:
+            continue
+        out.append(kind)
+    return out

@@ -1,0 +1,393 @@
+"""The ``pointcloud`` task: distance uncertainties from the point-cloud V_X (Forbes 2025).
+
+Workbook sheets: Instructions, Inputs, Points, Coords, V_R ... V_P, V_X, Budget (distances in the
+layout of Forbes 2025 Tables 4/5), MPE (C(d) of eq. 36 with Figures 4/5 as a chart), Results.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from xlfuncs import pointcloud as pc
+from xlfuncs.errors import ModelError
+
+from . import __version__
+from .book import Book, Formula
+from .errors import InputError
+from .taskfile import check_keys, number, read_point_cloud, string, table, task_kind_and_name
+from .vx_sheets import NATIVE_MAX_POINTS, point_block, write_point_cloud_model
+from .xlref import Block, block, cell
+
+KIND = "pointcloud"
+EXAMPLES = ["stepgauge_I_MPE1.toml", "stepgauge_I_MPE2.toml",
+            "stepgauge_II_MPE1.toml", "stepgauge_II_MPE2.toml"]
+MPE_GRID_POINTS = 201
+RESULT_COLUMNS = ["from", "to", "d_mm", "u_um", "U_um", "u_R_um", "u_PQ_um", "u_S_um",
+                  "u_ET_um", "u_ER_um", "u_P_um"]
+
+
+@dataclass
+class MPE:
+    A_um: float
+    B_mm: float
+    K: float
+    P_mm: float
+    L_max_mm: float
+
+
+@dataclass
+class Task:
+    path: Path
+    name: str
+    cloud: pc.PointCloud
+    params: pc.Parameters
+    pairs: np.ndarray
+    groups: list[str]
+    K: float
+    mpe: MPE | None = None
+    notes: list[str] = field(default_factory=list)
+
+
+def load(path: Path, doc: dict) -> Task:
+    path = Path(path)
+    kind, name = task_kind_and_name(path, doc)
+    check_keys(path, doc, "task file", {"task", "mpe", "parameters", "probes", "points", "distances"})
+    check_keys(path, table(path, doc, "task"), "task", {"kind", "name", "notes", "K"})
+    cloud, params, pts = read_point_cloud(path, doc)
+    notes = doc["task"].get("notes", [])
+    if isinstance(notes, str):
+        notes = [notes]
+    if not isinstance(notes, list) or not all(isinstance(n, str) for n in notes):
+        raise InputError("must be text or a list of texts", file=path, where="[task] notes")
+    mpe = None
+    K = number(path, doc["task"], "task", "K", 2.0, positive=True)
+    if "mpe" in doc:
+        t = table(path, doc, "mpe")
+        check_keys(path, t, "mpe", {"A_um", "B_mm", "K", "P_mm", "L_max_mm"})
+        longest = float(np.max(np.linalg.norm([p.offset_mm for p in cloud.probes], axis=1)))
+        mpe = MPE(number(path, t, "mpe", "A_um", positive=True), number(path, t, "mpe", "B_mm", positive=True),
+                  number(path, t, "mpe", "K", 2.0, positive=True), number(path, t, "mpe", "P_mm", longest, lo=0.0),
+                  number(path, t, "mpe", "L_max_mm", 1000.0, positive=True))
+        K = mpe.K
+    index = {lab: i for i, lab in enumerate(cloud.labels)}
+    raw = doc.get("distances")
+    pairs: list[tuple[int, int]] = []
+    groups: list[str] = []
+    if raw is None:
+        pairs = [tuple(p) for p in pc.all_pairs(cloud.m)]
+        groups = [""] * len(pairs)
+    else:
+        if not isinstance(raw, list) or not all(isinstance(d, dict) for d in raw):
+            raise InputError("must be a list of {from, to} tables", file=path, where="[[distances]]")
+        for n, d in enumerate(raw, start=1):
+            section = f"[[distances]] #{n}"
+            check_keys(path, d, section, {"from", "to", "group"})
+            a = string(path, d, section, "from")
+            b = string(path, d, section, "to")
+            g = string(path, d, section, "group", "")
+            for key, lab in (("from", a), ("to", b)):
+                if lab != "*" and lab not in index:
+                    raise InputError(f"unknown point {lab!r}", file=path, where=f"{section} {key}")
+            if a == "*":
+                raise InputError("'*' is allowed for 'to' only", file=path, where=f"{section} from")
+            targets = [j for j in range(cloud.m) if j != index[a]] if b == "*" else [index[b]]
+            for j in targets:
+                if j == index[a]:
+                    raise InputError("a distance needs two different points", file=path, where=section)
+                pairs.append((index[a], j))
+                groups.append(g)
+    if not pairs:
+        raise InputError("no distances to evaluate (one point only?)", file=path, where="[points]")
+    pairs_arr = np.array(pairs, dtype=int)
+    try:
+        pc.check_pairs(cloud, pairs_arr)
+    except ModelError as e:
+        raise InputError(str(e), file=path, where="[[distances]]" if raw is not None else "[points]") from None
+    return Task(path, name, cloud, params, pairs_arr, groups, K, mpe, list(notes))
+
+
+def compute(task: Task) -> dict:
+    r = pc.distance_components(task.cloud, task.params, task.pairs)
+    labels = task.cloud.labels
+    out = {"name": task.name, "kind": KIND, "version": __version__, "distances": []}
+    for q, (i, j) in enumerate(task.pairs):
+        u = float(r["u_um"][q])
+        out["distances"].append({
+            "from": labels[i], "to": labels[j], "group": task.groups[q],
+            "d_mm": float(r["d_mm"][q]), "u_um": u, "U_um": task.K * u,
+            "components_um": {f: float(r[f"u_{f}_um"][q]) for f in pc.FACTORS},
+        })
+    out["K"] = task.K
+    if task.mpe is not None:
+        m = task.mpe
+        chk = pc.mpe_check(task.params, m.A_um, m.B_mm, m.K, m.P_mm, m.L_max_mm, MPE_GRID_POINTS)
+        scaled = pc.conforming_parameters(task.params, chk.C_max)
+        out["mpe_check"] = {
+            "K": m.K, "C_max": chk.C_max, "d_at_max_mm": chk.d_at_max_mm, "conforms": chk.conforms,
+            "A_um": m.A_um, "B_mm": m.B_mm, "P_mm": m.P_mm, "L_max_mm": m.L_max_mm,
+            "grid_points": MPE_GRID_POINTS,
+            "conforming_parameters": {k: getattr(scaled, k) for k in pc.Parameters.__dataclass_fields__},
+        }
+    return out
+
+
+# -- workbook ----------------------------------------------------------------------------------
+
+def write_book(task: Task, results: dict, path: Path) -> None:
+    if task.cloud.m > NATIVE_MAX_POINTS:
+        raise InputError(f"{task.cloud.m} points: the workbook holds at most {NATIVE_MAX_POINTS} points "
+                         "with native V_X formulas (the JSON has every result)", file=task.path,
+                         where="[points]")
+    book = Book(KIND, task.name, f"Point-cloud uncertainty of distances — {task.name}")
+    _instructions(book, task)
+    extra = [("K", task.K, "1", "coverage factor for U = K u and for C(d)", 0.0)]
+    if task.mpe is not None:
+        m = task.mpe
+        extra = [("A_um", m.A_um, "µm", "MPE: E = A + d/B (A)", 0.0),
+                 ("B_mm", m.B_mm, "mm/µm", "MPE: E = A + d/B (B)", 0.0),
+                 ("K", m.K, "1", "coverage factor K of eq. (6) and (36); U = K u", 0.0),
+                 ("P_mm", m.P_mm, "mm", "longest probe length P in eq. (33)", 0.0),
+                 ("L_max_mm", m.L_max_mm, "mm", "largest distance of the MPE check", 0.0)]
+    layout = write_point_cloud_model(book, task.cloud, task.params, extra)
+    budget = _write_budget(book, task, layout)
+    if task.mpe is not None:
+        _write_mpe(book, task)
+    rows = []
+    for q, (i, j) in enumerate(task.pairs):
+        r = budget + q
+        rows.append([task.cloud.labels[i], task.cloud.labels[j]] +
+                    [Formula(f"={cell(r, c, 'Budget')}") for c in range(4, 13)])
+    book.results(RESULT_COLUMNS, rows)
+    book.save(path)
+
+
+def _instructions(book: Book, task: Task) -> None:
+    book.para("What this workbook computes", bold=True)
+    book.para(
+        "The standard uncertainty u(d) of distances between measured points and its contributions from six "
+        "CMM influence factors, following A. Forbes, 'CMM influence factors and uncertainty associated with "
+        "length measurement', Appl. Sci. 2025, 15, 271: the point-cloud variance V_X (eq. 28) is built from "
+        "the hyper-parameters on 'Inputs' and the points on 'Points'; each distance's u is the quadratic "
+        "form of eq. (29) over the 3x3 blocks of V_X; the components are eq. (30).",
+        "No Monte Carlo, no macros: every number is a native formula you can click and follow back.")
+    book.gap()
+    book.para("How to use it", bold=True)
+    book.para(
+        "1. Edit the yellow cells only: hyper-parameters and MPE on 'Inputs', probe offsets, point "
+        "coordinates and normals on 'Points'. Everything else recalculates.",
+        "2. Structural changes (more points, another probe, other distances) go through the task file: "
+        "`cmmwb read` this workbook, edit the task, `cmmwb build` again.",
+        "3. 'Budget' is the distance table in the layout of Forbes 2025 Tables 4/5; 'Results' is the "
+        "machine-readable summary; 'MPE' compares K u(d) with the MPE statement (eq. 36, Figures 4/5).")
+    book.gap()
+    book.para("Sheets", bold=True)
+    book.para(
+        "Inputs — hyper-parameters (named cells), probes, V_B of eq. (13).",
+        "Points — coordinates x_i (mm), outward unit normals n_i, probe; derived offset p_k(i) and ram position x_i - p_k(i).",
+        "Coords — one row per coordinate: the vectors the V blocks are built from, the rows of G_X|S (eq. 11) and G_k (eq. 24).",
+        "V_R, V_PQ, V_S, V_ET, V_ER, V_P — the six 3m x 3m contributions (µm²); V_X their sum (eq. 28).",
+        "Budget — d, u, U and u per factor for each distance (µm).",
+        "MPE — C(d) = K u(d)/(A + d/B) from the summary formula (33)-(34), its maximum and the conforming rescaling (section 6.8).")
+    book.gap()
+    book.para("Conventions (see docs/errata.md)", bold=True)
+    book.para(
+        "Units: coordinates mm, uncertainties µm, scale/squareness ppm, rotations µrad; the MPE is A + d/B µm with d in mm.",
+        "Scale/squareness, ET and ER act on the ram positions x_i - p_k(i) (Forbes 2025 sections 4.3, 5.3, 5.4).",
+        "Probing effects of different probes are independent (section 5.5); P0 is a per-probe radius error.",
+        "The MPE check evaluates eq. (33) on a grid of "
+        f"{MPE_GRID_POINTS} distances from 0 to L_max; C_max is the grid maximum.",
+        *task.notes)
+
+
+def _write_budget(book: Book, task: Task, layout) -> int:
+    ws = book.sheet("Budget")
+    cols = ["from", "to", "group", "d_mm", "u_um", "U_um", "u_R_um", "u_PQ_um", "u_S_um", "u_ET_um",
+            "u_ER_um", "u_P_um", "dx_mm", "dy_mm", "dz_mm", "nx", "ny", "nz"]
+    notes = [None, None, "free label (e.g. LL, RR, LR, FF of Forbes 2025 Figures 6/7)",
+             "d_ij = ||x_j - x_i||", "u(d_ij), eq. (30): root sum of squares of the components",
+             "U = K u", *["u_F(d_ij) = sqrt(n^T (V_ii + V_jj - V_ij - V_ji) n), eq. (29) on V_F"] * 6,
+             "x_j - x_i", None, None, "n_ij = (x_j - x_i)/d_ij", None, None]
+    book.header(ws, 1, 1, cols, notes)
+    X = layout.X
+    first = 2
+    for q, (i, j) in enumerate(task.pairs):
+        r = first + q
+        book.text(ws, r, 1, task.cloud.labels[i])
+        book.text(ws, r, 2, task.cloud.labels[j])
+        book.text(ws, r, 3, task.groups[q])
+        for a in range(3):
+            book.formula(ws, r, 13 + a, f"={X.cell(j, a)}-{X.cell(i, a)}")
+        dvec = block(r, 13, 1, 3)
+        book.formula(ws, r, 4, f"=SQRT(SUMSQ({dvec}))", fmt="0.0000")
+        for a in range(3):
+            book.formula(ws, r, 16 + a, f"={cell(r, 13 + a)}/{cell(r, 4)}")
+        n = block(r, 16, 1, 3)
+        for k, f in enumerate(pc.FACTORS):
+            V = layout.V[f]
+            s = f"{point_block(V, i, i).ref}+{point_block(V, j, j).ref}-{point_block(V, i, j).ref}-{point_block(V, j, i).ref}"
+            book.array(Block("Budget", r, 7 + k, 1, 1),
+                       f"=SQRT(MAX(0,SUMPRODUCT(({s})*MMULT(TRANSPOSE({n}),{n}))))", fmt="0.0000")
+        book.formula(ws, r, 5, f"=SQRT(SUMSQ({block(r, 7, 1, 6)}))", fmt="0.0000")
+        book.formula(ws, r, 6, f"=K*{cell(r, 5)}", fmt="0.0000")
+    ws.freeze_panes = "D2"
+    for c, w in zip("ABC", (8, 8, 7)):
+        ws.column_dimensions[c].width = w
+    _budget_chart(book, ws, task, first)
+    return first
+
+
+def _budget_chart(book: Book, ws, task: Task, first: int) -> None:
+    from openpyxl.chart import Reference, ScatterChart, Series
+
+    groups = [g for g in dict.fromkeys(task.groups)]
+    chart = ScatterChart()
+    chart.title = "Expanded uncertainty K u(d) against d (Forbes 2025 Figures 6/7)"
+    chart.x_axis.title = "d / mm"
+    chart.y_axis.title = "U / µm"
+    chart.style = 13
+    # contiguous runs of one group make one series each
+    start = 0
+    n = len(task.pairs)
+    while start < n:
+        end = start
+        while end + 1 < n and task.groups[end + 1] == task.groups[start]:
+            end += 1
+        x = Reference(ws, min_col=4, min_row=first + start, max_row=first + end)
+        y = Reference(ws, min_col=6, min_row=first + start, max_row=first + end)
+        s = Series(y, x, title=task.groups[start] or "distances")
+        s.marker.symbol = "circle"
+        s.graphicalProperties.line.noFill = True
+        chart.series.append(s)
+        start = end + 1
+    chart.height, chart.width = 9, 16
+    if len(groups) <= 12:
+        ws.add_chart(chart, "T2")
+
+
+def _write_mpe(book: Book, task: Task) -> None:
+    ws = book.sheet("MPE")
+    cols = ["d_mm", "MPE_um", "K_u_um", "K_sigma_A_um", "K_u_S_um", "K_u_ET_um", "K_u_ER_um", "C"]
+    notes = ["grid 0 .. L_max_mm", "A + d/B", "K u(d), eq. (33)", "K sigma_A, eq. (34)",
+             "K sqrt(sigma_S^2 + sigma_Sa^2 + sigma_Q^2) d", "K sqrt(2 sigma_ET^2 (1 - exp(-d^2/lambda_ET^2)))",
+             "K sqrt(2 sigma_ER^2 P^2 (1 - exp(-d^2/lambda_ER^2)))", "C(d) = K u(d)/(A + d/B), eq. (36)"]
+    book.header(ws, 1, 1, cols, notes)
+    n = MPE_GRID_POINTS
+    first = 2
+    for k in range(n):
+        r = first + k
+        d = cell(r, 1)
+        book.formula(ws, r, 1, f"=L_max_mm*{k}/{n - 1}", fmt="0.0")
+        book.formula(ws, r, 2, f"=A_um+{d}/B_mm", fmt="0.0000")
+        book.formula(ws, r, 4, "=K*SQRT(2*(sigma_R_um^2+sigma_PQ_um^2+sigma_P_um^2+2*sigma_P0_um^2))", fmt="0.0000")
+        book.formula(ws, r, 5, f"=K*SQRT(sigma_S_ppm^2+sigma_Sa_ppm^2+sigma_Q_ppm^2)*0.001*{d}", fmt="0.0000")
+        book.formula(ws, r, 6, f"=K*SQRT(2*sigma_ET_um^2*(1-EXP(-({d}^2)/(lambda_ET_mm^2+(lambda_ET_mm=0)))))",
+                     fmt="0.0000")
+        book.formula(ws, r, 7, f"=K*SQRT(2*(sigma_ER_urad*0.001*P_mm)^2*(1-EXP(-({d}^2)/(lambda_ER_mm^2+(lambda_ER_mm=0)))))",
+                     fmt="0.0000")
+        book.formula(ws, r, 3, f"=SQRT(SUMSQ({block(r, 4, 1, 4)}))", fmt="0.0000")
+        book.formula(ws, r, 8, f"={cell(r, 3)}/{cell(r, 2)}", fmt="0.0000")
+    Crange = block(first, 8, n, 1)
+    book.text(ws, 1, 10, "C_max")
+    book.formula(ws, 1, 11, f"=MAX({Crange})", name="C_max", fmt="0.0000",
+                 note="max of C(d) over the grid, Forbes 2025 section 6.8")
+    book.text(ws, 2, 10, "d_at_max_mm")
+    book.formula(ws, 2, 11, f"=L_max_mm*(MATCH(C_max,{Crange},0)-1)/{n - 1}", name="d_at_max_mm", fmt="0.0")
+    book.text(ws, 4, 10, "Conforming parameters: every standard deviation divided by C_max when C_max > 1 (section 6.8)")
+    r = 5
+    for key in pc.Parameters.__dataclass_fields__:
+        book.text(ws, r, 10, key)
+        scaled = key in pc.Parameters.SIGMAS
+        book.formula(ws, r, 11, f"={key}/MAX(1,C_max)" if scaled else f"={key}", fmt="0.0000")
+        r += 1
+    ws.freeze_panes = "A2"
+    from openpyxl.chart import Reference, ScatterChart, Series
+
+    chart = ScatterChart()
+    chart.title = "MPE and K u(d) with components (Forbes 2025 Figures 4/5)"
+    chart.x_axis.title = "d / mm"
+    chart.y_axis.title = "µm"
+    x = Reference(ws, min_col=1, min_row=first, max_row=first + n - 1)
+    for c in range(2, 8):
+        y = Reference(ws, min_col=c, min_row=1, max_row=first + n - 1)
+        s = Series(y, x, title_from_data=True)
+        s.marker.symbol = "none"
+        s.smooth = False
+        chart.series.append(s)
+    chart.height, chart.width = 10, 18
+    ws.add_chart(chart, "M4")
+
+
+# -- plots -------------------------------------------------------------------------------------
+
+def write_plots(task: Task, results: dict, out_dir: Path) -> list[Path]:
+    from . import plots
+
+    files = [plots.distance_plot(results, out_dir / f"{task.name}_distances.png")]
+    if task.mpe is not None:
+        m = task.mpe
+        d = np.linspace(0, m.L_max_mm, MPE_GRID_POINTS)
+        comp = pc.summary_components_um(d, task.params, m.P_mm)
+        files.append(plots.mpe_plot(d, pc.mpe_um(d, m.A_um, m.B_mm), comp, m.K,
+                                    out_dir / f"{task.name}_mpe.png", task.name))
+    return files
+
+
+def summary(results: dict) -> list[str]:
+    ds = results["distances"]
+    longest = max(ds, key=lambda d: d["d_mm"])
+    lines = [f"{len(ds)} distances; longest {longest['from']}-{longest['to']} d = {longest['d_mm']:.2f} mm: "
+             f"u = {longest['u_um']:.2f} µm, U = {longest['U_um']:.2f} µm"]
+    if "mpe_check" in results:
+        c = results["mpe_check"]
+        lines.append(f"MPE check: C_max = {c['C_max']:.3f} at d = {c['d_at_max_mm']:.0f} mm "
+                     f"({'conforms' if c['conforms'] else 'violates the MPE: divide the sigmas by C_max'})")
+    return lines
+
+
+NEW_TASK = '''# cmmwb point-cloud task (Forbes 2025): distance uncertainties from six CMM influence factors.
+# Units: coordinates mm, uncertainties µm, scale/squareness ppm (1e-6), rotations µrad.
+# Build with:  cmmwb build THIS.toml --out DIR
+
+[task]
+kind = "pointcloud"
+name = "my_pointcloud"          # file stem of the outputs
+# K = 2                         # coverage factor for U when there is no [mpe]
+
+[mpe]                           # E = A + L/B (µm, L in mm); K = coverage factor for C(d)
+A_um = 1.0
+B_mm = 500
+K = 2
+P_mm = 50                       # longest probe length in eq. (33); default: longest probe offset
+# L_max_mm = 1000               # largest distance of the MPE check
+
+[parameters]                    # Forbes 2025 Table 3 (MPE1 column); absent ones are 0
+sigma_R_um = 0.20               # repeatability
+sigma_S_ppm = 0.7               # global scale
+sigma_Sa_ppm = 0.7              # per-axis scale
+sigma_Q_ppm = 0.7               # squareness (µrad)
+sigma_PQ_um = 0.20              # probe qualification, per probe unless a probe sets its own
+sigma_ET_um = 0.2               # location errors (GP)
+lambda_ET_mm = 200
+sigma_ER_urad = 4.0             # rotation errors (GP)
+lambda_ER_mm = 400
+sigma_P0_um = 0.10              # probe radius
+sigma_P_um = 0.10               # direction-dependent probing (GP)
+lambda_P = 0.5
+
+[[probes]]
+id = "P1"
+offset_mm = [0.0, 0.0, -20.0]   # stylus tip centre from the probe-head reference point
+# sigma_PQ_um = 0.1             # optional per-probe override (also sigma_P0_um, sigma_P_um, lambda_P)
+
+[points]
+file = "points.csv"             # id,x,y,z,nx,ny,nz,probe  (mm; n = outward unit normal)
+
+# Optional: which distances (default: every pair of points).  to = "*" means every other point.
+# [[distances]]
+# from = "F1"
+# to = "F2"
+# group = "LR"                  # free label used in the charts
+'''

@@ -1,0 +1,159 @@
+"""Headless recalculation of a generated workbook.
+
+* ``formulas``: the pure-Python engine, in process.
+* ``libreoffice``: a real LibreOffice (``soffice --headless``) with a private profile that forces a
+  full recalculation on load (``OOXMLRecalcMode`` = 0, see ``shared/design.md``), converting to a
+  fresh ``.xlsx`` whose cached values are then read with openpyxl.
+
+Both return ``{sheet name: {cell coordinate: value}}`` for every cell that holds a value.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import shutil
+import subprocess
+import tempfile
+from pathlib import Path
+from typing import Any
+
+import openpyxl
+from openpyxl.utils import range_boundaries, get_column_letter
+
+ENGINES = ("formulas", "libreoffice")
+Values = dict[str, dict[str, Any]]
+
+_KEY = re.compile(r"^'?\[(?P<book>[^\]]+)\](?P<sheet>.+?)'?!(?P<ref>[A-Z]+[0-9]+(:[A-Z]+[0-9]+)?)$")
+
+_XCU = """<?xml version="1.0" encoding="UTF-8"?>
+<oor:items xmlns:oor="http://openoffice.org/2001/registry" xmlns:xs="http://www.w3.org/2001/XMLSchema" xmlns:xsi="http://www.w3.org/2001/XMLSchema-instance">
+<item oor:path="/org.openoffice.Office.Calc/Formula/Load"><prop oor:name="OOXMLRecalcMode" oor:op="fuse"><value>0</value></prop></item>
+<item oor:path="/org.openoffice.Office.Calc/Formula/Load"><prop oor:name="ODFRecalcMode" oor:op="fuse"><value>0</value></prop></item>
+</oor:items>
+"""
+
+
+class RecalcError(RuntimeError):
+    """The engine could not recalculate the workbook."""
+
+
+def soffice() -> str | None:
+    """Path of the LibreOffice executable, or None."""
+    for name in ("soffice", "libreoffice"):
+        found = shutil.which(name)
+        if found:
+            return found
+    for cand in ("/usr/bin/soffice", "/usr/lib/libreoffice/program/soffice"):
+        if os.path.exists(cand):
+            return cand
+    return None
+
+
+def recalculate(path: str | Path, engine: str = "formulas", timeout_s: float = 600) -> Values:
+    """Recompute every formula of the workbook at ``path`` and return all cell values."""
+    path = Path(path)
+    if engine == "formulas":
+        return _recalc_formulas(path)
+    if engine == "libreoffice":
+        return _recalc_libreoffice(path, timeout_s)
+    raise ValueError(f"unknown engine {engine!r}; choose one of {', '.join(ENGINES)}")
+
+
+def _sheet_map(path: Path) -> dict[str, str]:
+    wb = openpyxl.load_workbook(path, read_only=True)
+    try:
+        return {s.upper(): s for s in wb.sheetnames}
+    finally:
+        wb.close()
+
+
+def _recalc_formulas(path: Path) -> Values:
+    import formulas  # imported lazily: slow import
+
+    names = _sheet_map(path)
+    model = formulas.ExcelModel().loads(str(path)).finish()
+    sol = model.calculate()
+    out: Values = {s: {} for s in names.values()}
+    for key, rng in sol.items():
+        m = _KEY.match(str(key))
+        if not m:
+            continue
+        sheet = names.get(m.group("sheet").upper())
+        if sheet is None:
+            continue
+        values = getattr(rng, "value", rng)
+        c0, r0, c1, r1 = range_boundaries(m.group("ref"))
+        try:
+            import numpy as np
+
+            arr = np.asarray(values, dtype=object).reshape(r1 - r0 + 1, c1 - c0 + 1)
+        except Exception:  # pragma: no cover - unexpected shape from the engine
+            continue
+        for dr in range(r1 - r0 + 1):
+            for dc in range(c1 - c0 + 1):
+                v = arr[dr, dc]
+                if hasattr(v, "item") and not isinstance(v, str):
+                    v = v.item()
+                if v is None or (isinstance(v, str) and v == ""):
+                    continue
+                if type(v).__name__ == "XlError":
+                    v = str(v)
+                out[sheet][f"{get_column_letter(c0 + dc)}{r0 + dr}"] = v
+    return out
+
+
+def _recalc_libreoffice(path: Path, timeout_s: float) -> Values:
+    exe = soffice()
+    if exe is None:
+        raise RecalcError("LibreOffice (soffice) is not installed")
+    with tempfile.TemporaryDirectory(prefix="cmmwb_lo_") as tmp:
+        tmp = Path(tmp)
+        profile = tmp / "profile"
+        (profile / "user").mkdir(parents=True)
+        (profile / "user" / "registrymodifications.xcu").write_text(_XCU)
+        src = tmp / "in" / path.name
+        src.parent.mkdir()
+        shutil.copy(path, src)
+        outdir = tmp / "out"
+        cmd = [exe, f"-env:UserInstallation={profile.as_uri()}", "--headless", "--norestore",
+               "--convert-to", "xlsx:Calc MS Excel 2007 XML", "--outdir", str(outdir), str(src)]
+        proc = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout_s,
+                              env={**os.environ, "HOME": str(tmp)})
+        result = outdir / path.name
+        if proc.returncode != 0 or not result.exists():
+            raise RecalcError(f"LibreOffice failed on {path.name}: {proc.stderr.strip() or proc.stdout.strip()}")
+        return read_cached(result)
+
+
+def read_cached(path: str | Path) -> Values:
+    """Cached values of every cell of a saved workbook (as LibreOffice or Excel left them)."""
+    wb = openpyxl.load_workbook(path, data_only=True)
+    try:
+        out: Values = {}
+        for ws in wb.worksheets:
+            cells = {}
+            for row in ws.iter_rows():
+                for c in row:
+                    if c.value is not None:
+                        cells[c.coordinate] = c.value
+            out[ws.title] = cells
+        return out
+    finally:
+        wb.close()
+
+
+def results_rows(values: Values, sheet: str = "Results") -> list[dict[str, Any]]:
+    """The ``Results`` sheet as a list of dicts keyed by the header row."""
+    cells = values[sheet]
+    header = []
+    c = 1
+    while f"{get_column_letter(c)}1" in cells:
+        header.append(str(cells[f"{get_column_letter(c)}1"]))
+        c += 1
+    rows = []
+    r = 2
+    while any(f"{get_column_letter(k + 1)}{r}" in cells for k in range(len(header))):
+        rows.append({h: cells.get(f"{get_column_letter(k + 1)}{r}") for k, h in enumerate(header)})
+        r += 1
+    return rows

@@ -1,0 +1,276 @@
+"""Reading and validating task files (TOML) and point tables (CSV).
+
+Every problem becomes one :class:`~generator.errors.InputError` naming the file and the key or
+line, so the CLI can print it and exit with status 2.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import math
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from xlfuncs.errors import ModelError
+from xlfuncs.pointcloud import Parameters, PointCloud, Probe
+
+from .errors import InputError
+
+KINDS = ("pointcloud", "budget", "feature")
+MAX_TASK_BYTES = 16 * 1024 * 1024
+MAX_CSV_BYTES = 256 * 1024 * 1024
+NORMAL_TOL = 1e-3
+
+
+def read_toml(path: Path) -> dict:
+    """Parse a task file; syntax errors name the line (tomllib reports line and column)."""
+    path = Path(path)
+    try:
+        raw = path.read_bytes()
+    except OSError as e:
+        raise InputError(f"cannot read the task file: {e.strerror}", file=path) from None
+    if len(raw) > MAX_TASK_BYTES:
+        raise InputError(f"task file larger than {MAX_TASK_BYTES // 2**20} MiB", file=path)
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as e:
+        raise InputError(f"not UTF-8 text (byte {e.start})", file=path) from None
+    try:
+        return tomllib.loads(text)
+    except tomllib.TOMLDecodeError as e:
+        raise InputError(f"malformed TOML: {e}", file=path) from None
+
+
+def task_kind_and_name(path: Path, doc: dict) -> tuple[str, str]:
+    task = table(path, doc, "task")
+    kind = string(path, task, "task", "kind")
+    if kind not in KINDS:
+        raise InputError(f"unknown kind {kind!r}; expected one of {', '.join(KINDS)}", file=path,
+                         where="[task] kind")
+    name = string(path, task, "task", "name")
+    if not name or any(ch in name for ch in '/\\:*?"<>|') or name.startswith(".") or len(name) > 100:
+        raise InputError(f"{name!r} is not usable as a file name", file=path, where="[task] name")
+    return kind, name
+
+
+# -- typed getters ---------------------------------------------------------------------------
+
+def table(path: Path, doc: dict, key: str, required: bool = True) -> dict:
+    value = doc.get(key)
+    if value is None:
+        if required:
+            raise InputError(f"missing table [{key}]", file=path, where=f"[{key}]")
+        return {}
+    if not isinstance(value, dict):
+        raise InputError(f"[{key}] must be a table", file=path, where=f"[{key}]")
+    return value
+
+
+def string(path: Path, tbl: dict, section: str, key: str, default: str | None = None) -> str:
+    value = tbl.get(key, default)
+    if value is None:
+        raise InputError("missing key", file=path, where=f"[{section}] {key}")
+    if not isinstance(value, str):
+        raise InputError(f"must be text, got {value!r}", file=path, where=f"[{section}] {key}")
+    return value
+
+
+def number(path: Path, tbl: dict, section: str, key: str, default: float | None = None, *,
+           lo: float | None = None, positive: bool = False) -> float:
+    """A finite number (ints and floats; booleans and strings are errors)."""
+    value = tbl.get(key, default)
+    where = f"[{section}] {key}"
+    if value is None:
+        raise InputError("missing key", file=path, where=where)
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise InputError(f"must be a number, got {value!r}", file=path, where=where)
+    value = float(value)
+    if not math.isfinite(value):
+        raise InputError(f"must be a finite number, got {value!r}", file=path, where=where)
+    if lo is not None and value < lo:
+        raise InputError(f"must be >= {lo:g}, got {value:g}", file=path, where=where)
+    if positive and value <= 0:
+        raise InputError(f"must be positive, got {value:g}", file=path, where=where)
+    return value
+
+
+def vector3(path: Path, tbl: dict, section: str, key: str) -> tuple[float, float, float]:
+    value = tbl.get(key)
+    where = f"{section} {key}"
+    if not isinstance(value, list) or len(value) != 3:
+        raise InputError("must be a list of three numbers [x, y, z]", file=path, where=where)
+    out = []
+    for v in value:
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(float(v)):
+            raise InputError(f"must be three finite numbers, got {value!r}", file=path, where=where)
+        out.append(float(v))
+    return tuple(out)  # type: ignore[return-value]
+
+
+def check_keys(path: Path, tbl: dict, section: str, allowed: set[str]) -> None:
+    """Unknown keys are errors: a typo must not silently become a zero parameter."""
+    for key in tbl:
+        if key not in allowed:
+            raise InputError(f"unknown key (expected one of {', '.join(sorted(allowed))})",
+                             file=path, where=f"[{section}] {key}")
+
+
+# -- the point-cloud model: [parameters], [[probes]], [points] --------------------------------
+
+PARAMETER_KEYS = tuple(Parameters.__dataclass_fields__)
+PROBE_OVERRIDES = ("sigma_PQ_um", "sigma_P0_um", "sigma_P_um", "lambda_P")
+
+
+def read_parameters(path: Path, doc: dict) -> Parameters:
+    tbl = table(path, doc, "parameters", required=False)
+    check_keys(path, tbl, "parameters", set(PARAMETER_KEYS))
+    values = {k: number(path, tbl, "parameters", k, 0.0, lo=0.0) for k in PARAMETER_KEYS}
+    try:
+        return Parameters(**values)
+    except ModelError as e:
+        raise InputError(str(e), file=path, where="[parameters]") from None
+
+
+def read_probes(path: Path, doc: dict) -> tuple[Probe, ...]:
+    raw = doc.get("probes")
+    if raw is None:
+        return (Probe("P1"),)
+    if not isinstance(raw, list) or not raw or not all(isinstance(p, dict) for p in raw):
+        raise InputError("must be one or more [[probes]] tables", file=path, where="[[probes]]")
+    probes = []
+    seen = set()
+    for n, p in enumerate(raw, start=1):
+        section = f"[[probes]] #{n}"
+        check_keys(path, p, section, {"id", "offset_mm", *PROBE_OVERRIDES})
+        pid = string(path, p, section, "id").strip()
+        if not pid:
+            raise InputError("empty probe id", file=path, where=f"{section} id")
+        if pid in seen:
+            raise InputError(f"probe id {pid!r} used twice", file=path, where=f"{section} id")
+        seen.add(pid)
+        offset = vector3(path, p, section, "offset_mm") if "offset_mm" in p else (0.0, 0.0, 0.0)
+        over = {k: number(path, p, section, k, lo=0.0) for k in PROBE_OVERRIDES if k in p}
+        probes.append(Probe(pid, offset, **over))
+    return tuple(probes)
+
+
+@dataclass(frozen=True)
+class PointTable:
+    labels: tuple[str, ...]
+    X_mm: np.ndarray
+    N: np.ndarray
+    probe_ids: tuple[str, ...]
+    lines: tuple[int, ...]  # line of each point in its file (for messages)
+
+
+POINT_COLUMNS = {
+    "id": ("id",), "x": ("x", "x_mm"), "y": ("y", "y_mm"), "z": ("z", "z_mm"),
+    "nx": ("nx",), "ny": ("ny",), "nz": ("nz",), "probe": ("probe",),
+}
+
+
+def read_points_csv(path: Path, probes: tuple[Probe, ...]) -> PointTable:
+    """``id,x,y,z,nx,ny,nz,probe`` (mm; n = outward unit normal).  Lines starting with ``#``
+    before the header are comments.  ``probe`` may be omitted when the task has one probe."""
+    path = Path(path)
+    try:
+        if path.stat().st_size > MAX_CSV_BYTES:
+            raise InputError(f"larger than {MAX_CSV_BYTES // 2**20} MiB", file=path)
+        text = path.read_text(encoding="utf-8-sig")
+    except OSError as e:
+        raise InputError(f"cannot read the point file: {e.strerror}", file=path) from None
+    except UnicodeDecodeError as e:
+        raise InputError(f"not UTF-8 text (byte {e.start})", file=path) from None
+    lines = text.splitlines()
+    start = 0
+    while start < len(lines) and (lines[start].lstrip().startswith("#") or not lines[start].strip()):
+        start += 1
+    if start == len(lines):
+        raise InputError("no header line", file=path)
+    reader = csv.reader(io.StringIO("\n".join(lines[start:])))
+    header = [h.strip() for h in next(reader)]
+    colmap: dict[str, int] = {}
+    for key, aliases in POINT_COLUMNS.items():
+        for a in aliases:
+            if a in header:
+                colmap[key] = header.index(a)
+                break
+    for key in ("id", "x", "y", "z", "nx", "ny", "nz"):
+        if key not in colmap:
+            raise InputError(f"missing column {POINT_COLUMNS[key][0]!r} (header: {','.join(header)})",
+                             file=path, where=f"line {start + 1}")
+    probe_ids = {p.id for p in probes}
+    labels, X, N, pids, where = [], [], [], [], []
+    seen: dict[str, int] = {}
+    for offset, row in enumerate(reader, start=start + 2):
+        if not row or all(not c.strip() for c in row):
+            continue
+        if len(row) < len(header):
+            raise InputError(f"{len(row)} fields, the header has {len(header)}", file=path,
+                             where=f"line {offset}")
+        label = row[colmap["id"]].strip()
+        if not label:
+            raise InputError("empty point id", file=path, where=f"line {offset}, column 'id'")
+        if label in seen:
+            raise InputError(f"point id {label!r} also on line {seen[label]}", file=path,
+                             where=f"line {offset}, column 'id'")
+        seen[label] = offset
+        vals = []
+        for key in ("x", "y", "z", "nx", "ny", "nz"):
+            cell = row[colmap[key]].strip()
+            try:
+                v = float(cell)
+            except ValueError:
+                raise InputError(f"{cell!r} is not a number", file=path,
+                                 where=f"line {offset}, column {header[colmap[key]]!r}") from None
+            if not math.isfinite(v):
+                raise InputError(f"{cell!r} is not a finite number", file=path,
+                                 where=f"line {offset}, column {header[colmap[key]]!r}")
+            vals.append(v)
+        n = np.array(vals[3:])
+        if abs(np.linalg.norm(n) - 1.0) > NORMAL_TOL:
+            raise InputError(f"normal ({vals[3]:g}, {vals[4]:g}, {vals[5]:g}) is not a unit vector "
+                             f"(length {np.linalg.norm(n):.6g})", file=path, where=f"line {offset}")
+        if "probe" in colmap and row[colmap["probe"]].strip():
+            pid = row[colmap["probe"]].strip()
+        elif len(probes) == 1:
+            pid = probes[0].id
+        else:
+            raise InputError("no probe given and the task has several", file=path,
+                             where=f"line {offset}, column 'probe'")
+        if pid not in probe_ids:
+            raise InputError(f"unknown probe {pid!r} (the task defines {', '.join(sorted(probe_ids))})",
+                             file=path, where=f"line {offset}, column 'probe'")
+        labels.append(label)
+        X.append(vals[:3])
+        N.append(n / np.linalg.norm(n))
+        pids.append(pid)
+        where.append(offset)
+    if not labels:
+        raise InputError("no points", file=path)
+    return PointTable(tuple(labels), np.array(X), np.array(N), tuple(pids), tuple(where))
+
+
+def read_point_cloud(path: Path, doc: dict) -> tuple[PointCloud, Parameters, PointTable]:
+    """The point-cloud model of a task: points (from ``[points] file``), probes, parameters."""
+    params = read_parameters(path, doc)
+    probes = read_probes(path, doc)
+    pts = table(path, doc, "points")
+    check_keys(path, pts, "points", {"file"})
+    rel = string(path, pts, "points", "file")
+    csv_path = (Path(path).parent / rel)
+    tablep = read_points_csv(csv_path, probes)
+    index = {p.id: k for k, p in enumerate(probes)}
+    try:
+        for p in probes:
+            p.resolved(params)
+        cloud = PointCloud(tablep.X_mm, tablep.N, np.array([index[p] for p in tablep.probe_ids]),
+                           probes, tablep.labels)
+    except ModelError as e:
+        raise InputError(str(e), file=path, where="[[probes]]") from None
+    return cloud, params, tablep

@@ -1,0 +1,268 @@
+"""The point-cloud model laid out as live sheets: inputs, points, the long coordinate table and
+the six V_X contributions of Forbes 2025 eq. (28) as native 3m x 3m array formulas.
+
+Used by the ``pointcloud`` workbook and by any workbook that propagates V_X (fitted features).
+
+Sheets written:
+
+``Inputs``  the hyper-parameters (defined names = task keys), the probes table
+``Points``  id, x, y, z (mm), outward normal, probe; derived probe offset p and ram position x - p
+``Coords``  one row per coordinate (x1, y1, z1, x2, ...): the columns the V blocks broadcast over,
+            the rows of G_X|S (eq. 11) and of the rotation sensitivity G_k (eq. 24)
+``V_R`` ... ``V_P`` and ``V_X``  the contributions and their sum (µm²)
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from xlfuncs.pointcloud import FACTORS, Parameters, PointCloud
+
+from .book import Book
+from .xlref import Block, block, cell, col
+
+# Workbook limit for native V_X formulas: 3m x 3m array formulas per factor.  Measured:
+# m = 52 (156 x 156) recalculates in ~1 s per matrix in `formulas`; see bench/.
+NATIVE_MAX_POINTS = 120
+
+PARAM_NOTES = {
+    "sigma_R_um": "Repeatability, Forbes 2025 eq. (8)",
+    "sigma_S_ppm": "Global scale, eq. (13) (1e-6)",
+    "sigma_Sa_ppm": "Per-axis scale sigma_S,a, eq. (13) (1e-6)",
+    "sigma_Q_ppm": "Squareness sigma_Q, eq. (13) (1e-6 = µrad)",
+    "sigma_PQ_um": "Probe qualification, eq. (9); default for every probe",
+    "sigma_ET_um": "Location errors GP, eq. (21)",
+    "lambda_ET_mm": "Length scale of the location-error GP, eq. (21)",
+    "sigma_ER_urad": "Rotation errors GP, eq. (25)",
+    "lambda_ER_mm": "Length scale of the rotation-error GP, eq. (25)",
+    "sigma_P0_um": "Probe radius uncertainty, eq. (27); default for every probe",
+    "sigma_P_um": "Direction-correlated probing GP, eq. (27); default for every probe",
+    "lambda_P": "Length scale (chordal, unit sphere) of the probing GP, eq. (27)",
+}
+PARAM_UNITS = {"sigma_S_ppm": "ppm", "sigma_Sa_ppm": "ppm", "sigma_Q_ppm": "ppm", "sigma_ER_urad": "µrad",
+               "lambda_ET_mm": "mm", "lambda_ER_mm": "mm", "lambda_P": "1"}
+
+FACTOR_TITLES = {
+    "R": "repeatability, Forbes 2025 eq. (8): sigma_R^2 I",
+    "PQ": "probe qualification, eq. (9): sigma_PQ,k^2 I_3 between points of the same probe",
+    "S": "scale and squareness, eqs. (11)-(14): G_X|S V_B G_X|S^T with G at x_i - p_k(i)",
+    "ET": "location errors, eq. (21): sigma_ET^2 exp(-||u_i - u_j||^2/lambda_ET^2), per axis, u = x - p",
+    "ER": "rotation errors, eq. (25): sigma_ER^2 exp(-||u_i - u_j||^2/lambda_ER^2) G_k(i) G_k(j)^T",
+    "P": "probing, eq. (27): n_i n_j^T (sigma_P0^2 + sigma_P^2 exp(-||n_i - n_j||^2/lambda_P^2)), same probe",
+}
+
+
+@dataclass
+class VXLayout:
+    """Where the point-cloud model lives in the workbook."""
+
+    m: int
+    X: Block          # m x 3 coordinates (Points)
+    N: Block          # m x 3 normals (Points)
+    V: dict           # factor -> Block (3m x 3m), plus "X" for the total
+    probe_rows: dict  # probe index -> row on Inputs
+
+
+def _name_safe(i: int) -> str:
+    return f"probe{i + 1}"
+
+
+def write_inputs(book: Book, params: Parameters, cloud: PointCloud, extra: list[tuple] = ()) -> tuple:
+    """The Inputs sheet: named parameters, optional extra named inputs, the probes table."""
+    ws = book.sheet("Inputs")
+    book.header(ws, 1, 1, ["parameter", "value", "unit", "meaning"])
+    r = 2
+    for key in Parameters.__dataclass_fields__:
+        book.text(ws, r, 1, key)
+        book.input(ws, r, 2, key, getattr(params, key), lo=0.0, note=PARAM_NOTES[key])
+        book.text(ws, r, 3, PARAM_UNITS.get(key, "µm"))
+        book.text(ws, r, 4, PARAM_NOTES[key])
+        r += 1
+    for key, value, unit, meaning, lo in extra:
+        book.text(ws, r, 1, key)
+        book.input(ws, r, 2, key, value, lo=lo, note=meaning)
+        book.text(ws, r, 3, unit)
+        book.text(ws, r, 4, meaning)
+        r += 1
+    ws.column_dimensions["A"].width = 16
+    ws.column_dimensions["D"].width = 60
+    r += 1
+    book.text(ws, r, 1, "Probes (offset p_k = stylus tip centre from the probe-head reference point)",
+              font=None)
+    r += 1
+    cols = ["probe", "px_mm", "py_mm", "pz_mm", "sigma_PQ_um", "sigma_P0_um", "sigma_P_um", "lambda_P"]
+    book.header(ws, r, 1, cols)
+    probe_rows = {}
+    for k, p in enumerate(cloud.probes):
+        r += 1
+        probe_rows[k] = r
+        book.text(ws, r, 1, p.id)
+        for c, v in enumerate(p.offset_mm):
+            book.input(ws, r, 2 + c, f"{_name_safe(k)}_p{'xyz'[c]}_mm", v)
+        for c, key in enumerate(("sigma_PQ_um", "sigma_P0_um", "sigma_P_um", "lambda_P")):
+            own = getattr(p, key)
+            name = f"{_name_safe(k)}_{key}"
+            if own is None:
+                book.formula(ws, r, 5 + c, f"={key}", name=name, fmt="General",
+                             note="task-wide default; type a number to override for this probe")
+            else:
+                book.input(ws, r, 5 + c, name, own, lo=0.0, note="per-probe override")
+    return ws, probe_rows
+
+
+def write_points(book: Book, cloud: PointCloud, probe_rows: dict) -> tuple[Block, Block, Block]:
+    """The Points sheet; returns the blocks of X (m x 3), N (m x 3) and U = X - p (m x 3)."""
+    ws = book.sheet("Points")
+    cols = ["id", "x_mm", "y_mm", "z_mm", "nx", "ny", "nz", "probe", "px_mm", "py_mm", "pz_mm",
+            "ux_mm", "uy_mm", "uz_mm"]
+    notes = [None] * 8 + ["probe offset p_k(i) (from Inputs)"] * 3 + \
+            ["machine (ram) position x_i - p_k(i), Forbes 2025 section 5.3"] * 3
+    book.header(ws, 1, 1, cols, notes)
+    for i in range(cloud.m):
+        r = i + 2
+        k = int(cloud.probe_index[i])
+        book.text(ws, r, 1, cloud.labels[i])
+        for c in range(3):
+            book.number(ws, r, 2 + c, cloud.X_mm[i, c])
+            book.number(ws, r, 5 + c, cloud.N[i, c])
+        book.text(ws, r, 8, cloud.probes[k].id)
+        for c in range(3):
+            book.formula(ws, r, 9 + c, f"={cell(probe_rows[k], 2 + c, 'Inputs')}", fmt="General")
+            book.formula(ws, r, 12 + c, f"={cell(r, 2 + c)}-{cell(r, 9 + c)}")
+    ws.freeze_panes = "B2"
+    m = cloud.m
+    return Block("Points", 2, 2, m, 3), Block("Points", 2, 5, m, 3), Block("Points", 2, 12, m, 3)
+
+
+COORD_COLS = ["coordinate", "point", "axis", "index", "probe_no", "ux_mm", "uy_mm", "uz_mm",
+              "n_axis", "nx", "ny", "nz",
+              "GS_aa", "GS_xx", "GS_yy", "GS_zz", "GS_xy", "GS_xz", "GS_yz",
+              "GR_x", "GR_y", "GR_z", "sigma_PQ_um", "sigma_P0_um", "sigma_P_um", "lambda_P"]
+
+
+def write_coords(book: Book, cloud: PointCloud, probe_rows: dict) -> dict[str, Block]:
+    """One row per coordinate x1, y1, z1, x2, ...: returns a column Block per name."""
+    ws = book.sheet("Coords")
+    book.header(ws, 1, 1, COORD_COLS)
+    ci = {name: k + 1 for k, name in enumerate(COORD_COLS)}
+    for i in range(cloud.m):
+        k = int(cloud.probe_index[i])
+        pr = probe_rows[k]
+        prow = i + 2  # row on Points
+        for a in range(3):
+            r = 3 * i + a + 2
+            book.text(ws, r, ci["coordinate"], f"{'xyz'[a]}{i + 1}")
+            book.text(ws, r, ci["point"], cloud.labels[i])
+            ws.cell(row=r, column=ci["axis"]).value = a + 1
+            ws.cell(row=r, column=ci["index"]).value = 3 * i + a + 1
+            ws.cell(row=r, column=ci["probe_no"]).value = k + 1
+            for c, key in enumerate(("ux_mm", "uy_mm", "uz_mm")):
+                book.formula(ws, r, ci[key], f"={cell(prow, 12 + c, 'Points')}")
+            book.formula(ws, r, ci["n_axis"], f"={cell(prow, 5 + a, 'Points')}")
+            for c, key in enumerate(("nx", "ny", "nz")):
+                book.formula(ws, r, ci[key], f"={cell(prow, 5 + c, 'Points')}")
+            ux, uy, uz = (cell(r, ci[k2]) for k2 in ("ux_mm", "uy_mm", "uz_mm"))
+            # G(x_i - p) of Forbes 2025 eq. (11), row a
+            gs = [[ux, ux, "0", "0", uy, uz, "0"], [uy, "0", uy, "0", "0", "0", uz],
+                  [uz, "0", "0", uz, "0", "0", "0"]][a]
+            for c, v in enumerate(gs):
+                book.formula(ws, r, ci["GS_aa"] + c, f"={v}", fmt="General")
+            px, py, pz = (cell(pr, 2 + c, "Inputs") for c in range(3))
+            # G_k of Forbes 2025 eq. (24), row a
+            gr = [["0", pz, f"-{py}"], [f"-{pz}", "0", px], [py, f"-{px}", "0"]][a]
+            for c, v in enumerate(gr):
+                book.formula(ws, r, ci["GR_x"] + c, f"={v}", fmt="General")
+            for c, key in enumerate(("sigma_PQ_um", "sigma_P0_um", "sigma_P_um", "lambda_P")):
+                book.formula(ws, r, ci[key], f"={cell(pr, 5 + c, 'Inputs')}", fmt="General")
+    n3 = 3 * cloud.m
+    ws.freeze_panes = "C2"
+    return {name: Block("Coords", 2, ci[name], n3, 1) for name in COORD_COLS} | {
+        "GS": Block("Coords", 2, ci["GS_aa"], n3, 7), "GR": Block("Coords", 2, ci["GR_x"], n3, 3)}
+
+
+def _t(b: Block) -> str:
+    return f"TRANSPOSE({b.ref})"
+
+
+def _sqdist(cols: list[Block]) -> str:
+    return "+".join(f"({c.ref}-{_t(c)})^2" for c in cols)
+
+
+def v_formulas(c: dict[str, Block], vb: Block) -> dict[str, str]:
+    """Array formulas (3m x 3m, µm²) of the six contributions of eq. (28)."""
+    same_probe = f"({c['probe_no'].ref}={_t(c['probe_no'])})"
+    same_axis = f"({c['axis'].ref}={_t(c['axis'])})"
+    D2 = _sqdist([c["ux_mm"], c["uy_mm"], c["uz_mm"]])
+    DN2 = _sqdist([c["nx"], c["ny"], c["nz"]])
+    lam2 = f"({c['lambda_P'].ref}*{_t(c['lambda_P'])})"
+    return {
+        "R": f"=sigma_R_um^2*({c['index'].ref}={_t(c['index'])})",
+        "PQ": f"={same_probe}*{same_axis}*{c['sigma_PQ_um'].ref}*{_t(c['sigma_PQ_um'])}",
+        "S": f"=MMULT(MMULT({c['GS'].ref},{vb.ref}),TRANSPOSE({c['GS'].ref}))",
+        # (lambda=0) keeps the exponent finite when the factor is switched off (sigma = 0)
+        "ET": f"=sigma_ET_um^2*{same_axis}*EXP(-({D2})/(lambda_ET_mm^2+(lambda_ET_mm=0)))",
+        "ER": f"=(sigma_ER_urad*0.001)^2*EXP(-({D2})/(lambda_ER_mm^2+(lambda_ER_mm=0)))"
+              f"*MMULT({c['GR'].ref},TRANSPOSE({c['GR'].ref}))",
+        "P": f"={same_probe}*{c['n_axis'].ref}*{_t(c['n_axis'])}*({c['sigma_P0_um'].ref}*{_t(c['sigma_P0_um'])}"
+             f"+{c['sigma_P_um'].ref}*{_t(c['sigma_P_um'])}*EXP(-({DN2})/({lam2}+({lam2}=0))))",
+    }
+
+
+def write_VB(book: Book) -> Block:
+    """V_B of Forbes 2025 eq. (13) in (µm/mm)² on the Inputs sheet (right of the parameters)."""
+    ws = book.wb["Inputs"]
+    r0, c0 = 1, 7
+    book.text(ws, r0, c0, "V_B, Forbes 2025 eq. (13), (µm/mm)^2 = (0.001 ppm)^2")
+    names = ["sigma_S_ppm"] + ["sigma_Sa_ppm"] * 3 + ["sigma_Q_ppm"] * 3
+    labels = ["b_aa", "b_xx", "b_yy", "b_zz", "b_xy", "b_xz", "b_yz"]
+    for k, lab in enumerate(labels):
+        book.text(ws, r0 + 1, c0 + 1 + k, lab)
+        book.text(ws, r0 + 2 + k, c0, lab)
+    for a in range(7):
+        for b in range(7):
+            if a == b:
+                book.formula(ws, r0 + 2 + a, c0 + 1 + b, f"=({names[a]}*0.001)^2", fmt="0.00E+00")
+            else:
+                ws.cell(row=r0 + 2 + a, column=c0 + 1 + b).value = 0
+    return Block("Inputs", r0 + 2, c0 + 1, 7, 7)
+
+
+def write_V_sheets(book: Book, cloud: PointCloud, coords: dict[str, Block], vb: Block) -> dict[str, Block]:
+    """One sheet per contribution plus V_X; each matrix at B2 with coordinate labels."""
+    n3 = 3 * cloud.m
+    out: dict[str, Block] = {}
+    formulas = v_formulas(coords, vb)
+    labels = [f"{'xyz'[a]}{i + 1}" for i in range(cloud.m) for a in range(3)]
+    for f in (*FACTORS, "X"):
+        ws = book.sheet(f"V_{f}")
+        book.text(ws, 1, 1, "µm²")
+        for k, lab in enumerate(labels):
+            book.text(ws, 1, 2 + k, lab)
+            book.text(ws, 2 + k, 1, lab)
+        target = Block(ws.title, 2, 2, n3, n3)
+        if f == "X":
+            formula = "=" + "+".join(out[g].ref for g in FACTORS)
+            note = "V_X = sum of the six contributions, Forbes 2025 eq. (28)"
+        else:
+            formula = formulas[f]
+            note = f"V_{f}: {FACTOR_TITLES[f]}"
+        book.array(target, formula, note=note, fmt="0.000E+00")
+        ws.freeze_panes = "B2"
+        out[f] = target
+    return out
+
+
+def write_point_cloud_model(book: Book, cloud: PointCloud, params: Parameters,
+                            extra_inputs: list[tuple] = ()) -> VXLayout:
+    """Inputs, Points, Coords and the V sheets; returns where everything is."""
+    _, probe_rows = write_inputs(book, params, cloud, list(extra_inputs))
+    X, N, _U = write_points(book, cloud, probe_rows)
+    coords = write_coords(book, cloud, probe_rows)
+    vb = write_VB(book)
+    V = write_V_sheets(book, cloud, coords, vb)
+    return VXLayout(cloud.m, X, N, V, probe_rows)
+
+
+def point_block(V: Block, i: int, j: int) -> Block:
+    """The 3 x 3 block V_ij (0-based point indices) of a 3m x 3m matrix."""
+    return V.sub(3 * i, 3 * j, 3, 3)

@@ -1,0 +1,453 @@
+"""Point-cloud variance V_X from six CMM influence factors (Forbes 2025, sections 4-6).
+
+Units: coordinates, offsets and distances in mm; uncertainties in µm, variances in µm².
+Scale and squareness hyper-parameters are in ppm (1e-6), rotations in µrad, so that
+``ppm * mm = 1e-3 µm`` and ``µrad * mm = 1e-3 µm``.
+
+Factors (labels of Forbes 2025, section 2.4):
+
+====  ==========================================  =====================
+R     repeatability                               eq. (8)
+PQ    probe qualification, per probe              eq. (9)
+S     scale and squareness, G(x_i - p_k(i))       eqs. (10)-(14)
+ET    spatially correlated location errors (GP)   eqs. (20)-(21), 5.3
+ER    spatially correlated rotation errors (GP)   eqs. (22)-(25)
+P     probing: radius + direction-correlated GP   eqs. (26)-(27)
+====  ==========================================  =====================
+
+The spatial kernels of ET and ER act on the machine (ram) positions ``x_i - p_k(i)``
+(Forbes 2025, section 5.3, multiple probes).  Probing effects of different probes are
+independent (section 5.5).
+
+Two evaluation paths give the same numbers:
+
+* ``V_X_components`` builds the dense 3m x 3m matrices of eq. (28) (what the workbook shows);
+* ``distance_components`` evaluates the quadratic form of eq. (29) for many pairs at once
+  without forming V_X (memory linear in the number of pairs processed per block).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, replace
+from typing import Iterable, Sequence
+
+import numpy as np
+
+from .errors import DegenerateGeometryError, ModelError
+
+FACTORS: tuple[str, ...] = ("R", "PQ", "S", "ET", "ER", "P")
+
+#: conversion of ppm*mm (or µrad*mm) to µm
+MILLI = 1e-3
+
+
+@dataclass(frozen=True)
+class Parameters:
+    """Statistical hyper-parameters of Forbes 2025, Tables 1 and 3 (task-file names and units).
+
+    ``sigma_PQ_um``, ``sigma_P0_um``, ``sigma_P_um`` and ``lambda_P`` are defaults that a
+    probe may override.
+    """
+
+    sigma_R_um: float = 0.0
+    sigma_S_ppm: float = 0.0
+    sigma_Sa_ppm: float = 0.0
+    sigma_Q_ppm: float = 0.0
+    sigma_PQ_um: float = 0.0
+    sigma_ET_um: float = 0.0
+    lambda_ET_mm: float = 0.0
+    sigma_ER_urad: float = 0.0
+    lambda_ER_mm: float = 0.0
+    sigma_P0_um: float = 0.0
+    sigma_P_um: float = 0.0
+    lambda_P: float = 0.0
+
+    #: names of the standard-deviation parameters, rescaled by C_max (section 6.8)
+    SIGMAS = (
+        "sigma_R_um", "sigma_S_ppm", "sigma_Sa_ppm", "sigma_Q_ppm", "sigma_PQ_um",
+        "sigma_ET_um", "sigma_ER_urad", "sigma_P0_um", "sigma_P_um",
+    )
+
+    def __post_init__(self) -> None:
+        for name in self.__dataclass_fields__:
+            value = getattr(self, name)
+            if not math.isfinite(value):
+                raise ModelError(f"{name} must be a finite number, got {value!r}")
+            if value < 0:
+                raise ModelError(f"{name} must not be negative, got {value!r}")
+        for sigma, lam in (("sigma_ET_um", "lambda_ET_mm"), ("sigma_ER_urad", "lambda_ER_mm"),
+                           ("sigma_P_um", "lambda_P")):
+            if getattr(self, sigma) > 0 and getattr(self, lam) <= 0:
+                raise ModelError(f"{lam} must be positive when {sigma} > 0")
+
+    def scaled(self, factor: float) -> "Parameters":
+        """All standard deviations divided by ``factor`` (section 6.8: divide by C_max)."""
+        return replace(self, **{n: getattr(self, n) / factor for n in self.SIGMAS})
+
+
+@dataclass(frozen=True)
+class Probe:
+    """A probe (stylus) configuration: offset p_k and its per-probe uncertainty parameters.
+
+    ``None`` for a sigma means: use the task-wide value of :class:`Parameters`.
+    """
+
+    id: str
+    offset_mm: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    sigma_PQ_um: float | None = None
+    sigma_P0_um: float | None = None
+    sigma_P_um: float | None = None
+    lambda_P: float | None = None
+
+    def resolved(self, params: Parameters) -> "Probe":
+        """A copy with every ``None`` replaced by the task-wide default."""
+        vals = {n: getattr(params, n) if getattr(self, n) is None else getattr(self, n)
+                for n in ("sigma_PQ_um", "sigma_P0_um", "sigma_P_um", "lambda_P")}
+        for n, v in vals.items():
+            if not math.isfinite(v) or v < 0:
+                raise ModelError(f"probe {self.id}: {n} must be a finite non-negative number")
+        if vals["sigma_P_um"] > 0 and vals["lambda_P"] <= 0:
+            raise ModelError(f"probe {self.id}: lambda_P must be positive when sigma_P_um > 0")
+        return replace(self, **vals)
+
+
+@dataclass(frozen=True)
+class PointCloud:
+    """Measured points x_i (mm), outward unit normals n_i and the probe used for each point.
+
+    ``probe_index[i]`` indexes ``probes``.  ``labels`` are the point ids.
+    """
+
+    X_mm: np.ndarray
+    N: np.ndarray
+    probe_index: np.ndarray
+    probes: tuple[Probe, ...]
+    labels: tuple[str, ...] = field(default=())
+
+    def __post_init__(self) -> None:
+        X = np.asarray(self.X_mm, dtype=float)
+        N = np.asarray(self.N, dtype=float)
+        k = np.asarray(self.probe_index, dtype=int)
+        if X.ndim != 2 or X.shape[1] != 3:
+            raise ModelError("points must be an m x 3 array of coordinates in mm")
+        if N.shape != X.shape:
+            raise ModelError("normals must have the same shape as the points")
+        if k.shape != (X.shape[0],):
+            raise ModelError("every point needs a probe")
+        if not np.all(np.isfinite(X)) or not np.all(np.isfinite(N)):
+            raise ModelError("points and normals must be finite numbers")
+        if len(self.probes) == 0 or k.min(initial=0) < 0 or k.max(initial=0) >= len(self.probes):
+            raise ModelError("probe index out of range")
+        object.__setattr__(self, "X_mm", X)
+        object.__setattr__(self, "N", N)
+        object.__setattr__(self, "probe_index", k)
+        if not self.labels:
+            object.__setattr__(self, "labels", tuple(f"X{i + 1}" for i in range(X.shape[0])))
+
+    @property
+    def m(self) -> int:
+        return self.X_mm.shape[0]
+
+    @property
+    def offsets_mm(self) -> np.ndarray:
+        """p_k(i) for every point (m x 3)."""
+        P = np.array([p.offset_mm for p in self.probes], dtype=float).reshape(-1, 3)
+        return P[self.probe_index]
+
+    @property
+    def ram_mm(self) -> np.ndarray:
+        """Machine positions x_i - p_k(i) (m x 3) on which the S, ET and ER models act."""
+        return self.X_mm - self.offsets_mm
+
+
+# ---------------------------------------------------------------------------------------------
+# Dense V_X (Forbes 2025 eq. 28), one 3m x 3m matrix per factor, µm²
+# ---------------------------------------------------------------------------------------------
+
+def skew_G(p_mm: np.ndarray) -> np.ndarray:
+    """Sensitivity of R(alpha) p to alpha at alpha = 0 (Forbes 2025 eq. 24), mm per rad."""
+    px, py, pz = np.asarray(p_mm, dtype=float)
+    return np.array([[0.0, pz, -py], [-pz, 0.0, px], [py, -px, 0.0]])
+
+
+def G_S_point(u_mm: np.ndarray) -> np.ndarray:
+    """3 x 7 scale/squareness sensitivity G(x_i - p_k(i)) of Forbes 2025 eq. (11), in mm."""
+    x, y, z = np.asarray(u_mm, dtype=float)
+    return np.array([[x, x, 0, 0, y, z, 0], [y, 0, y, 0, 0, 0, z], [z, 0, 0, z, 0, 0, 0]], dtype=float)
+
+
+def G_X_S(cloud: PointCloud) -> np.ndarray:
+    """3m x 7 sensitivity matrix G_X|S assembled from eq. (11) at x_i - p_k(i) (mm)."""
+    return np.vstack([G_S_point(u) for u in cloud.ram_mm])
+
+
+def V_S_diag_um_per_mm2(params: Parameters) -> np.ndarray:
+    """Diagonal of V_B of eq. (13), converted from ppm² to (µm/mm)²."""
+    s = np.array([params.sigma_S_ppm, params.sigma_Sa_ppm, params.sigma_Sa_ppm, params.sigma_Sa_ppm,
+                  params.sigma_Q_ppm, params.sigma_Q_ppm, params.sigma_Q_ppm]) * MILLI
+    return s**2
+
+
+def _probe_arrays(cloud: PointCloud, params: Parameters) -> dict[str, np.ndarray]:
+    probes = [p.resolved(params) for p in cloud.probes]
+    k = cloud.probe_index
+    return {n: np.array([getattr(p, n) for p in probes], dtype=float)[k]
+            for n in ("sigma_PQ_um", "sigma_P0_um", "sigma_P_um", "lambda_P")}
+
+
+def _sq_dists(A: np.ndarray, B: np.ndarray) -> np.ndarray:
+    """Matrix of squared Euclidean distances between the rows of A and B."""
+    D = A[:, None, :] - B[None, :, :]
+    return np.einsum("ijk,ijk->ij", D, D)
+
+
+def V_X_components(cloud: PointCloud, params: Parameters) -> dict[str, np.ndarray]:
+    """The six 3m x 3m contributions of Forbes 2025 eq. (28), in µm², keyed by ``FACTORS``.
+
+    Coordinates are interleaved ``x1, y1, z1, x2, ...`` (the paper's x_{1:m}).
+    """
+    m = cloud.m
+    n3 = 3 * m
+    pa = _probe_arrays(cloud, params)
+    k = cloud.probe_index
+    same_probe = (k[:, None] == k[None, :]).astype(float)
+    I3 = np.eye(3)
+    U = cloud.ram_mm
+    D2 = _sq_dists(U, U)
+    out: dict[str, np.ndarray] = {}
+
+    # R, eq. (8): sigma_R^2 I
+    out["R"] = params.sigma_R_um**2 * np.eye(n3)
+
+    # PQ, eq. (9): G_X|PQ V_PQ G_X|PQ^T, same probe -> sigma_PQ,k^2 I_3 in every block pair
+    s = pa["sigma_PQ_um"]
+    out["PQ"] = np.kron(same_probe * np.outer(s, s), I3)
+
+    # S, eqs. (11)-(14) at x_i - p_k(i)
+    G = G_X_S(cloud)
+    out["S"] = (G * V_S_diag_um_per_mm2(params)) @ G.T
+
+    # ET, eq. (21): independent axes, kernel on ram positions
+    if params.sigma_ET_um > 0:
+        out["ET"] = np.kron(params.sigma_ET_um**2 * np.exp(-D2 / params.lambda_ET_mm**2), I3)
+    else:
+        out["ET"] = np.zeros((n3, n3))
+
+    # ER, eq. (25): sigma_ER^2 exp(-d_ij^2/lambda^2) G_k(i) G_k(j)^T
+    if params.sigma_ER_urad > 0:
+        GR = np.vstack([skew_G(p) for p in cloud.offsets_mm])  # 3m x 3, mm/rad
+        rho = np.exp(-D2 / params.lambda_ER_mm**2)
+        out["ER"] = (params.sigma_ER_urad * MILLI) ** 2 * np.kron(rho, np.ones((3, 3))) * (GR @ GR.T)
+    else:
+        out["ER"] = np.zeros((n3, n3))
+
+    # P, eqs. (26)-(27): N V_DP N^T, probes independent
+    N = cloud.N
+    DN2 = _sq_dists(N, N)
+    lam = pa["lambda_P"]
+    sP = pa["sigma_P_um"]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        kern = np.where(np.outer(sP, sP) > 0, np.exp(-DN2 / np.outer(lam, lam)), 0.0)
+    V_DP = same_probe * (np.outer(pa["sigma_P0_um"], pa["sigma_P0_um"]) + np.outer(sP, sP) * kern)
+    NN = np.einsum("ia,jb->iajb", N, N).reshape(n3, n3) if m else np.zeros((0, 0))
+    out["P"] = np.kron(V_DP, np.ones((3, 3))) * NN
+    return out
+
+
+def V_X(cloud: PointCloud, params: Parameters) -> np.ndarray:
+    """Total point-cloud variance matrix of Forbes 2025 eq. (28), µm²."""
+    return sum(V_X_components(cloud, params).values())
+
+
+# ---------------------------------------------------------------------------------------------
+# Distances (Forbes 2025 section 6, eqs. 29-30) without forming V_X
+# ---------------------------------------------------------------------------------------------
+
+def all_pairs(m: int) -> np.ndarray:
+    """Every unordered pair (i < j) of m points, as a (m(m-1)/2) x 2 index array."""
+    i, j = np.triu_indices(m, k=1)
+    return np.column_stack([i, j])
+
+
+def check_pairs(cloud: PointCloud, pairs: np.ndarray) -> np.ndarray:
+    """Validate a pair index array; coincident points make eq. (29)'s n_ij undefined."""
+    pairs = np.asarray(pairs, dtype=int).reshape(-1, 2)
+    if pairs.size and (pairs.min() < 0 or pairs.max() >= cloud.m):
+        raise ModelError("pair index out of range")
+    d = np.linalg.norm(cloud.X_mm[pairs[:, 1]] - cloud.X_mm[pairs[:, 0]], axis=1)
+    bad = np.flatnonzero(d <= 1e-9)
+    if bad.size:
+        i, j = pairs[bad[0]]
+        raise DegenerateGeometryError(
+            f"points {cloud.labels[i]} and {cloud.labels[j]} are at the same place: "
+            "the distance direction n_ij of Forbes 2025 eq. (29) is undefined")
+    return pairs
+
+
+def _distance_block(cloud: PointCloud, params: Parameters, pa: dict, i: np.ndarray,
+                    j: np.ndarray) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    """Distances and per-factor variances (µm²) for pairs (i, j): the quadratic form of eq. (29)
+    with g = [-n_ij; n_ij], n_ij = (x_j - x_i)/d_ij, evaluated factor by factor."""
+    X, N, U = cloud.X_mm, cloud.N, cloud.ram_mm
+    delta = X[j] - X[i]
+    d = np.sqrt(np.einsum("ij,ij->i", delta, delta))
+    n = delta / d[:, None]
+    same = cloud.probe_index[i] == cloud.probe_index[j]
+    var: dict[str, np.ndarray] = {}
+
+    var["R"] = np.full(d.shape, 2.0 * params.sigma_R_um**2)
+
+    sPQ = pa["sigma_PQ_um"]
+    var["PQ"] = np.where(same, 0.0, sPQ[i] ** 2 + sPQ[j] ** 2)
+
+    # S: n^T (G(u_j) - G(u_i)) = n^T G(u_j - u_i), G linear (eq. 11)
+    du = U[j] - U[i]
+    nx, ny, nz = n.T
+    ux, uy, uz = du.T
+    g7 = np.column_stack([nx * ux + ny * uy + nz * uz, nx * ux, ny * uy, nz * uz, nx * uy, nx * uz, ny * uz])
+    var["S"] = g7**2 @ V_S_diag_um_per_mm2(params)
+
+    du2 = np.einsum("ij,ij->i", du, du)
+    if params.sigma_ET_um > 0:
+        var["ET"] = 2.0 * params.sigma_ET_um**2 * -np.expm1(-du2 / params.lambda_ET_mm**2)
+    else:
+        var["ET"] = np.zeros_like(d)
+
+    if params.sigma_ER_urad > 0:
+        # m_i = G_k(i)^T n with G_k of eq. (24): G^T n = n x p  (section 6.5)
+        P = cloud.offsets_mm
+        mi = np.cross(n, P[i])
+        mj = np.cross(n, P[j])
+        rho = np.exp(-du2 / params.lambda_ER_mm**2)
+        var["ER"] = (params.sigma_ER_urad * MILLI) ** 2 * (
+            np.einsum("ij,ij->i", mi, mi) + np.einsum("ij,ij->i", mj, mj)
+            - 2.0 * rho * np.einsum("ij,ij->i", mi, mj))
+    else:
+        var["ER"] = np.zeros_like(d)
+
+    # P (section 6.6): o_i = n_i.n_ij, o_j = n_j.n_ij
+    oi = np.einsum("ij,ij->i", N[i], n)
+    oj = np.einsum("ij,ij->i", N[j], n)
+    s0, sp, lam = pa["sigma_P0_um"], pa["sigma_P_um"], pa["lambda_P"]
+    dn = N[j] - N[i]
+    dn2 = np.einsum("ij,ij->i", dn, dn)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        kern = np.where(sp[i] * sp[j] > 0, np.exp(-dn2 / (lam[i] * lam[j])), 0.0)
+    cross = s0[i] * s0[j] + sp[i] * sp[j] * kern
+    var["P"] = ((s0[i] ** 2 + sp[i] ** 2) * oi**2 + (s0[j] ** 2 + sp[j] ** 2) * oj**2
+                - 2.0 * np.where(same, cross, 0.0) * oi * oj)
+    return d, var
+
+
+def distance_components(cloud: PointCloud, params: Parameters, pairs: np.ndarray | None = None,
+                        *, block: int = 262_144, progress=None) -> dict[str, np.ndarray]:
+    """d_ij (mm), u(d_ij) (µm) and the per-factor u (µm) of eq. (30) for many pairs.
+
+    Evaluates the quadratic form of eq. (29) factor by factor, ``block`` pairs at a time, so
+    memory grows with the number of pairs only through the outputs.  Returns a dict with keys
+    ``d_mm``, ``u_um`` and ``u_<factor>_um`` for every factor.  ``progress(done, total)`` is
+    called after every block when given.
+    """
+    pairs = all_pairs(cloud.m) if pairs is None else check_pairs(cloud, pairs)
+    n = len(pairs)
+    pa = _probe_arrays(cloud, params)
+    out = {"d_mm": np.empty(n), "u_um": np.empty(n)}
+    for f in FACTORS:
+        out[f"u_{f}_um"] = np.empty(n)
+    for start in range(0, n, block):
+        sl = slice(start, min(start + block, n))
+        i, j = pairs[sl, 0], pairs[sl, 1]
+        d, var = _distance_block(cloud, params, pa, i, j)
+        if np.any(d <= 1e-9):
+            check_pairs(cloud, pairs[sl])
+        out["d_mm"][sl] = d
+        total = np.zeros_like(d)
+        for f in FACTORS:
+            v = np.maximum(var[f], 0.0)  # clip -1e-20 rounding of exact zeros
+            total += v
+            out[f"u_{f}_um"][sl] = np.sqrt(v)
+        out["u_um"][sl] = np.sqrt(total)
+        if progress is not None:
+            progress(sl.stop, n)
+    return out
+
+
+def distance_u_dense(V: np.ndarray, X_mm: np.ndarray, i: int, j: int) -> float:
+    """u(d_ij) from a dense V_X block by eq. (29) literally (reference implementation)."""
+    n = (X_mm[j] - X_mm[i]) / np.linalg.norm(X_mm[j] - X_mm[i])
+    g = np.zeros(V.shape[0])
+    g[3 * i:3 * i + 3] = -n
+    g[3 * j:3 * j + 3] = n
+    return float(np.sqrt(max(g @ V @ g, 0.0)))
+
+
+def distance_difference_u(V: np.ndarray, X_mm: np.ndarray, ij: tuple[int, int],
+                          rs: tuple[int, int]) -> float:
+    """u(d_ij - d_rs) of Forbes 2025 section 6 (12 x 12 quadratic form) from a dense V_X."""
+    g = np.zeros(V.shape[0])
+    for (a, b), sign in ((ij, 1.0), (rs, -1.0)):
+        n = (X_mm[b] - X_mm[a]) / np.linalg.norm(X_mm[b] - X_mm[a])
+        g[3 * a:3 * a + 3] -= sign * n
+        g[3 * b:3 * b + 3] += sign * n
+    return float(np.sqrt(max(g @ V @ g, 0.0)))
+
+
+# ---------------------------------------------------------------------------------------------
+# Summary formula and the MPE check (Forbes 2025 sections 6.7-6.8)
+# ---------------------------------------------------------------------------------------------
+
+def summary_components_um(d_mm, params: Parameters, P_mm: float) -> dict[str, np.ndarray]:
+    """Terms of eq. (33) as standard uncertainties (µm): ``A`` (sigma_A of eq. 34), ``S``,
+    ``ET``, ``ER`` and the total ``u``.  ``P_mm`` is the longest probe length."""
+    d = np.asarray(d_mm, dtype=float)
+    sA2 = 2.0 * (params.sigma_R_um**2 + params.sigma_PQ_um**2 + params.sigma_P_um**2
+                 + 2.0 * params.sigma_P0_um**2)
+    S2 = (params.sigma_S_ppm**2 + params.sigma_Sa_ppm**2 + params.sigma_Q_ppm**2) * (MILLI * d) ** 2
+    ET2 = (2.0 * params.sigma_ET_um**2 * -np.expm1(-(d**2) / params.lambda_ET_mm**2)
+           if params.sigma_ET_um > 0 else np.zeros_like(d))
+    ER2 = (2.0 * (params.sigma_ER_urad * MILLI * P_mm) ** 2 * -np.expm1(-(d**2) / params.lambda_ER_mm**2)
+           if params.sigma_ER_urad > 0 else np.zeros_like(d))
+    return {"A": np.sqrt(sA2) + 0 * d, "S": np.sqrt(S2), "ET": np.sqrt(ET2), "ER": np.sqrt(ER2),
+            "u": np.sqrt(sA2 + S2 + ET2 + ER2)}
+
+
+def mpe_um(d_mm, A_um: float, B_mm: float):
+    """MPE statement A + d/B in µm, d in mm (B_mm is "mm per µm", as in E = 3 + L/200)."""
+    return A_um + np.asarray(d_mm, dtype=float) / B_mm
+
+
+def C_of_d(d_mm, params: Parameters, A_um: float, B_mm: float, K: float, P_mm: float) -> np.ndarray:
+    """C(d) = K u(d) / (A + d/B) of Forbes 2025 eq. (36) with u(d) from eq. (33)."""
+    return K * summary_components_um(d_mm, params, P_mm)["u"] / mpe_um(d_mm, A_um, B_mm)
+
+
+@dataclass(frozen=True)
+class MPECheck:
+    K: float
+    C_max: float
+    d_at_max_mm: float
+    L_max_mm: float
+    conforms: bool
+
+
+def mpe_check(params: Parameters, A_um: float, B_mm: float, K: float, P_mm: float,
+              L_max_mm: float = 1000.0, n_grid: int = 201) -> MPECheck:
+    """Maximum of C(d) of eq. (36) over the grid d = 0, L_max/(n-1), ..., L_max (section 6.8).
+
+    The grid (not a continuous search) is what the workbook's MPE sheet evaluates, so the
+    workbook and the JSON report the same C_max and d_at_max.
+    """
+    if A_um <= 0 or B_mm <= 0 or K <= 0 or L_max_mm <= 0 or n_grid < 2:
+        raise ModelError("A_um, B_mm, K and L_max_mm must be positive")
+    d = L_max_mm * np.arange(n_grid) / (n_grid - 1)
+    c = C_of_d(d, params, A_um, B_mm, K, P_mm)
+    k = int(np.argmax(c))
+    return MPECheck(K=K, C_max=float(c[k]), d_at_max_mm=float(d[k]), L_max_mm=L_max_mm,
+                    conforms=bool(c[k] <= 1.0))
+
+
+def conforming_parameters(params: Parameters, C_max: float) -> Parameters:
+    """Parameters divided by C_max so that C(d) <= 1 (Forbes 2025 section 6.8).  Parameters
+    that already conform (C_max <= 1) are returned unchanged."""
+    return params if C_max <= 1.0 else params.scaled(C_max)
