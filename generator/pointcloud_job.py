@@ -24,7 +24,7 @@ from .xlref import Block, block, cell
 KIND = "pointcloud"
 EXAMPLES = ["stepgauge_I_MPE1.toml", "stepgauge_I_MPE2.toml",
             "stepgauge_II_MPE1.toml", "stepgauge_II_MPE2.toml"]
-MPE_GRID_POINTS = 201
+MPE_GRID_POINTS = 101
 RESULT_COLUMNS = ["from", "to", "d_mm", "u_um", "U_um", "u_R_um", "u_PQ_um", "u_S_um",
                   "u_ET_um", "u_ER_um", "u_P_um"]
 

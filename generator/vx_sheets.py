@@ -166,18 +166,26 @@ def write_coords(book: Book, cloud: PointCloud, probe_rows: dict) -> dict[str, B
             gs = [[ux, ux, "0", "0", uy, uz, "0"], [uy, "0", uy, "0", "0", "0", uz],
                   [uz, "0", "0", uz, "0", "0", "0"]][a]
             for c, v in enumerate(gs):
-                book.formula(ws, r, ci["GS_aa"] + c, f"={v}", fmt="General")
+                _ref_or_zero(book, ws, r, ci["GS_aa"] + c, v)
             px, py, pz = (cell(pr, 2 + c, "Inputs") for c in range(3))
             # G_k of Forbes 2025 eq. (24), row a
             gr = [["0", pz, f"-{py}"], [f"-{pz}", "0", px], [py, f"-{px}", "0"]][a]
             for c, v in enumerate(gr):
-                book.formula(ws, r, ci["GR_x"] + c, f"={v}", fmt="General")
+                _ref_or_zero(book, ws, r, ci["GR_x"] + c, v)
             for c, key in enumerate(("sigma_PQ_um", "sigma_P0_um", "sigma_P_um", "lambda_P")):
                 book.formula(ws, r, ci[key], f"={cell(pr, 5 + c, 'Inputs')}", fmt="General")
     n3 = 3 * cloud.m
     ws.freeze_panes = "C2"
     return {name: Block("Coords", 2, ci[name], n3, 1) for name in COORD_COLS} | {
         "GS": Block("Coords", 2, ci["GS_aa"], n3, 7), "GR": Block("Coords", 2, ci["GR_x"], n3, 3)}
+
+
+def _ref_or_zero(book: Book, ws, r: int, c: int, v: str) -> None:
+    """Structural zeros of a sensitivity matrix are numbers, the rest references."""
+    if v == "0":
+        ws.cell(row=r, column=c).value = 0
+    else:
+        book.formula(ws, r, c, f"={v}", fmt="General")
 
 
 def _t(b: Block) -> str:

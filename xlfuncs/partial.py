@@ -297,26 +297,62 @@ def cone_jacobian_rows(theta, z, r0: float, phi: float) -> np.ndarray:
     return np.stack([-cp * c, -cp * s, w * s, -w * c, np.full_like(c, -cp), z / cp], axis=-1)
 
 
-def cone_patch(alpha_rad: float, a_mm: float, r0_mm: float, phi_rad: float,
-               *, nodes: int = 48) -> Approximation:
+def cone_z_moments(a_mm: float, r0_mm: float, phi_rad: float) -> tuple[float, float, float]:
+    """Means of z, z^2, z^3 over -a <= z <= a with the area weight rho(z) = r0 - z tan(phi)."""
+    a, r0, t = a_mm, r0_mm, math.tan(phi_rad)
+    return -t * a * a / (3 * r0), a * a / 3, -t * a ** 4 / (5 * r0)
+
+
+def cone_patch(alpha_rad: float, a_mm: float, r0_mm: float, phi_rad: float) -> Approximation:
     """Patch -alpha <= theta <= alpha, -a <= z <= a of the cone r = r0 - z tan(phi)
-    (Tables 6, 7): H = (1/|A|) integral J^T J dA by Gauss-Legendre quadrature (exact here:
-    the integrand is a trigonometric polynomial of degree 2 in theta and a polynomial of degree
-    3 in z).  dA = rho(z) dtheta dz / cos(phi) with the signed rho = r0 - z tan(phi) (the
-    paper's convention, docs/errata.md)."""
+    (Tables 6, 7): H = (1/|A|) integral J^T J dA over the Jacobian rows of section 8
+    (:func:`cone_jacobian_rows`), uniform by area, dA = rho(z) dtheta dz / cos(phi) with the
+    signed rho = r0 - z tan(phi) (the paper's convention, docs/errata.md).
+
+    The paper evaluates these integrals by quadrature; they have a closed form: the means over
+    theta of cos, cos^2, sin^2 (Appendix A) times the rho-weighted means M1, M2 of z, z^2
+    (:func:`cone_z_moments`); w = z/cos(phi) - r0 sin(phi) is linear in z.
+    :func:`cone_patch_quadrature` checks it.
+    """
     al = _check_angle("half arc angle alpha", alpha_rad, 0.0, math.pi)
     a = _check_positive("half-height a_mm", a_mm)
     r0 = _check_positive("r0_mm", r0_mm)
     phi = float(phi_rad)
     if not math.isfinite(phi) or abs(phi) >= math.pi / 2:
         raise ModelError(f"cone angle phi must be in (-90, 90) deg, got {math.degrees(phi):g}")
+    c, c2, s2 = _arc_means(al)
+    cp, sp = math.cos(phi), math.sin(phi)
+    M1, M2, _ = cone_z_moments(a, r0, phi)
+    Ew = M1 / cp - r0 * sp
+    Ew2 = M2 / cp ** 2 - 2 * r0 * sp * M1 / cp + (r0 * sp) ** 2
+    Ewz = M2 / cp - r0 * sp * M1
+    H = np.zeros((6, 6))
+    H[0, 0] = cp * cp * c2
+    H[0, 3] = cp * c2 * Ew
+    H[0, 4] = cp * cp * c
+    H[0, 5] = -c * M1
+    H[1, 1] = cp * cp * s2
+    H[1, 2] = -cp * s2 * Ew
+    H[2, 2] = s2 * Ew2
+    H[3, 3] = c2 * Ew2
+    H[3, 4] = cp * c * Ew
+    H[3, 5] = -c * Ewz / cp
+    H[4, 4] = cp * cp
+    H[4, 5] = -M1
+    H[5, 5] = M2 / (cp * cp)
+    H = np.triu(H) + np.triu(H, 1).T
+    return Approximation("cone", "cone_patch", CONE_NAMES, H,
+                         {"alpha_rad": al, "a_mm": a, "r0_mm": r0, "phi_rad": phi})
+
+
+def cone_patch_quadrature(alpha_rad: float, a_mm: float, r0_mm: float, phi_rad: float,
+                          *, nodes: int = 48) -> Approximation:
+    """:func:`cone_patch` by Gauss-Legendre quadrature of J^T J rho over (theta, z), as the
+    paper describes ("one-dimensional quadrature routines")."""
+    al, a, r0, phi = float(alpha_rad), float(a_mm), float(r0_mm), float(phi_rad)
     x, w = leggauss(nodes)
-    t = al * x
-    wt = al * w
-    z = a * x
-    wz = a * w
-    T, Z = np.meshgrid(t, z, indexing="ij")
-    W = np.outer(wt, wz) * (r0 - math.tan(phi) * Z)
+    T, Z = np.meshgrid(al * x, a * x, indexing="ij")
+    W = np.outer(al * w, a * w) * (r0 - math.tan(phi) * Z)
     J = cone_jacobian_rows(T, Z, r0, phi)
     H = np.einsum("ij,ijk,ijl->kl", W, J, J) / W.sum()
     return Approximation("cone", "cone_patch", CONE_NAMES, H,

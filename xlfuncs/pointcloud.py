@@ -358,7 +358,8 @@ def distance_components(cloud: PointCloud, params: Parameters, pairs: np.ndarray
     for start in range(0, n, block):
         sl = slice(start, min(start + block, n))
         i, j = pairs[sl, 0], pairs[sl, 1]
-        d, var = _distance_block(cloud, params, pa, i, j)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            d, var = _distance_block(cloud, params, pa, i, j)
         if np.any(d <= 1e-9):
             check_pairs(cloud, pairs[sl])
         out["d_mm"][sl] = d

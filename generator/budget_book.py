@@ -1,0 +1,566 @@
+"""The ``budget`` workbook: Wojtyła/Płowucha 2023 uncertainty budgets as live formulas.
+
+Sheets: Instructions, Inputs (MPE, essential points, TEDs: named input cells), one sheet per
+characteristic, Results.  A characteristic sheet shows the budget of the chosen variant in the
+layout of the paper's Tables 1-8 (input, x_i in mm, dl/dx_i, u_i in µm, contribution, then l,
+u_c, U), a table of every variant's u_c side by side, and the budgets of the other variants
+below.  A position sheet first combines its two distance budgets (Table 9).
+
+Every computed cell is a formula of the named inputs: x_i = coordinate differences, u_i =
+b (A_um + |x_i|/B_mm), the sensitivities are the closed-form derivatives of the cross/dot-product
+models written out cell by cell (cross products component-wise, next to each budget under
+"intermediate quantities"), contributions, u_c = SQRT(SUMSQ(...)), U = k u_c.  Only plain
+single-cell formulas are used (no array formulas, INDEX or OFFSET).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from xlfuncs import budget as bd
+
+from .book import HEADER_FONT, Book, Formula
+from .xlref import block, cell
+
+# columns of a budget block (paper layout) and of its intermediate quantities
+C_INPUT, C_X, C_S, C_U, C_C = 1, 2, 3, 4, 5
+C_QTY, C_VX, C_VY, C_VZ, C_MEAN = 7, 8, 9, 10, 11
+
+FMT_X = "0.00##"
+FMT_S = "0.000000"
+FMT_U = "0.0000"
+
+BUDGET_HEADER = ["input", "x_i_mm", "dl_dx_i", "u_i_um", "contribution_um"]
+BUDGET_NOTES = [
+    "Input quantity x_i: a coordinate difference of two essential points, e.g. x_CS4 = x(S4) - x(C) "
+    "(Wojtyła/Płowucha 2023, section 2).",
+    "Value of the input quantity in mm, a formula of the named point coordinates on 'Inputs'.",
+    "Sensitivity dl/dx_i: closed-form derivative of the model, written with the intermediate "
+    "quantities to the right (columns G-K).",
+    "u(x_i) = b * E_L,MPE(|x_i|) = b * (A_um + |x_i|/B_mm), eq. (5) applied to each coordinate "
+    "difference.",
+    "Contribution dl/dx_i * u_i (µm); u_c = sqrt(sum of squares), eq. (6).",
+]
+
+KIND_TEXT = {
+    "point_point": "l = |p|, eq. (1)",
+    "point_line": "l = |p x a|/|a|, eq. (2)",
+    "plane": "l = |p . n|/|n|, n = a x c, eqs. (3), (7), (10)-(18)",
+    "line_line": "l = |p . n|/|n|, n = a x c, eq. (4)",
+    "secondary": "l = |p . v|/|v|, v = d x u, u = a x c, eqs. (8), (27)-(32)",
+    "tertiary": "l = |p . w|/|w|, w = u x v, v = d x u, u = a x c, eqs. (9), (19)-(21), (33)-(35)",
+}
+SENS_TEXT = {
+    "point_point": "dl/dp = p/|p|",
+    "point_line": "dl/dp = (a x m)/(|m||a|), dl/da = (m x p)/(|m||a|) - |m| a/|a|^3, m = p x a",
+    "plane": "dl/dp = s n/|n|, dl/da = c x g, dl/dc = g x a, g = dl/dn = s (p - t n/|n|)/|n|",
+    "line_line": "dl/dp = s n/|n|, dl/da = c x g, dl/dc = g x a, g = dl/dn = s (p - t n/|n|)/|n|",
+    "secondary": "dl/dp = s v/|v|; g = dl/dv; dl/dd = u x g; g_u = g x d; dl/da = c x g_u, "
+                 "dl/dc = g_u x a",
+    "tertiary": "dl/dp = s w/|w|; g = dl/dw; g_v = g x u; dl/dd = u x g_v; g_u = v x g + g_v x d; "
+                "dl/da = c x g_u, dl/dc = g_u x a",
+}
+
+
+@dataclass
+class BudgetCells:
+    """Where one variant's budget is (coordinates on ``sheet``)."""
+
+    sheet: str
+    label: str
+    rows: list[dict]             # {"input", "value", "sensitivity", "u", "contribution"}
+    value: str
+    u: str
+    U: str
+
+
+@dataclass
+class CharCells:
+    """Where a characteristic's results are: ``value``, ``u``, ``U`` (and, for a position, the
+    combination ``rows`` and the two distances)."""
+
+    sheet: str
+    value: str
+    u: str
+    U: str
+    rows: list[dict] = field(default_factory=list)
+    chosen: BudgetCells | None = None
+    variants: dict[str, BudgetCells] = field(default_factory=dict)
+    distances: list["CharCells"] = field(default_factory=list)
+    results_row: int = 0
+
+
+# -- formula text helpers (no leading "=") --------------------------------------------------------
+
+def _cross(a: list[str], c: list[str]) -> list[str]:
+    return [f"{a[1]}*{c[2]}-{a[2]}*{c[1]}", f"{a[2]}*{c[0]}-{a[0]}*{c[2]}",
+            f"{a[0]}*{c[1]}-{a[1]}*{c[0]}"]
+
+
+def _dot(a: list[str], c: list[str]) -> str:
+    return f"{a[0]}*{c[0]}+{a[1]}*{c[1]}+{a[2]}*{c[2]}"
+
+
+def _coord(ref: str) -> str:
+    return ref.replace("$", "")
+
+
+# -- one variant's budget ---------------------------------------------------------------------------
+
+class _BlockWriter:
+    def __init__(self, book: Book, ws, r0: int):
+        self.book, self.ws, self.r0 = book, ws, r0
+        self.qrow = r0 + 2          # next row of the intermediate quantities
+
+    def vec(self, label: str, comps: list[str], meaning: str) -> list[str]:
+        r = self.qrow
+        self.book.text(self.ws, r, C_QTY, label)
+        for k, f in enumerate(comps):
+            self.book.formula(self.ws, r, C_VX + k, f"={f}", fmt=FMT_S)
+        self.book.text(self.ws, r, C_MEAN, meaning)
+        self.qrow += 1
+        return [cell(r, C_VX + k) for k in range(3)]
+
+    def scalar(self, label: str, formula: str, meaning: str) -> str:
+        r = self.qrow
+        self.book.text(self.ws, r, C_QTY, label)
+        self.book.formula(self.ws, r, C_VX, f"={formula}", fmt=FMT_S)
+        self.book.text(self.ws, r, C_MEAN, meaning)
+        self.qrow += 1
+        return cell(r, C_VX)
+
+    def norm(self, v: list[str]) -> str:
+        return f"SQRT(SUMSQ({v[0]}:{v[2]}))"
+
+
+def _point_refs(vec: bd.Vec) -> list[str]:
+    return [f"{vec.head}_{ax}_mm-{vec.tail}_{ax}_mm" for ax in bd.AXES]
+
+
+def write_variant(book: Book, ws, r0: int, title: str, vb: bd.VariantBudget, *,
+                  notes: bool) -> tuple[BudgetCells, int]:
+    """Write one variant's budget with its top-left at row ``r0``; return its cells and the
+    first free row below it."""
+    spec = vb.spec
+    w = _BlockWriter(book, ws, r0)
+    book.text(ws, r0, C_INPUT, title, font=HEADER_FONT)
+    book.header(ws, r0 + 1, C_INPUT, BUDGET_HEADER,
+                [*BUDGET_NOTES[:2], f"{BUDGET_NOTES[2]} Here: {SENS_TEXT[spec.kind]}.",
+                 *BUDGET_NOTES[3:]] if notes else None)
+    book.header(ws, r0 + 1, C_QTY, ["intermediate", "x", "y", "z", "meaning"])
+
+    # input quantities: x_i = coordinate differences of named points
+    vecs: dict[str, list[str]] = {}
+    rows = []
+    r = r0 + 2
+    for v in spec.vectors:
+        refs = []
+        for k, (name, f) in enumerate(zip(v.inputs, _point_refs(v))):
+            book.text(ws, r, C_INPUT, name)
+            book.formula(ws, r, C_X, f"={f}", fmt=FMT_X)
+            book.formula(ws, r, C_U, f"=b*(A_um+ABS({cell(r, C_X)})/B_mm)", fmt=FMT_U)
+            book.formula(ws, r, C_C, f"={cell(r, C_S)}*{cell(r, C_U)}", fmt=FMT_U)
+            refs.append(cell(r, C_X))
+            rows.append({"input": name, "value": _coord(cell(r, C_X)),
+                         "sensitivity": _coord(cell(r, C_S)), "u": _coord(cell(r, C_U)),
+                         "contribution": _coord(cell(r, C_C))})
+            r += 1
+        vecs[v.role] = refs
+    lab = {v.role: v.label for v in spec.vectors}
+    p = vecs.get("p")
+
+    # intermediate quantities and the sensitivities, per formula skeleton
+    sens: dict[str, list[str]] = {}
+    kind = spec.kind
+    if kind == "point_point":
+        P = w.scalar("|p|", w.norm(p), f"|{lab['p']}|, eq. (1)")
+        value = P
+        sens["p"] = [f"{x}/{P}" for x in p]
+    elif kind == "point_line":
+        a = vecs["a"]
+        m = w.vec("m = p x a", _cross(p, a), f"{lab['p']} x {lab['a']}")
+        M = w.scalar("|m|", w.norm(m), "length of m")
+        A = w.scalar("|a|", w.norm(a), f"|{lab['a']}|")
+        q = w.vec("a x m", _cross(a, m), "for dl/dp")
+        qq = w.vec("m x p", _cross(m, p), "for dl/da")
+        value = f"{M}/{A}"
+        sens["p"] = [f"{x}/({M}*{A})" for x in q]
+        sens["a"] = [f"{x}/({M}*{A})-{M}*{y}/{A}^3" for x, y in zip(qq, a)]
+    else:
+        a, c = vecs["a"], vecs["c"]
+        if kind in ("plane", "line_line"):
+            n = w.vec("n = a x c", _cross(a, c), f"{lab['a']} x {lab['c']}"
+                      + (", eq. (7)" if kind == "plane" else ", eq. (4)"))
+        else:
+            d = vecs["d"]
+            u = w.vec("u = a x c", _cross(a, c), f"{lab['a']} x {lab['c']}, eq. (7)")
+            v = w.vec("v = d x u", _cross(d, u), f"{lab['d']} x u, eq. (8)")
+            if kind == "secondary":
+                n = v
+            else:
+                n = w.vec("w = u x v", _cross(u, v), "u x (DE x u), eq. (9)")
+        N = w.scalar("|n|", w.norm(n), "length of the normal")
+        t = w.scalar("t = p.n/|n|", f"({_dot(p, n)})/{N}", f"signed distance of {lab['p']}")
+        s = w.scalar("s", f"IF({t}<0,-1,1)", "sign of t (+1 at t = 0: one-sided derivative)")
+        g = w.vec("g = dl/dn", [f"{s}*({pp}-{t}*{nn}/{N})/{N}" for pp, nn in zip(p, n)],
+                  "s (p - t n/|n|)/|n|")
+        value = f"ABS({t})"
+        sens["p"] = [f"{s}*{nn}/{N}" for nn in n]
+        if kind in ("plane", "line_line"):
+            gu = g
+        elif kind == "secondary":
+            gu = w.vec("g_u = dl/du", _cross(g, vecs["d"]), "g x d")
+            sens["d"] = _cross(u, g)
+        else:
+            gv = w.vec("g_v = dl/dv", _cross(g, u), "g x u")
+            gu = w.vec("g_u = dl/du", [f"({x})+({y})" for x, y in
+                                       zip(_cross(v, g), _cross(gv, vecs["d"]))],
+                       "v x g + g_v x d")
+            sens["d"] = _cross(u, gv)
+        sens["a"] = _cross(c, gu)
+        sens["c"] = _cross(gu, a)
+
+    r = r0 + 2
+    for v in spec.vectors:
+        for f in sens[v.role]:
+            book.formula(ws, r, C_S, f"={f}", fmt=FMT_S)
+            r += 1
+    last_input = r - 1
+    value_cell = (r, C_C)
+    book.text(ws, r, C_U, "l_mm")
+    book.formula(ws, r, C_C, f"={value}", fmt="0.0000",
+                 note=f"{KIND_TEXT[kind]}: {spec.label} ({spec.equation})" if notes else None)
+    book.text(ws, r + 1, C_U, "u_c_um")
+    book.formula(ws, r + 1, C_C, f"=SQRT(SUMSQ({block(r0 + 2, C_C, last_input - r0 - 1, 1)}))",
+                 fmt=FMT_U, note="u_c = sqrt(sum((dl/dx_i u_i)^2)), eq. (6)" if notes else None)
+    book.text(ws, r + 2, C_U, "U_um")
+    book.formula(ws, r + 2, C_C, f"=k*{cell(r + 1, C_C)}", fmt=FMT_U,
+                 note="U = k u_c" if notes else None)
+    bottom = max(r + 3, w.qrow)
+    cells = BudgetCells(ws.title, spec.label, rows, _coord(cell(*value_cell)),
+                        _coord(cell(r + 1, C_C)), _coord(cell(r + 2, C_C)))
+    return cells, bottom + 1
+
+
+def _variant_table(book: Book, ws, r0: int, title: str, d: bd.DistanceBudget,
+                   cells: dict[str, BudgetCells], sheet: str) -> int:
+    """Every variant's l, u_c and U side by side (formulas pointing at their budgets), the
+    lowest u_c now, and whether the chosen variant is still the lowest."""
+    book.text(ws, r0, C_INPUT, title, font=HEADER_FONT)
+    book.header(ws, r0 + 1, C_INPUT, ["variant", "equation", "l_mm", "u_c_um", "U_um", "chosen"],
+                [None, "Wojtyła/Płowucha 2023", None, "u_c of the variant's budget (eq. (6))",
+                 None, "the variant whose budget is reported (auto: lowest u_c at build time)"])
+    r = r0 + 2
+    first = r
+    chosen_u = None
+    for vb in d.variants:
+        bc = cells[vb.label]
+        book.text(ws, r, 1, vb.label)
+        book.text(ws, r, 2, vb.spec.equation)
+        book.formula(ws, r, 3, f"={_ref(bc.sheet, bc.value, sheet)}", fmt="0.0000")
+        book.formula(ws, r, 4, f"={_ref(bc.sheet, bc.u, sheet)}", fmt=FMT_U)
+        book.formula(ws, r, 5, f"={_ref(bc.sheet, bc.U, sheet)}", fmt=FMT_U)
+        if vb is d.chosen:
+            book.text(ws, r, 6, "chosen")
+            chosen_u = cell(r, 4)
+        r += 1
+    book.text(ws, r, 3, "lowest_u_c_um")
+    book.formula(ws, r, 4, f"=MIN({block(first, 4, len(d.variants), 1)})", fmt=FMT_U)
+    book.text(ws, r + 1, 3, "chosen_is_lowest")
+    book.formula(ws, r + 1, 4, f"=IF({chosen_u}<={cell(r, 4)}*(1+1E-9),\"yes\",\"no\")",
+                 fmt=None, note="'no' after an edit: another variant now has a lower u_c; set "
+                 "variant in the task file or rebuild with variant = \"auto\"")
+    return r + 3
+
+
+def _ref(target_sheet: str, coord: str, here: str) -> str:
+    r, c = _split(coord)
+    return cell(r, c, None if target_sheet == here else target_sheet)
+
+
+def _split(coord: str) -> tuple[int, int]:
+    from openpyxl.utils.cell import coordinate_from_string, column_index_from_string
+
+    letters, row = coordinate_from_string(coord)
+    return row, column_index_from_string(letters)
+
+
+def _distance_section(book: Book, ws, r0: int, heading: str, d: bd.DistanceBudget
+                      ) -> tuple[CharCells, int, list]:
+    """The chosen variant's budget of one distance; returns its cells, the next row and the
+    pending (other) variants to write further down."""
+    ch = d.chosen
+    title = f"{heading} — variant {ch.label}, {ch.spec.equation}"
+    bc, r = write_variant(book, ws, r0, title, ch, notes=True)
+    cc = CharCells(ws.title, bc.value, bc.u, bc.U, rows=bc.rows, chosen=bc,
+                   variants={ch.label: bc})
+    return cc, r, [v for v in d.variants if v is not ch]
+
+
+def _set_widths(ws) -> None:
+    for col, width in (("A", 30), ("B", 14), ("C", 14), ("D", 14), ("E", 16), ("F", 9),
+                       ("G", 14), ("H", 13), ("I", 13), ("J", 13), ("K", 34)):
+        ws.column_dimensions[col].width = width
+
+
+# -- sheets ---------------------------------------------------------------------------------------
+
+def _write_distance_sheet(book: Book, task, c, d: bd.DistanceBudget) -> CharCells:
+    from .budget_job import MODEL_TEXT
+
+    ws = book.sheet(c.name)
+    _set_widths(ws)
+    book.text(ws, 1, 1, f"{c.name}: {MODEL_TEXT[c.model]}", font=HEADER_FONT)
+    book.text(ws, 2, 1, _points_text(c) + f"; variant requested: {c.variant}")
+    cc, r, others = _distance_section(book, ws, 4, f"Budget of {c.name}", d)
+    r = _others_and_table(book, ws, r, [(c.name, d, cc, others)])
+    ws.freeze_panes = "B1"
+    return cc
+
+
+def _others_and_table(book: Book, ws, r: int, sections) -> int:
+    """Variant tables first (near the top), then the budgets of the other variants."""
+    # the tables need the other variants' cells: compute the layout of the blocks first by
+    # writing the tables after the blocks but placing the tables above them
+    table_rows = sum(len(d.variants) + 5 for _, d, _, _ in sections)
+    r_table = r
+    r_blocks = r + table_rows + 1
+    book.text(ws, r_blocks, 1, "Budgets of the other variants", font=HEADER_FONT)
+    r_blocks += 1
+    for name, d, cc, others in sections:
+        for vb in others:
+            bc, r_blocks = write_variant(book, ws, r_blocks, f"{name} — variant {vb.label}, "
+                                         f"{vb.spec.equation}", vb, notes=False)
+            cc.variants[vb.label] = bc
+    for name, d, cc, others in sections:
+        r_table = _variant_table(book, ws, r_table, f"Variants of {name}: u_c side by side "
+                                 "(the lowest is selected, section 2)", d, cc.variants, ws.title)
+    return r_blocks
+
+
+def _write_position_sheet(book: Book, task, c, pb: bd.PositionBudget) -> CharCells:
+    from .budget_job import distance_name
+
+    ws = book.sheet(c.name)
+    _set_widths(ws)
+    book.text(ws, 1, 1, f"{c.name}: position deviation of the axis point {pb.point}, cylindrical "
+              "tolerance zone (Wojtyła/Płowucha 2023 eq. (22))", font=HEADER_FONT)
+    book.text(ws, 2, 1, "POS = 2 sqrt((l1 - l1_TED)^2 + (l2 - l2_TED)^2); u_POS = 2 sqrt(u_l1^2 + "
+              "u_l2^2) (Table 9 convention: the RMS of POS at the exact location, docs/errata.md)")
+    book.text(ws, 4, 1, f"Budget of {c.name} (Table 9)", font=HEADER_FONT)
+    book.header(ws, 5, 1, ["input", "value_mm", "sensitivity", "u_um", "contribution_um",
+                           "TED_mm", "datum"],
+                ["the distances of the axis point from the two datums", "l_i (mm), from the "
+                 "distance budgets below", "2: POS = 2 |deviation|; u_POS = 2 sqrt(u_l1^2 + "
+                 "u_l2^2) (Table 9); eq. (26) would give 2 max(u_l1, u_l2)",
+                 "u_c of the distance budget below", "sensitivity * u", "theoretically exact "
+                 "distance (input cell on 'Inputs')", None])
+    # distance budgets further down
+    sections = []
+    r = 13
+    dist_cells = []
+    for i, d in enumerate(pb.distances):
+        heading = (f"Budget of {distance_name(c, i)}: distance of {pb.point} from the "
+                   f"{pb.datums[i]} datum")
+        cc, r, others = _distance_section(book, ws, r, heading, d)
+        dist_cells.append(cc)
+        sections.append((distance_name(c, i), d, cc, others))
+    _others_and_table(book, ws, r, sections)
+    rows = []
+    for i, (d, cc) in enumerate(zip(pb.distances, dist_cells)):
+        rr = 6 + i
+        book.text(ws, rr, 1, pb.inputs[i])
+        book.formula(ws, rr, 2, f"={_ref(ws.title, cc.value, ws.title)}", fmt="0.0000")
+        book.formula(ws, rr, 3, f"={bd.POSITION_FACTOR:g}", fmt="0")
+        book.formula(ws, rr, 4, f"={_ref(ws.title, cc.u, ws.title)}", fmt=FMT_U)
+        book.formula(ws, rr, 5, f"={cell(rr, 3)}*{cell(rr, 4)}", fmt=FMT_U)
+        book.formula(ws, rr, 6, f"={c.name}_ted{i + 1}_mm", fmt="0.00##")
+        book.text(ws, rr, 7, pb.datums[i])
+        rows.append({"input": pb.inputs[i], "value": _coord(cell(rr, 2)),
+                     "sensitivity": _coord(cell(rr, 3)), "u": _coord(cell(rr, 4)),
+                     "contribution": _coord(cell(rr, 5))})
+    book.text(ws, 8, 4, "POS_mm")
+    book.formula(ws, 8, 5, f"=2*SQRT(({cell(6, 2)}-{cell(6, 6)})^2+({cell(7, 2)}-{cell(7, 6)})^2)",
+                 fmt="0.0000", note="POS = 2 sqrt((l1 - l1_TED)^2 + (l2 - l2_TED)^2), eq. (22)")
+    book.text(ws, 9, 4, "u_POS_um")
+    book.formula(ws, 9, 5, f"=SQRT(SUMSQ({block(6, 5, 2, 1)}))", fmt=FMT_U,
+                 note="u_POS = 2 sqrt(u_l1^2 + u_l2^2): Table 9 (docs/errata.md)")
+    book.text(ws, 10, 4, "U_POS_um")
+    book.formula(ws, 10, 5, f"=k*{cell(9, 5)}", fmt=FMT_U, note="U = k u_POS")
+    book.text(ws, 11, 4, "u_eq26_um")
+    book.formula(ws, 11, 5, f"=2*MAX({block(6, 4, 2, 1)})", fmt=FMT_U,
+                 note="for comparison only: the paper's eq. (26) with u_l = max(u_l1, u_l2); "
+                      "Table 9 does not follow it")
+    ws.freeze_panes = "B1"
+    return CharCells(ws.title, "E8", "E9", "E10", rows=rows, distances=dist_cells)
+
+
+def _points_text(c) -> str:
+    parts = []
+    for k, v in c.points.items():
+        parts.append(f"{k} = {', '.join(v) if isinstance(v, tuple) else v}")
+    if c.datum:
+        parts.append(f"datum = {c.datum}")
+    return "; ".join(parts)
+
+
+def _write_inputs(book: Book, task) -> None:
+    ws = book.sheet("Inputs")
+    ws.column_dimensions["A"].width = 22
+    for col in "BCD":
+        ws.column_dimensions[col].width = 14
+    ws.column_dimensions["E"].width = 70
+    book.text(ws, 1, 1, "Inputs: edit the yellow cells, every budget recalculates", font=HEADER_FONT)
+    book.header(ws, 3, 1, ["key", "value", "unit", "", "meaning"])
+    m = task.mpe
+    rows = [("A_um", m.A_um, "µm", 0.0, "E_L,MPE = A + L/B: constant term A (eq. (5))"),
+            ("B_mm", m.B_mm, "mm/µm", 1e-12, "E_L,MPE = A + L/B: length term L/B, L in mm"),
+            ("b", m.b, "1", 1e-12, "u = b E_L,MPE: 0.577 = 1/sqrt(3) for a uniform distribution "
+                                   "(eq. (5)); 1/3 in section 4 of the paper"),
+            ("k", m.k, "1", 1e-12, "coverage factor, U = k u")]
+    r = 4
+    for key, value, unit, lo, meaning in rows:
+        book.text(ws, r, 1, key)
+        book.input(ws, r, 2, key, value, lo=lo, note=meaning)
+        book.text(ws, r, 3, unit)
+        book.text(ws, r, 5, meaning)
+        r += 1
+    r += 1
+    book.text(ws, r, 1, "Essential points (mm); defined names <point>_x_mm, <point>_y_mm, "
+              "<point>_z_mm", font=HEADER_FONT)
+    book.header(ws, r + 1, 1, ["point", "x_mm", "y_mm", "z_mm", "role"])
+    r += 2
+    roles = _point_roles(task)
+    for name, xyz in task.points.items():
+        book.text(ws, r, 1, name)
+        for k, ax in enumerate(bd.AXES):
+            book.input(ws, r, 2 + k, f"{name}_{ax}_mm", xyz[k])
+        book.text(ws, r, 5, roles.get(name, ""))
+        r += 1
+    if task.datum_system is not None:
+        ds = task.datum_system
+        r += 1
+        book.text(ws, r, 1, "Datum system (section 3, eqs. (7)-(9))", font=HEADER_FONT)
+        book.text(ws, r + 1, 1, f"primary: plane {''.join(ds.primary)}, normal u = "
+                  f"{ds.primary[0]}{ds.primary[1]} x {ds.primary[0]}{ds.primary[2]} (or the "
+                  "other two vertex pairs)")
+        book.text(ws, r + 2, 1, f"secondary: plane through {ds.secondary[0]} and {ds.secondary[1]} "
+                  f"perpendicular to the primary, normal v = {''.join(ds.secondary)} x u")
+        book.text(ws, r + 3, 1, f"tertiary: plane through {ds.tertiary_point} perpendicular to "
+                  "both, normal w = u x v")
+        r += 5
+    pos = [c for c in task.characteristics if c.model == "position"]
+    if pos:
+        book.text(ws, r, 1, "Theoretically exact distances of the positions (mm); defined names "
+                  "<characteristic>_ted1_mm, _ted2_mm", font=HEADER_FONT)
+        book.header(ws, r + 1, 1, ["characteristic", "ted_mm", "datum", "", "distance"])
+        r += 2
+        for c in pos:
+            for i in range(2):
+                book.text(ws, r, 1, c.name)
+                book.input(ws, r, 2, f"{c.name}_ted{i + 1}_mm", c.ted_mm[i], lo=0.0)
+                book.text(ws, r, 3, c.datums[i])
+                book.text(ws, r, 5, f"l_{c.points['point']},{i + 1}")
+                r += 1
+        r += 1
+    book.text(ws, r, 1, "Characteristics (structure; change it in the task file)",
+              font=HEADER_FONT)
+    book.header(ws, r + 1, 1, ["name", "model", "points", "", "variant requested"])
+    r += 2
+    for c in task.characteristics:
+        book.text(ws, r, 1, c.name)
+        book.text(ws, r, 2, c.model)
+        pts = _points_text(c)
+        if c.datums:
+            pts += f"; datums = {', '.join(c.datums)}"
+        book.text(ws, r, 3, pts)
+        book.text(ws, r, 5, c.variant if isinstance(c.variant, str) else " | ".join(c.variant))
+        r += 1
+
+
+def _point_roles(task) -> dict[str, str]:
+    roles: dict[str, list[str]] = {}
+    ds = task.datum_system
+    if ds is not None:
+        for p in ds.primary:
+            roles.setdefault(p, []).append("primary datum")
+        for p in ds.secondary:
+            roles.setdefault(p, []).append("secondary datum")
+        if ds.tertiary_point not in ds.secondary:
+            roles.setdefault(ds.tertiary_point, []).append("tertiary datum")
+    for c in task.characteristics:
+        for v in c.points.values():
+            for p in (v if isinstance(v, tuple) else (v,)):
+                if c.name not in roles.get(p, []):
+                    roles.setdefault(p, []).append(c.name)
+    return {k: ", ".join(v) for k, v in roles.items()}
+
+
+def _instructions(book: Book, task) -> None:
+    book.para("What this workbook computes", bold=True)
+    book.para(
+        "Uncertainty budgets by the sensitivity-analysis method of M. Wojtyła, P. Rosner, "
+        "W. Płowucha et al., 'Determination of uncertainty of coordinate measurements on the "
+        "basis of the formula for E_L,MPE', Measurement 222 (2023) 113635.",
+        "Each characteristic is a distance l of a few essential points. Its input quantities x_i are "
+        "coordinate differences of the points (x_CS4 = x(S4) - x(C), mm); each has u(x_i) = "
+        "b * E_L,MPE(|x_i|) = b (A + |x_i|/B) (eq. 5); u_c = sqrt(sum((dl/dx_i u_i)^2)) (eq. 6); "
+        "U = k u_c.",
+        "The sensitivities dl/dx_i are the closed-form derivatives of the cross/dot-product models "
+        "(eqs. 1-4, 7-21, 27-35), written as cell formulas next to each budget (columns G-K: "
+        "normal vectors, signed distance t, its sign s, and the gradient g = dl/dn).",
+        "No macros, no pasted numbers: click any cell and follow it back to the inputs.")
+    book.gap()
+    book.para("How to use it", bold=True)
+    book.para(
+        "1. Edit the yellow cells on 'Inputs' only: MPE (A_um, B_mm), b, k, point coordinates, TEDs.",
+        "2. Each characteristic sheet shows the budget of the chosen variant in the layout of the "
+        "paper's Tables 1-8, a table of all variants' u_c side by side, and the other variants' "
+        "budgets below. A position sheet combines its two distance budgets (Table 9).",
+        "3. 'auto' picks the variant of lowest u_c when the workbook is built. After an edit, "
+        "'chosen_is_lowest' says whether another variant has become lower; rebuild with cmmwb to "
+        "switch.",
+        "4. Structural changes (other points, characteristics, variants) go through the task file "
+        "and `cmmwb build`.")
+    book.gap()
+    book.para("Conventions (docs/errata.md, section Wojtyła/Płowucha 2023)", bold=True)
+    book.para(
+        "Tables 1-9 of the paper follow E = 3 + L/250 µm with b = 0.577 (the MicroXcel of section "
+        "6), not the 2 + L/250, b = 1/3 stated in section 4.",
+        "Position, cylindrical zone: u_POS = 2 sqrt(u_l1^2 + u_l2^2), which reproduces Table 9. "
+        "Eq. (26) (u_POS ~ 2 u_l) is not what Table 9 uses; it is shown as u_eq26_um for comparison.",
+        "A point exactly on a plane-type datum (l = 0): |.| has a kink; the one-sided derivative "
+        "(sign +1) is used, with the same u_c from either side. The paper instead replaced the zero "
+        "x components of CS4, DS4, DS3 by 0.01 mm; the shipped knuckle task does that through the "
+        "coordinates of S3 and S4.",
+        "Degenerate geometry (collinear plane points, parallel lines, a point on a line, coincident "
+        "points) makes the formulas return #DIV/0! rather than a number.",
+        *task.notes)
+
+
+def write(task, evaluated: list, path: Path) -> dict[str, CharCells]:
+    """Write the workbook to ``path``; return where each characteristic's cells are."""
+    book = Book("budget", task.name, f"Sensitivity-analysis uncertainty budgets — {task.name}")
+    _instructions(book, task)
+    _write_inputs(book, task)
+    layout: dict[str, CharCells] = {}
+    for c, r in zip(task.characteristics, evaluated):
+        if c.model == "position":
+            layout[c.name] = _write_position_sheet(book, task, c, r)
+        else:
+            layout[c.name] = _write_distance_sheet(book, task, c, r)
+    rows = []
+    for k, (c, r) in enumerate(zip(task.characteristics, evaluated)):
+        cc = layout[c.name]
+        cc.results_row = k + 2
+        variant = r.variant if c.model == "position" else r.chosen.label
+        sheet = cc.sheet
+        rows.append([c.name, variant, Formula(f"={_ref(sheet, cc.value, '')}"),
+                     Formula(f"={_ref(sheet, cc.u, '')}"), Formula(f"={_ref(sheet, cc.U, '')}")])
+    book.results(["name", "variant", "value_mm", "u_um", "U_um"], rows,
+                 ["characteristic (task file)", "formula variant used (x cross, . dot product)",
+                  "value of the characteristic, mm", "standard uncertainty u_c (u_POS), µm",
+                  "expanded uncertainty U = k u, µm"])
+    book.save(path)
+    return layout

@@ -1,0 +1,398 @@
+"""The ``budget`` task: sensitivity-analysis uncertainty budgets from E_L,MPE
+(Wojtyła, Płowucha et al. 2023, Measurement 222, 113635).
+
+Task file: ``[task]``, ``[mpe]`` (A_um, B_mm, b, k), ``[points]`` (named essential points),
+optional ``[datum_system]`` (primary, secondary, tertiary) and ``[[characteristics]]``; the keys
+are documented in ``NEW_TASK`` (= ``examples/knuckle.toml``, the paper's steering knuckle).
+
+Workbook (``generator.budget_book``): Instructions, Inputs, one sheet per characteristic in the
+layout of the paper's Tables 1-9 (every value, sensitivity, u_i, contribution and u_c a native
+formula of the inputs), Results.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from xlfuncs import budget as bd
+from xlfuncs.errors import ModelError
+
+from . import __version__
+from .errors import InputError
+from .taskfile import check_keys, number, table, task_kind_and_name
+from .xlref import check_name
+
+KIND = "budget"
+EXAMPLES = ["knuckle.toml"]
+EXAMPLES_DIR = Path(__file__).parent / "examples"
+
+#: the commented steering-knuckle task written by ``cmmwb new budget``
+NEW_TASK: str = (EXAMPLES_DIR / "knuckle.toml").read_text(encoding="utf-8")
+
+RESULT_COLUMNS = ["name", "variant", "value_mm", "u_um", "U_um"]
+
+#: point-name keys of each model (the points a characteristic uses), with their shape
+MODEL_KEYS: dict[str, dict[str, int]] = {
+    "point_point": {"from": 1, "to": 1},
+    "point_line": {"point": 1, "line": 2},
+    "point_plane": {"point": 1, "plane": 3},
+    "line_line": {"line1": 2, "line2": 2},
+    "datum_distance": {"point": 1},
+    "position": {"point": 1},
+}
+MODEL_TEXT = {
+    "point_point": "distance of two points, eq. (1)",
+    "point_line": "distance of a point from a straight line, eq. (2)",
+    "point_plane": "distance of a point from a plane, eq. (3)",
+    "line_line": "distance of two straight lines, eq. (4)",
+    "datum_distance": "distance of a point from a datum, eqs. (7)-(21), (27)-(35)",
+    "position": "position deviation, cylindrical tolerance zone, eq. (22)",
+}
+
+_POINT_NAME = re.compile(r"^[A-Za-z][A-Za-z0-9_]{0,19}$")
+_CHAR_NAME = re.compile(r"^[A-Za-z][A-Za-z0-9_]{0,30}$")
+RESERVED_SHEETS = {"inputs", "results", "instructions"}
+
+
+@dataclass
+class Characteristic:
+    """One ``[[characteristics]]`` entry (``index`` is 1-based, for messages)."""
+
+    index: int
+    name: str
+    model: str
+    points: dict                      # model keys -> point name(s), e.g. {"point": "S4"}
+    variant: str | tuple[str, str] = "auto"
+    datum: str | None = None          # datum_distance
+    datums: tuple[str, str] | None = None   # position
+    ted_mm: tuple[float, float] | None = None
+
+    @property
+    def where(self) -> str:
+        return f"[[characteristics]] #{self.index}"
+
+
+@dataclass
+class Task:
+    path: Path
+    name: str
+    mpe: bd.MPE
+    points: dict[str, tuple[float, float, float]]
+    datum_system: bd.DatumSystem | None
+    characteristics: list[Characteristic]
+    notes: list[str] = field(default_factory=list)
+
+
+# -- reading the task file ----------------------------------------------------------------------
+
+def _err(path: Path, where: str, message: str) -> InputError:
+    return InputError(message, file=path, where=where)
+
+
+def _point_names(path: Path, value, n: int, where: str, points: dict) -> str | tuple[str, ...]:
+    """``n`` = 1: one point name; ``n`` > 1: a list of ``n`` distinct point names."""
+    items = [value] if n == 1 else value
+    if n == 1 and not isinstance(value, str):
+        raise _err(path, where, f"must be the name of a point, got {value!r}")
+    if n > 1 and (not isinstance(value, list) or len(value) != n):
+        raise _err(path, where, f"must be a list of {n} point names, got {value!r}")
+    for p in items:
+        if not isinstance(p, str):
+            raise _err(path, where, f"must be point names, got {p!r}")
+        if p not in points:
+            raise _err(path, where, f"unknown point {p!r} (the [points] table has "
+                       f"{', '.join(points) or 'none'})")
+    if n > 1 and len(set(items)) != n:
+        raise _err(path, where, f"needs {n} different points, got {value!r}")
+    return items[0] if n == 1 else tuple(items)
+
+
+def _read_points(path: Path, doc: dict) -> dict[str, tuple[float, float, float]]:
+    tbl = table(path, doc, "points")
+    if not tbl:
+        raise _err(path, "[points]", "no essential points (write e.g. A = [50, -32, 0])")
+    out = {}
+    for name, value in tbl.items():
+        where = f"[points] {name}"
+        if not _POINT_NAME.match(name):
+            raise _err(path, where, "a point name starts with a letter and has at most 20 "
+                       "letters, digits or underscores")
+        if (not isinstance(value, list) or len(value) != 3 or
+                any(isinstance(v, bool) or not isinstance(v, (int, float)) for v in value)):
+            raise _err(path, where, f"must be three numbers [x_mm, y_mm, z_mm], got {value!r}")
+        if not all(math.isfinite(float(v)) for v in value):
+            raise _err(path, where, f"must be three finite numbers, got {value!r}")
+        for ax in "xyz":
+            try:
+                check_name(f"{name}_{ax}_mm")
+            except ValueError:
+                raise _err(path, where, "not usable as a workbook name") from None
+        out[name] = tuple(float(v) for v in value)
+    return out
+
+
+def _read_datum_system(path: Path, doc: dict, points: dict) -> bd.DatumSystem | None:
+    if "datum_system" not in doc:
+        return None
+    tbl = table(path, doc, "datum_system")
+    check_keys(path, tbl, "datum_system", {"primary", "secondary", "tertiary"})
+    for key in ("primary", "secondary"):
+        if key not in tbl:
+            raise _err(path, f"[datum_system] {key}", "missing key")
+    primary = _point_names(path, tbl["primary"], 3, "[datum_system] primary", points)
+    secondary = _point_names(path, tbl["secondary"], 2, "[datum_system] secondary", points)
+    tertiary = None
+    if "tertiary" in tbl:
+        tertiary = _point_names(path, tbl["tertiary"], 1, "[datum_system] tertiary", points)
+    try:
+        return bd.DatumSystem(primary, secondary, tertiary)
+    except ModelError as e:
+        raise _err(path, "[datum_system]", str(e)) from None
+
+
+def _read_characteristic(path: Path, n: int, raw, points: dict, ds) -> Characteristic:
+    where = f"[[characteristics]] #{n}"
+    if not isinstance(raw, dict):
+        raise _err(path, where, "must be a table")
+    model = raw.get("model")
+    if model not in MODEL_KEYS:
+        raise _err(path, f"{where} key 'model'",
+                   f"must be one of {', '.join(MODEL_KEYS)}, got {model!r}")
+    keys = set(MODEL_KEYS[model]) | {"name", "model", "variant"}
+    if model == "datum_distance":
+        keys.add("datum")
+    if model == "position":
+        keys |= {"datums", "ted_mm"}
+    for key in raw:
+        if key not in keys:
+            raise _err(path, f"{where} key '{key}'",
+                       f"unknown key for model {model!r} (expected {', '.join(sorted(keys))})")
+    name = raw.get("name")
+    if not isinstance(name, str) or not _CHAR_NAME.match(name):
+        raise _err(path, f"{where} key 'name'", "a characteristic name starts with a letter and "
+                   f"has at most 31 letters, digits or underscores, got {name!r}")
+    if name.lower() in RESERVED_SHEETS:
+        raise _err(path, f"{where} key 'name'", f"{name!r} is the name of a workbook sheet")
+    pts = {}
+    for key, count in MODEL_KEYS[model].items():
+        if key not in raw:
+            raise _err(path, f"{where} key '{key}'", "missing key")
+        pts[key] = _point_names(path, raw[key], count, f"{where} key '{key}'", points)
+    if model == "point_point" and pts["from"] == pts["to"]:
+        raise _err(path, f"{where} key 'to'", "the two points are the same")
+    if model == "point_line" and pts["point"] in pts["line"]:
+        raise _err(path, f"{where} key 'point'", "the point is one of the line's points")
+    if model == "point_plane" and pts["point"] in pts["plane"]:
+        raise _err(path, f"{where} key 'point'", "the point is one of the plane's points")
+    c = Characteristic(n, name, model, pts)
+    if model in ("datum_distance", "position") and ds is None:
+        raise _err(path, f"{where} key 'model'", f"model {model!r} needs a [datum_system] table")
+    if model == "datum_distance":
+        datum = raw.get("datum")
+        if datum not in bd.DATUMS:
+            raise _err(path, f"{where} key 'datum'",
+                       f"must be one of {', '.join(bd.DATUMS)}, got {datum!r}")
+        c.datum = datum
+    variant = raw.get("variant", "auto")
+    if model == "position":
+        datums = raw.get("datums")
+        if (not isinstance(datums, list) or len(datums) != 2 or
+                any(d not in bd.DATUMS for d in datums) or datums[0] == datums[1]):
+            raise _err(path, f"{where} key 'datums'", "must be two different datums of "
+                       f"{', '.join(bd.DATUMS)}, e.g. [\"primary\", \"tertiary\"], got {datums!r}")
+        c.datums = tuple(datums)
+        ted = raw.get("ted_mm")
+        if (not isinstance(ted, list) or len(ted) != 2 or
+                any(isinstance(t, bool) or not isinstance(t, (int, float)) for t in ted) or
+                not all(math.isfinite(float(t)) and float(t) >= 0 for t in ted)):
+            raise _err(path, f"{where} key 'ted_mm'", "must be the two theoretically exact "
+                       f"distances (mm, >= 0) from the two datums, got {ted!r}")
+        c.ted_mm = (float(ted[0]), float(ted[1]))
+        if isinstance(variant, list):
+            if len(variant) != 2 or not all(isinstance(v, str) for v in variant):
+                raise _err(path, f"{where} key 'variant'",
+                           f"must be \"auto\" or one variant per distance, got {variant!r}")
+            variant = tuple(variant)
+        elif not isinstance(variant, str):
+            raise _err(path, f"{where} key 'variant'", f"must be text, got {variant!r}")
+        for k in (1, 2):
+            check_name(f"{name}_ted{k}_mm")
+    elif not isinstance(variant, str):
+        raise _err(path, f"{where} key 'variant'", f"must be text, got {variant!r}")
+    c.variant = variant
+    return c
+
+
+def load(path: Path, doc: dict) -> Task:
+    """Read and validate a budget task; every characteristic is evaluated once so that
+    degenerate geometry is reported with its ``[[characteristics]]`` entry."""
+    path = Path(path)
+    kind, name = task_kind_and_name(path, doc)
+    if kind != KIND:
+        raise _err(path, "[task] kind", f"expected {KIND!r}, got {kind!r}")
+    check_keys(path, doc, "task file", {"task", "mpe", "points", "datum_system", "characteristics"})
+    task_tbl = table(path, doc, "task")
+    check_keys(path, task_tbl, "task", {"kind", "name", "notes"})
+    notes = task_tbl.get("notes", [])
+    if isinstance(notes, str):
+        notes = [notes]
+    if not isinstance(notes, list) or not all(isinstance(x, str) for x in notes):
+        raise _err(path, "[task] notes", "must be text or a list of texts")
+    m = table(path, doc, "mpe")
+    check_keys(path, m, "mpe", {"A_um", "B_mm", "b", "k"})
+    mpe = bd.MPE(number(path, m, "mpe", "A_um", lo=0.0), number(path, m, "mpe", "B_mm", positive=True),
+                 number(path, m, "mpe", "b", positive=True), number(path, m, "mpe", "k", 2.0, positive=True))
+    points = _read_points(path, doc)
+    ds = _read_datum_system(path, doc, points)
+    raw = doc.get("characteristics")
+    if not isinstance(raw, list) or not raw:
+        raise _err(path, "[[characteristics]]", "no characteristics (add [[characteristics]] tables)")
+    chars = []
+    seen: dict[str, int] = {}
+    for n, entry in enumerate(raw, start=1):
+        c = _read_characteristic(path, n, entry, points, ds)
+        if c.name.lower() in seen:
+            raise _err(path, f"{c.where} key 'name'",
+                       f"{c.name!r} is also the name of characteristic #{seen[c.name.lower()]}")
+        seen[c.name.lower()] = n
+        chars.append(c)
+    task = Task(path, name, mpe, points, ds, chars, list(notes))
+    for c in chars:
+        _evaluate(task, c)      # degenerate geometry, unknown variants -> InputError here
+    return task
+
+
+# -- computing ------------------------------------------------------------------------------------
+
+def specs(task: Task, c: Characteristic, datum: str | None = None) -> list[bd.VariantSpec]:
+    """The formula variants of a distance characteristic (or of one datum of a position)."""
+    if c.model == "position":
+        return bd.variants_datum(c.points["point"], datum, task.datum_system)
+    g = dict(c.points)
+    if c.model == "datum_distance":
+        g["datum"] = c.datum
+    return bd.specs_for(c.model, points_used=g, datums=task.datum_system)
+
+
+def _evaluate(task: Task, c: Characteristic):
+    """DistanceBudget or PositionBudget of one characteristic (ModelError -> InputError)."""
+    try:
+        if c.model == "position":
+            return bd.position_budget(c.points["point"], c.datums, c.ted_mm, task.datum_system,
+                                      task.points, task.mpe, c.variant)
+        return bd.distance_budget(specs(task, c), task.points, task.mpe, c.variant)
+    except ModelError as e:
+        where = f"{c.where} key 'variant'" if "unknown variant" in str(e) else c.where
+        raise InputError(f"{c.name}: {e}", file=task.path, where=where) from None
+
+
+def evaluate(task: Task) -> list:
+    """The evaluated budget of every characteristic, in task order."""
+    return [_evaluate(task, c) for c in task.characteristics]
+
+
+def _distance_entry(name: str, model: str, d: bd.DistanceBudget, k: float) -> dict:
+    ch = d.chosen
+    return {
+        "name": name, "model": model, "variant": ch.label, "equation": ch.spec.equation,
+        "value_mm": ch.value_mm, "u_um": ch.u_c_um, "U_um": ch.U_um, "rows": ch.rows(),
+        "variants": [{"variant": v.label, "equation": v.spec.equation, "value_mm": v.value_mm,
+                      "u_um": v.u_c_um, "U_um": v.U_um, "rows": v.rows()} for v in d.variants],
+    }
+
+
+def distance_name(c: Characteristic, i: int) -> str:
+    """Name of the i-th (0, 1) datum distance of a position: the paper's l_S4,1, l_S4,2."""
+    return f"l_{c.points['point']},{i + 1}"
+
+
+def compute(task: Task) -> dict:
+    """Results JSON per the contract (plus per-variant budgets, equations, and for positions the
+    two distance budgets)."""
+    out = {"name": task.name, "kind": KIND, "version": __version__,
+           "mpe": {"A_um": task.mpe.A_um, "B_mm": task.mpe.B_mm, "b": task.mpe.b, "k": task.mpe.k},
+           "characteristics": []}
+    for c, r in zip(task.characteristics, evaluate(task)):
+        if c.model == "position":
+            entry = {
+                "name": c.name, "model": c.model, "variant": r.variant, "point": r.point,
+                "datums": list(r.datums), "ted_mm": list(r.ted_mm),
+                "value_mm": r.value_mm, "u_um": r.u_um, "U_um": r.U_um, "rows": r.rows(),
+                "u_eq26_um": r.u_eq26_um,
+                "distances": [dict(_distance_entry(distance_name(c, i), "datum_distance", d,
+                                                   task.mpe.k), datum=r.datums[i])
+                              for i, d in enumerate(r.distances)],
+            }
+        else:
+            entry = _distance_entry(c.name, c.model, r, task.mpe.k)
+            entry.update({k: (list(v) if isinstance(v, tuple) else v) for k, v in c.points.items()})
+            if c.datum:
+                entry["datum"] = c.datum
+        out["characteristics"].append(entry)
+    return out
+
+
+# -- outputs ----------------------------------------------------------------------------------------
+
+def write_book(task: Task, results: dict, path: Path) -> None:
+    from .budget_book import write
+
+    write(task, evaluate(task), path)
+
+
+def write_plots(task: Task, results: dict, out_dir: Path) -> list[Path]:
+    """One PNG: per characteristic, the non-zero contributions of its chosen budget (for a
+    position, each distance's contributions times the sensitivity 2 of u_POS)."""
+    from .plots import _plt
+
+    plt = _plt()
+    chars = results["characteristics"]
+    n = len(chars)
+    ncols = 2 if n > 1 else 1
+    nrows = (n + ncols - 1) // ncols
+    fig, axes = plt.subplots(nrows, ncols, figsize=(6.2 * ncols, 2.6 * nrows + 0.6), dpi=100,
+                             squeeze=False)
+    for ax, ch in zip(axes.flat, chars):
+        labels, values = [], []
+        if ch["model"] == "position":
+            for i, d in enumerate(ch["distances"]):
+                for row in d["rows"]:
+                    labels.append(f"l{i + 1}: {row['input']}")
+                    values.append(2.0 * abs(row["contribution_um"]))
+        else:
+            for row in ch["rows"]:
+                labels.append(row["input"])
+                values.append(abs(row["contribution_um"]))
+        keep = [(lab, v) for lab, v in zip(labels, values) if v > 1e-3]
+        keep = keep or list(zip(labels, values))[:1]
+        ax.barh([k[0] for k in keep][::-1], [k[1] for k in keep][::-1], color="#4472C4")
+        ax.set_title(f"{ch['name']}: u = {ch['u_um']:.3f} µm ({ch['variant'][:60]})", fontsize=8)
+        ax.set_xlabel("|contribution| / µm", fontsize=8)
+        ax.tick_params(labelsize=7)
+        ax.grid(axis="x", alpha=0.3)
+    for ax in list(axes.flat)[n:]:
+        ax.axis("off")
+    fig.suptitle(f"{results['name']}: uncertainty contributions (Wojtyła/Płowucha 2023)", fontsize=10)
+    fig.tight_layout()
+    path = Path(out_dir) / f"{task.name}_contributions.png"
+    fig.savefig(path)
+    plt.close(fig)
+    return [path]
+
+
+def summary(results: dict) -> list[str]:
+    chars = results["characteristics"]
+    pos = [c for c in chars if c["model"] == "position"]
+    lines = [f"{len(chars)} characteristics; E = {results['mpe']['A_um']:g} + L/"
+             f"{results['mpe']['B_mm']:g} µm, b = {results['mpe']['b']:g}, k = {results['mpe']['k']:g}"]
+    if pos:
+        lines.append("position u_POS / U_POS (µm): " + ", ".join(
+            f"{c['name']} {c['u_um']:.2f} / {c['U_um']:.2f}" for c in pos))
+    rest = [c for c in chars if c["model"] != "position"]
+    if rest:
+        lines.append("u_c (µm): " + ", ".join(f"{c['name']} {c['u_um']:.3f}" for c in rest[:6])
+                     + (" ..." if len(rest) > 6 else ""))
+    return lines

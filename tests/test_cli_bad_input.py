@@ -1,0 +1,111 @@
+"""Bad input: exit status 2, one message naming the file and line or key, no traceback, and an
+output folder that holds nothing from the failed run."""
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from pointcloud_tasks import write_random_task
+
+
+def run(*args, cwd=None):
+    return subprocess.run([sys.executable, "-m", "generator", *args], capture_output=True, text=True, cwd=cwd)
+
+
+def break_file(path: Path, old: str, new: str) -> None:
+    text = path.read_text()
+    assert old in text, old
+    path.write_text(text.replace(old, new, 1))
+
+
+CASES = {
+    # name: (which file, old, new, words the message must contain)
+    "malformed toml": ("toml", 'kind = "pointcloud"', 'kind = "pointcloud', ["malformed TOML", "line"]),
+    "non-numeric parameter": ("toml", "sigma_R_um = 0.2", 'sigma_R_um = "abc"', ["[parameters] sigma_R_um", "number"]),
+    "negative sigma": ("toml", "sigma_R_um = 0.2", "sigma_R_um = -0.2", ["[parameters] sigma_R_um", ">= 0"]),
+    "nan parameter": ("toml", "sigma_R_um = 0.2", "sigma_R_um = nan", ["[parameters] sigma_R_um", "finite"]),
+    "typo in a key": ("toml", "sigma_R_um = 0.2", "sigma_RR_um = 0.2", ["[parameters] sigma_RR_um", "unknown key"]),
+    "missing column": ("csv", "id,x,y,z,nx,ny,nz,probe", "id,x,y,nx,ny,nz,probe", ["missing column 'z'", "line 1"]),
+    "unknown probe": ("csv", ",P1\n", ",P9\n", ["line 2", "unknown probe 'P9'"]),
+}
+FIELD_CASES = {
+    # name: (data row, column, new text, words)
+    "text in a number cell": (3, 1, "abc", ["line 4", "'x'", "'abc' is not a number"]),
+    "NaN coordinate": (2, 2, "nan", ["line 3", "'y'", "not a finite number"]),
+    "infinite coordinate": (1, 3, "inf", ["line 2", "'z'", "not a finite number"]),
+    "empty cell": (2, 4, "", ["line 3", "'nx'", "not a number"]),
+}
+
+
+def set_field(csv: Path, row: int, column: int, value: str) -> None:
+    lines = csv.read_text().splitlines()
+    f = lines[row].split(",")
+    f[column] = value
+    lines[row] = ",".join(f)
+    csv.write_text("\n".join(lines) + "\n")
+
+
+@pytest.fixture
+def task(tmp_path):
+    return write_random_task(tmp_path, 11, m=5, probes=2, name="t")
+
+
+@pytest.mark.parametrize("case", list(CASES) + list(FIELD_CASES))
+def test_bad_input_exits_2_with_one_clear_message(tmp_path, task, case):
+    if case in CASES:
+        which, old, new, words = CASES[case]
+        break_file(task if which == "toml" else task.with_suffix(".csv"), old, new)
+    else:
+        row, column, new, words = FIELD_CASES[case]
+        set_field(task.with_suffix(".csv"), row, column, new)
+    out = tmp_path / "out"
+    r = run("build", str(task), "--out", str(out))
+    assert r.returncode == 2, r.stderr
+    msg = r.stderr.strip()
+    assert "Traceback" not in msg and len(msg.splitlines()) == 1, msg
+    assert ("t.toml" in msg) or ("t.csv" in msg)
+    for w in words:
+        assert w in msg, msg
+    assert not out.exists()
+
+
+def test_non_unit_normal_is_named(tmp_path, task):
+    csv = task.with_suffix(".csv")
+    lines = csv.read_text().splitlines()
+    f = lines[3].split(",")
+    f[4:7] = ["1", "1", "0"]
+    lines[3] = ",".join(f)
+    csv.write_text("\n".join(lines) + "\n")
+    r = run("build", str(task), "--out", str(tmp_path / "out"))
+    assert r.returncode == 2 and "line 4" in r.stderr and "not a unit vector" in r.stderr
+
+
+def test_two_points_at_the_same_place(tmp_path, task):
+    csv = task.with_suffix(".csv")
+    lines = csv.read_text().splitlines()
+    a, b = lines[1].split(","), lines[2].split(",")
+    b[1:4] = a[1:4]
+    lines[2] = ",".join(b)
+    csv.write_text("\n".join(lines) + "\n")
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "keep.txt").write_text("user file")
+    r = run("build", str(task), "--out", str(out))
+    assert r.returncode == 2 and "Q1 and Q2 are at the same place" in r.stderr
+    assert sorted(p.name for p in out.iterdir()) == ["keep.txt"]  # nothing from the failed run
+
+
+def test_missing_task_file(tmp_path):
+    r = run("build", str(tmp_path / "nope.toml"), "--out", str(tmp_path / "o"))
+    assert r.returncode == 2 and "nope.toml" in r.stderr and "cannot read" in r.stderr
+
+
+def test_new_writes_a_task_that_builds(tmp_path):
+    r = run("new", "pointcloud", "--out", str(tmp_path / "t.toml"))
+    assert r.returncode == 0
+    text = (tmp_path / "t.toml").read_text()
+    assert 'kind = "pointcloud"' in text and "sigma_ET_um" in text
+    r = run("new", "pointcloud", "--out", str(tmp_path / "t.toml"))
+    assert r.returncode == 2 and "exists already" in r.stderr
