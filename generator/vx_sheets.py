@@ -254,7 +254,7 @@ def write_V_sheets(book: Book, cloud: PointCloud, coords: dict[str, Block], vb: 
         else:
             formula = formulas[f]
             note = f"V_{f}: {FACTOR_TITLES[f]}"
-        book.array(target, formula, note=note, fmt="0.000E+00")
+        book.array(target, formula, note=note, fmt=None)  # formatting 3m x 3m cells costs seconds
         ws.freeze_panes = "B2"
         out[f] = target
     return out

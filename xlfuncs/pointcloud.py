@@ -340,38 +340,126 @@ def _distance_block(cloud: PointCloud, params: Parameters, pa: dict, i: np.ndarr
     return d, var
 
 
+def _rect_variances(cloud: PointCloud, params: Parameters, pa: dict, I: slice, J: slice):
+    """Distances and per-factor variances (µm²) for every (i in I, j in J), as 2-D arrays.
+
+    The quadratic form of eq. (29) with g = [-n_ij; n_ij], factor by factor, written per
+    coordinate so that everything is a broadcast of row slices (no gathers):
+    S: n^T G(u_j - u_i) (eq. 11); ET: 2 sigma^2 (1 - rho); ER: m = n x p (section 6.5);
+    P: o_i = n_i.n_ij, o_j = n_j.n_ij (section 6.6).
+    """
+    X, N, P = cloud.X_mm, cloud.N, cloud.offsets_mm
+    col = lambda A, k: A[J, k][None, :]  # noqa: E731
+    row = lambda A, k: A[I, k][:, None]  # noqa: E731
+    dx, dy, dz = (col(X, k) - row(X, k) for k in range(3))
+    d = np.sqrt(dx * dx + dy * dy + dz * dz)
+    inv = 1.0 / d
+    nx, ny, nz = dx * inv, dy * inv, dz * inv
+    var: dict[str, np.ndarray] = {}
+    var["R"] = np.full(d.shape, 2.0 * params.sigma_R_um**2)
+    ki = cloud.probe_index[I][:, None]
+    kj = cloud.probe_index[J][None, :]
+    same = ki == kj
+    sPQ = pa["sigma_PQ_um"]
+    var["PQ"] = np.where(same, 0.0, sPQ[I][:, None] ** 2 + sPQ[J][None, :] ** 2)
+    # ram differences u_j - u_i = (x_j - x_i) - (p_j - p_i)
+    ux, uy, uz = (dk - (col(P, k) - row(P, k)) for k, dk in enumerate((dx, dy, dz)))
+    c = V_S_diag_um_per_mm2(params)
+    a0 = nx * ux + ny * uy + nz * uz
+    var["S"] = (c[0] * a0 * a0 + c[1] * (nx * ux) ** 2 + c[2] * (ny * uy) ** 2 + c[3] * (nz * uz) ** 2
+                + c[4] * (nx * uy) ** 2 + c[5] * (nx * uz) ** 2 + c[6] * (ny * uz) ** 2)
+    du2 = ux * ux + uy * uy + uz * uz
+    if params.sigma_ET_um > 0:
+        var["ET"] = -2.0 * params.sigma_ET_um**2 * np.expm1(-du2 / params.lambda_ET_mm**2)
+    else:
+        var["ET"] = np.zeros_like(d)
+    if params.sigma_ER_urad > 0:
+        pix, piy, piz = (row(P, k) for k in range(3))
+        pjx, pjy, pjz = (col(P, k) for k in range(3))
+        mix, miy, miz = ny * piz - nz * piy, nz * pix - nx * piz, nx * piy - ny * pix
+        mjx, mjy, mjz = ny * pjz - nz * pjy, nz * pjx - nx * pjz, nx * pjy - ny * pjx
+        rho = np.exp(-du2 / params.lambda_ER_mm**2)
+        var["ER"] = (params.sigma_ER_urad * MILLI) ** 2 * (
+            mix * mix + miy * miy + miz * miz + mjx * mjx + mjy * mjy + mjz * mjz
+            - 2.0 * rho * (mix * mjx + miy * mjy + miz * mjz))
+    else:
+        var["ER"] = np.zeros_like(d)
+    oi = nx * row(N, 0) + ny * row(N, 1) + nz * row(N, 2)
+    oj = nx * col(N, 0) + ny * col(N, 1) + nz * col(N, 2)
+    s0, sp, lam = pa["sigma_P0_um"], pa["sigma_P_um"], pa["lambda_P"]
+    s0i, s0j = s0[I][:, None], s0[J][None, :]
+    spi, spj = sp[I][:, None], sp[J][None, :]
+    dn2 = sum((col(N, k) - row(N, k)) ** 2 for k in range(3))
+    lam2 = lam[I][:, None] * lam[J][None, :]
+    kern = np.exp(-dn2 / np.where(lam2 > 0, lam2, 1.0))
+    cross = np.where(same, s0i * s0j + spi * spj * kern, 0.0)
+    var["P"] = (s0i**2 + spi**2) * oi * oi + (s0j**2 + spj**2) * oj * oj - 2.0 * cross * oi * oj
+    return d, var
+
+
 def distance_components(cloud: PointCloud, params: Parameters, pairs: np.ndarray | None = None,
                         *, block: int = 262_144, progress=None) -> dict[str, np.ndarray]:
     """d_ij (mm), u(d_ij) (µm) and the per-factor u (µm) of eq. (30) for many pairs.
 
-    Evaluates the quadratic form of eq. (29) factor by factor, ``block`` pairs at a time, so
-    memory grows with the number of pairs only through the outputs.  Returns a dict with keys
-    ``d_mm``, ``u_um`` and ``u_<factor>_um`` for every factor.  ``progress(done, total)`` is
-    called after every block when given.
+    ``pairs=None`` means every pair i < j, in the order of ``all_pairs``.  Evaluates the
+    quadratic form of eq. (29) factor by factor without forming V_X, about ``block`` pairs at a
+    time, so memory grows only through the outputs.  Returns a dict with keys ``d_mm``,
+    ``u_um`` and ``u_<factor>_um``.  ``progress(done, total)`` is called after every block.
     """
-    pairs = all_pairs(cloud.m) if pairs is None else check_pairs(cloud, pairs)
-    n = len(pairs)
     pa = _probe_arrays(cloud, params)
+    m = cloud.m
+    if pairs is None:
+        total = m * (m - 1) // 2
+        out = {"d_mm": np.empty(total), "u_um": np.empty(total)}
+        for f in FACTORS:
+            out[f"u_{f}_um"] = np.empty(total)
+        pos = 0
+        i0 = 0
+        while i0 < m - 1:
+            rows = max(1, min(m - 1 - i0, block // max(m - i0 - 1, 1)))
+            I, J = slice(i0, i0 + rows), slice(i0 + 1, m)
+            with np.errstate(invalid="ignore", divide="ignore"):
+                d, var = _rect_variances(cloud, params, pa, I, J)
+            keep = np.arange(i0 + 1, m)[None, :] > np.arange(i0, i0 + rows)[:, None]
+            n = int(keep.sum())
+            dk = d[keep]
+            if np.any(dk <= 1e-9):
+                q = np.flatnonzero(dk <= 1e-9)[0]
+                ii, jj = np.nonzero(keep)
+                i, j = i0 + ii[q], i0 + 1 + jj[q]
+                raise DegenerateGeometryError(
+                    f"points {cloud.labels[i]} and {cloud.labels[j]} are at the same place: "
+                    "the distance direction n_ij of Forbes 2025 eq. (29) is undefined")
+            sl = slice(pos, pos + n)
+            _store(out, sl, dk, {f: v[keep] for f, v in var.items()})
+            pos += n
+            i0 += rows
+            if progress is not None:
+                progress(pos, total)
+        return out
+    pairs = check_pairs(cloud, pairs)
+    n = len(pairs)
     out = {"d_mm": np.empty(n), "u_um": np.empty(n)}
     for f in FACTORS:
         out[f"u_{f}_um"] = np.empty(n)
     for start in range(0, n, block):
         sl = slice(start, min(start + block, n))
         i, j = pairs[sl, 0], pairs[sl, 1]
-        with np.errstate(invalid="ignore", divide="ignore"):
-            d, var = _distance_block(cloud, params, pa, i, j)
-        if np.any(d <= 1e-9):
-            check_pairs(cloud, pairs[sl])
-        out["d_mm"][sl] = d
-        total = np.zeros_like(d)
-        for f in FACTORS:
-            v = np.maximum(var[f], 0.0)  # clip -1e-20 rounding of exact zeros
-            total += v
-            out[f"u_{f}_um"][sl] = np.sqrt(v)
-        out["u_um"][sl] = np.sqrt(total)
+        d, var = _distance_block(cloud, params, pa, i, j)
+        _store(out, sl, d, var)
         if progress is not None:
             progress(sl.stop, n)
     return out
+
+
+def _store(out: dict, sl: slice, d: np.ndarray, var: dict) -> None:
+    out["d_mm"][sl] = d
+    total = np.zeros_like(d)
+    for f in FACTORS:
+        v = np.maximum(var[f], 0.0)  # clip -1e-20 rounding of exact zeros
+        total += v
+        out[f"u_{f}_um"][sl] = np.sqrt(v)
+    out["u_um"][sl] = np.sqrt(total)
 
 
 def distance_u_dense(V: np.ndarray, X_mm: np.ndarray, i: int, j: int) -> float:
