@@ -29,6 +29,8 @@ Two evaluation paths give the same numbers:
 from __future__ import annotations
 
 import math
+import os
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
 from typing import Iterable, Sequence
 
@@ -413,15 +415,20 @@ def distance_components(cloud: PointCloud, params: Parameters, pairs: np.ndarray
         out = {"d_mm": np.empty(total), "u_um": np.empty(total)}
         for f in FACTORS:
             out[f"u_{f}_um"] = np.empty(total)
-        pos = 0
-        i0 = 0
+        blocks = []  # (first row, rows, first output position)
+        i0 = pos = 0
         while i0 < m - 1:
             rows = max(1, min(m - 1 - i0, block // max(m - i0 - 1, 1)))
+            blocks.append((i0, rows, pos))
+            pos += rows * (m - 1 - i0) - rows * (rows - 1) // 2
+            i0 += rows
+
+        def work(b):
+            i0, rows, pos = b
             I, J = slice(i0, i0 + rows), slice(i0 + 1, m)
             with np.errstate(invalid="ignore", divide="ignore"):
                 d, var = _rect_variances(cloud, params, pa, I, J)
             keep = np.arange(i0 + 1, m)[None, :] > np.arange(i0, i0 + rows)[:, None]
-            n = int(keep.sum())
             dk = d[keep]
             if np.any(dk <= 1e-9):
                 q = np.flatnonzero(dk <= 1e-9)[0]
@@ -430,12 +437,25 @@ def distance_components(cloud: PointCloud, params: Parameters, pairs: np.ndarray
                 raise DegenerateGeometryError(
                     f"points {cloud.labels[i]} and {cloud.labels[j]} are at the same place: "
                     "the distance direction n_ij of Forbes 2025 eq. (29) is undefined")
-            sl = slice(pos, pos + n)
-            _store(out, sl, dk, {f: v[keep] for f, v in var.items()})
-            pos += n
-            i0 += rows
-            if progress is not None:
-                progress(pos, total)
+            _store(out, slice(pos, pos + dk.size), dk, {f: v[keep] for f, v in var.items()})
+            return dk.size
+
+        # numpy releases the GIL in elementwise work: row blocks run on every core
+        done = 0
+        workers = min(len(blocks), os.cpu_count() or 1)
+        if workers <= 1:
+            results = map(work, blocks)
+        else:
+            pool = ThreadPoolExecutor(max_workers=workers)
+            results = pool.map(work, blocks)
+        try:
+            for n in results:
+                done += n
+                if progress is not None:
+                    progress(done, total)
+        finally:
+            if workers > 1:
+                pool.shutdown(cancel_futures=True)
         return out
     pairs = check_pairs(cloud, pairs)
     n = len(pairs)
