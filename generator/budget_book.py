@@ -15,6 +15,7 @@ single-cell formulas are used (no array formulas, INDEX or OFFSET).
 
 from __future__ import annotations
 
+import json
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -412,6 +413,9 @@ def _write_inputs(book: Book, task) -> None:
         ws.column_dimensions[col].width = 14
     ws.column_dimensions["E"].width = 70
     book.text(ws, 1, 1, "Inputs: edit the yellow cells, every budget recalculates", font=HEADER_FONT)
+    book.text(ws, 2, 1, "task_name")
+    book.text(ws, 2, 2, task.name)
+    book.text(ws, 2, 5, json.dumps(task.notes, ensure_ascii=False))
     book.header(ws, 3, 1, ["key", "value", "unit", "", "meaning"])
     m = task.mpe
     rows = [("A_um", m.A_um, "µm", 0.0, "E_L,MPE = A + L/B: constant term A (eq. (5))"),
@@ -449,7 +453,11 @@ def _write_inputs(book: Book, task) -> None:
                   f"perpendicular to the primary, normal v = {''.join(ds.secondary)} x u")
         book.text(ws, r + 3, 1, f"tertiary: plane through {ds.tertiary_point} perpendicular to "
                   "both, normal w = u x v")
-        r += 5
+        book.text(ws, r + 4, 1, "datum_system")
+        book.text(ws, r + 4, 5, json.dumps({"primary": list(ds.primary),
+                                            "secondary": list(ds.secondary),
+                                            "tertiary": ds.tertiary_point}))
+        r += 6
     pos = [c for c in task.characteristics if c.model == "position"]
     if pos:
         book.text(ws, r, 1, "Theoretically exact distances of the positions (mm); defined names "
@@ -466,17 +474,26 @@ def _write_inputs(book: Book, task) -> None:
         r += 1
     book.text(ws, r, 1, "Characteristics (structure; change it in the task file)",
               font=HEADER_FONT)
-    book.header(ws, r + 1, 1, ["name", "model", "points", "", "variant requested"])
+    book.header(ws, r + 1, 1, ["name", "model", "", "", "definition"],
+                [None, None, None, None, "the task-file keys of the characteristic (JSON): the "
+                 "points it uses, datum(s), the variant requested; ted_mm are the named cells above"])
     r += 2
     for c in task.characteristics:
         book.text(ws, r, 1, c.name)
         book.text(ws, r, 2, c.model)
-        pts = _points_text(c)
-        if c.datums:
-            pts += f"; datums = {', '.join(c.datums)}"
-        book.text(ws, r, 3, pts)
-        book.text(ws, r, 5, c.variant if isinstance(c.variant, str) else " | ".join(c.variant))
+        book.text(ws, r, 5, json.dumps(definition(c), ensure_ascii=False))
         r += 1
+
+
+def definition(c) -> dict:
+    """The task-file keys of a characteristic other than name, model and ted_mm."""
+    out = {k: (list(v) if isinstance(v, tuple) else v) for k, v in c.points.items()}
+    if c.datum:
+        out["datum"] = c.datum
+    if c.datums:
+        out["datums"] = list(c.datums)
+    out["variant"] = c.variant if isinstance(c.variant, str) else list(c.variant)
+    return out
 
 
 def _point_roles(task) -> dict[str, str]:

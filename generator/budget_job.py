@@ -335,6 +335,93 @@ def compute(task: Task) -> dict:
     return out
 
 
+# -- reading a workbook back (for `cmmwb read`) ----------------------------------------------------
+
+def read_book(path: Path) -> dict:
+    """The task (a dict ready for ``tomli_w``) of a budget workbook a user edited: MPE, points and
+    TEDs from the named input cells, the structure from the 'Inputs' sheet.  Bad cells raise
+    InputError naming the sheet and cell."""
+    import json
+
+    import openpyxl
+
+    path = Path(path)
+    try:
+        raw = openpyxl.load_workbook(path)
+        cached = openpyxl.load_workbook(path, data_only=True)
+    except Exception as e:  # not a workbook at all
+        raise InputError(f"cannot open the workbook ({type(e).__name__})", file=path) from None
+    if "Inputs" not in raw.sheetnames:
+        raise InputError("no sheet named 'Inputs': not a cmmwb budget workbook", file=path,
+                         where="sheet Inputs")
+    ws = raw["Inputs"]
+
+    def named(name: str) -> float:
+        dn = raw.defined_names.get(name)
+        if dn is None:
+            raise InputError(f"the defined name {name!r} is missing", file=path)
+        (sheet, coord), = dn.destinations
+        coord = coord.replace("$", "")
+        value = cached[sheet][coord].value
+        if value is None:
+            value = raw[sheet][coord].value
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+            raise InputError(f"{name} must be a finite number, got {value!r}", file=path,
+                             where=f"sheet {sheet} cell {coord}")
+        return float(value)
+
+    def text_json(r: int, what: str):
+        try:
+            return json.loads(str(ws.cell(row=r, column=5).value))
+        except (TypeError, ValueError):
+            raise InputError(f"{what} is not valid JSON", file=path,
+                             where=f"sheet Inputs cell E{r}") from None
+
+    def find(marker: str, start: int) -> int | None:
+        for r in range(start, ws.max_row + 1):
+            if ws.cell(row=r, column=1).value == marker:
+                return r
+        return None
+
+    def col_a(r: int):
+        v = ws.cell(row=r, column=1).value
+        return v if isinstance(v, str) and v else None
+
+    r_task, r_points = find("task_name", 1), find("point", 1)
+    if r_task is None or r_points is None:
+        raise InputError("the 'Inputs' sheet has no 'task_name' or 'point' row: not a cmmwb "
+                         "budget workbook", file=path, where="sheet Inputs")
+    doc: dict = {"task": {"kind": KIND, "name": str(ws.cell(row=r_task, column=2).value)}}
+    notes = text_json(r_task, "the task notes")
+    if notes:
+        doc["task"]["notes"] = notes
+    doc["mpe"] = {k: named(k) for k in ("A_um", "B_mm", "b", "k")}
+    points = {}
+    r = r_points + 1
+    while col_a(r):
+        points[col_a(r)] = [named(f"{col_a(r)}_{ax}_mm") for ax in bd.AXES]
+        r += 1
+    doc["points"] = points
+    r_ds = find("datum_system", r)
+    if r_ds is not None:
+        doc["datum_system"] = text_json(r_ds, "the datum system")
+    r_chars = find("name", r)
+    if r_chars is None:
+        raise InputError("the 'Inputs' sheet has no characteristics table", file=path,
+                         where="sheet Inputs")
+    chars = []
+    r = r_chars + 1
+    while col_a(r):
+        entry = {"name": col_a(r), "model": ws.cell(row=r, column=2).value}
+        entry.update(text_json(r, f"the definition of {entry['name']}"))
+        if entry["model"] == "position":
+            entry["ted_mm"] = [named(f"{entry['name']}_ted{i}_mm") for i in (1, 2)]
+        chars.append(entry)
+        r += 1
+    doc["characteristics"] = chars
+    return doc
+
+
 # -- outputs ----------------------------------------------------------------------------------------
 
 def write_book(task: Task, results: dict, path: Path) -> None:

@@ -43,8 +43,8 @@ Conventions (see docs/errata.md, "Wojtyła/Płowucha 2023"):
   0.01 mm (Table 7), which the shipped knuckle task does through the point coordinates.
 * Distances that vanish for a point on a *line* (point_line) or for coincident points
   (point_point) have no derivative (not even one-sided up to sign): DegenerateGeometryError.
-  So do collinear plane points, parallel lines in line_line, a secondary-datum direction DE
-  perpendicular to the primary plane, and any non-finite input.
+  So do collinear plane points, parallel lines in line_line and a secondary-datum direction DE
+  perpendicular to the primary plane.  A non-finite coordinate is a ModelError.
 
 The module is numpy only; it knows nothing of spreadsheets.  Each evaluated variant exposes
 its ordered input vectors (label, tail point, head point, role in the formula), the input
@@ -55,7 +55,7 @@ workbook writer can lay out the same budget as cell formulas.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Mapping, Sequence
 
 import numpy as np
