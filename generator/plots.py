@@ -10,6 +10,11 @@ import numpy as np
 os.environ.setdefault("MPLBACKEND", "Agg")
 
 
+def pyplot():
+    """matplotlib.pyplot with the headless Agg backend."""
+    return _plt()
+
+
 def _plt():
     import matplotlib
 
@@ -25,9 +30,12 @@ def distance_plot(results: dict, path: Path) -> Path:
     fig, ax = plt.subplots(figsize=(7, 4.2), dpi=110)
     ds = results["distances"]
     groups = list(dict.fromkeys(d.get("group", "") for d in ds))
-    for g in groups:
+    markers = "osD^v<>ph*"
+    for k, g in enumerate(groups):
         sel = [d for d in ds if d.get("group", "") == g]
-        ax.plot([d["d_mm"] for d in sel], [d["U_um"] for d in sel], "o", ms=3.5, label=g or "distances")
+        # hollow markers of decreasing size: series that coincide (LL and RR) stay visible
+        ax.plot([d["d_mm"] for d in sel], [d["U_um"] for d in sel], markers[k % len(markers)],
+                ms=max(3.0, 7.5 - 1.5 * k), mfc="none", label=g or "distances")
     if "mpe_check" in results:
         c = results["mpe_check"]
         dmax = max(d["d_mm"] for d in ds)
