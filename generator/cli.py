@@ -93,9 +93,14 @@ def cmd_new(args) -> int:
     tmp = out.with_name(f".{out.name}.tmp")
     tmp.write_text(text, encoding="utf-8")
     os.replace(tmp, out)
-    for extra in getattr(job(args.kind), "NEW_TASK_FILES", {}).items():
-        (out.parent / extra[0]).write_text(extra[1], encoding="utf-8")
     print(out)
+    for fname, content in getattr(job(args.kind), "NEW_TASK_FILES", {}).items():
+        extra = out.parent / fname
+        if extra.exists():
+            print(f"{extra} exists already: kept as it is")
+            continue
+        extra.write_text(content, encoding="utf-8")
+        print(extra)
     return 0
 
 

@@ -347,6 +347,15 @@ def summary(results: dict) -> list[str]:
     return lines
 
 
+#: files `cmmwb new pointcloud` writes beside the task (never over an existing file)
+NEW_TASK_FILES = {"points.csv": '''# A 100 mm gauge block measured on both end faces and a 200 mm one beside it (mm)
+id,x,y,z,nx,ny,nz,probe
+G1L,0,0,0,-1,0,0,P1
+G1R,100,0,0,1,0,0,P1
+G2L,0,30,0,-1,0,0,P1
+G2R,200,30,0,1,0,0,P1
+'''}
+
 NEW_TASK = '''# cmmwb point-cloud task (Forbes 2025): distance uncertainties from six CMM influence factors.
 # Units: coordinates mm, uncertainties µm, scale/squareness ppm (1e-6), rotations µrad.
 # Build with:  cmmwb build THIS.toml --out DIR

@@ -107,5 +107,8 @@ def test_new_writes_a_task_that_builds(tmp_path):
     assert r.returncode == 0
     text = (tmp_path / "t.toml").read_text()
     assert 'kind = "pointcloud"' in text and "sigma_ET_um" in text
+    r = run("build", str(tmp_path / "t.toml"), "--out", str(tmp_path / "out"))
+    assert r.returncode == 0, r.stderr
+    assert (tmp_path / "out" / "my_pointcloud.xlsx").exists()
     r = run("new", "pointcloud", "--out", str(tmp_path / "t.toml"))
     assert r.returncode == 2 and "exists already" in r.stderr
