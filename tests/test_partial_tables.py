@@ -70,6 +70,63 @@ TABLE8 = {"s|6": (0.71, 0.71, 0.71, 0.41), "s|X6": (0.71, 0.71, 0.71, 0.41),
 rad = math.radians
 
 
+# ---- from the shipped tasks (what `cmmwb demo` builds) ------------------------------------------
+
+def task_results(example: str) -> dict:
+    """load + compute of a shipped feature task, through the same JSON text users get."""
+    from generator import feature_job
+    from generator.taskfile import read_toml
+
+    path = EXAMPLES / example
+    return json.loads(json.dumps(feature_job.compute(feature_job.load(path, read_toml(path)))))
+
+
+SHIPPED = [
+    ("feature_table1_circle_arc.toml", "Table 1", TABLE1, (1, 1, 1)),
+    ("feature_table2_sphere_cap.toml", "Table 2", TABLE2, (1, 1, 1, 1)),
+    ("feature_table3_sphere_band.toml", "Table 3", TABLE3, (1, 1, 1, 1)),
+    ("feature_table4_sphere_segment.toml", "Table 4", TABLE4, (1, 1, 1, 1)),
+    # Table 5 prints a s(u_A), a s(v_A) with a = half_height_mm = 50
+    ("feature_table5_cylinder_patch.toml", "Table 5", TABLE5, (1, 1, 50, 50, 1)),
+    ("feature_table6_cone_angle.toml", "Table 6", TABLE6, (1,) * 6),
+    ("feature_table7_cone_arc.toml", "Table 7", TABLE7, (1,) * 6),
+]
+
+
+@pytest.mark.parametrize("example,label,table,factor", SHIPPED, ids=[s[1] for s in SHIPPED])
+def test_shipped_task_reproduces_the_table(example, label, table, factor):
+    pl = task_results(example)["planning"]
+    assert [r[pl["sweep"]] for r in pl["rows"]] == list(table), "the task lists the table's rows"
+    for row in pl["rows"]:
+        s = [row["s"][n] * k for n, k in zip(pl["parameter_names"], factor)]
+        assert_row(label, row[pl["sweep"]], s, table[row[pl["sweep"]]])
+
+
+def test_shipped_tasks_reproduce_table8():
+    """Feature u (the actual points, sigma_R = 1 µm) = s|X_n; Planning u = s|n."""
+    for n_pts, example in ((6, "feature_table8_sphere_six.toml"),
+                           (5, "feature_table8_sphere_five.toml"),
+                           (9, "feature_table8_sphere_nine.toml")):
+        r = task_results(example)
+        fe, pl = r["feature"], r["planning"]
+        assert fe["fit"]["m"] == n_pts == pl["m_points"]
+        names = fe["parameter_names"]
+        assert names == ["x0_mm", "y0_mm", "z0_mm", "r0_mm"]
+        assert_row("Table 8", f"s|X{n_pts}", [fe["u"][n] * 1e3 for n in names],
+                   TABLE8[f"s|X{n_pts}"])
+        assert_row("Table 8", f"s|{n_pts}", [pl["rows"][0]["u"][n] * 1e3 for n in names],
+                   TABLE8[f"s|{n_pts}"])
+
+
+def test_shipped_strategy_u_is_sigma_s_over_sqrt_m_of_its_points():
+    """Table 1's task: the feature u of its 24 points on a 60 deg arc equals
+    sigma_R sqrt(diag (J^T J)^-1), close to the Table 1 row for 60 deg divided by sqrt(24)."""
+    r = task_results("feature_table1_circle_arc.toml")
+    fe = r["feature"]
+    s_exact = [fe["u"][n] * 1e3 * math.sqrt(24) for n in fe["parameter_names"]]
+    np.testing.assert_allclose(s_exact, TABLE1[60], rtol=0.03)
+
+
 def assert_row(table: str, key, got, expected):
     for j, (g, e) in enumerate(zip(got, expected)):
         assert printed(g, e), f"{table} row {key} column {j + 1}: {g:.5f} does not print as {e}"
@@ -239,7 +296,7 @@ STRATEGIES = [
     ("sphere_cap", dict(r0_mm=10.0, gamma_deg=60.0, n_theta=60, n_phi=40), "sphere", {}),
     ("sphere_band", dict(r0_mm=10.0, beta_deg=30.0, n_theta=60, n_phi=40), "sphere", {}),
     ("sphere_segment", dict(r0_mm=10.0, arc_deg=120.0, n_theta=60, n_phi=400), "sphere", {}),
-    ("sphere_patch", dict(r0_mm=10.0, theta_deg=[-30, 80], phi_deg=[-20, 50], n_theta=60,
+    ("sphere_patch", dict(r0_mm=10.0, theta_deg=[-30, 80], phi_range_deg=[-20, 50], n_theta=60,
                           n_phi=40), "sphere", {}),
     ("plane_rectangle", dict(half_width_x_mm=40.0, half_width_y_mm=15.0, n_x=40, n_y=30),
      "plane", {}),

@@ -48,7 +48,7 @@ Units: coordinates and lengths in mm, angles in rad, V_X in µm^2 as produced by
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass
 from typing import Mapping, Sequence
 
 import numpy as np

@@ -43,7 +43,6 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Sequence
 
 import numpy as np
 from numpy.polynomial.legendre import leggauss
@@ -443,7 +442,7 @@ PATTERNS: dict[str, dict] = {
     "sphere_band": {"element": "sphere", "keys": ("r0_mm", "beta_deg", "n_theta", "n_phi")},
     "sphere_segment": {"element": "sphere", "keys": ("r0_mm", "arc_deg", "n_theta", "n_phi")},
     "sphere_patch": {"element": "sphere",
-                     "keys": ("r0_mm", "theta_deg", "phi_deg", "n_theta", "n_phi")},
+                     "keys": ("r0_mm", "theta_deg", "phi_range_deg", "n_theta", "n_phi")},
     "sphere_rings": {"element": "sphere", "keys": ("r0_mm", "elevations_deg", "points_per_ring")},
     "cylinder_patch": {"element": "cylinder",
                        "keys": ("r0_mm", "arc_deg", "half_height_mm", "n_theta", "n_z")},
@@ -473,8 +472,8 @@ def approximation(pattern: str, **g) -> Approximation:
     if pattern == "sphere_segment":
         return sphere_segment(rad(g["arc_deg"]) / 2)
     if pattern == "sphere_patch":
-        t1, t2 = (rad(v) for v in g["theta_deg"])
-        p1, p2 = (rad(v) for v in g["phi_deg"])
+        t1, t2 = (rad(v) for v in _pair("theta_deg", g["theta_deg"]))
+        p1, p2 = (rad(v) for v in _pair("phi_range_deg", g["phi_range_deg"]))
         return sphere_patch(t1, t2, p1, p2)
     if pattern == "sphere_full":
         return sphere_full()
@@ -573,7 +572,7 @@ def sample(pattern: str, *, center_mm=(0.0, 0.0, 0.0), axis=(0.0, 0.0, 1.0), ref
                 approx = sphere_segment(al)
             else:
                 t1, t2 = (rad(v) for v in _pair("theta_deg", g["theta_deg"]))
-                p1, p2 = (rad(v) for v in _pair("phi_deg", g["phi_deg"]))
+                p1, p2 = (rad(v) for v in _pair("phi_range_deg", g["phi_range_deg"]))
                 approx = sphere_patch(t1, t2, p1, p2)
             # uniform by area: midpoints in theta and in sin(phi) (Archimedes)
             T, S = np.meshgrid(_midpoints(t1, t2, nt),

@@ -1,0 +1,603 @@
+"""The ``feature`` task: uncertainty of least-squares fitted features (Forbes 2022) under the
+full point-cloud V_X of Forbes 2025, decomposed per influence factor (Forbes 2025 section 5.6),
+and a-priori planning with the analytic approximations for partial features (Tables 1-8).
+
+Task file::
+
+    [task]      kind = "feature", name, notes
+    [feature]   type (line | plane | circle | sphere | cylinder | cone), circle_plane,
+                axis_hint, reference_mm, weights = {point id = w}, max_iter
+    [points]    file = "points.csv"          (id,x,y,z,nx,ny,nz,probe)   -- or --
+    [sampling]  pattern = "cylinder_patch", geometry keys, counts, center_mm, axis, ref_dir, probe
+    [planning]  pattern, sweep, values, geometry keys, m_points   (optional)
+    [parameters], [[probes]]                  the point-cloud model (Forbes 2025 Table 3 names)
+
+Workbook: see :mod:`generator.feature_book`.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from xlfuncs import features as ft
+from xlfuncs import partial as pa
+from xlfuncs import pointcloud as pc
+from xlfuncs.errors import ModelError
+
+from . import __version__
+from .errors import InputError
+from .taskfile import (check_keys, number, read_parameters, read_point_cloud, read_probes,
+                       string, table, task_kind_and_name, vector3)
+
+KIND = "feature"
+EXAMPLES = [
+    "feature_cylinder_bore.toml",
+    "feature_table1_circle_arc.toml",
+    "feature_table2_sphere_cap.toml",
+    "feature_table3_sphere_band.toml",
+    "feature_table4_sphere_segment.toml",
+    "feature_table5_cylinder_patch.toml",
+    "feature_table6_cone_angle.toml",
+    "feature_table7_cone_arc.toml",
+    "feature_table8_sphere_six.toml",
+    "feature_table8_sphere_five.toml",
+    "feature_table8_sphere_nine.toml",
+    "feature_plane_face.toml",
+]
+
+CIRCLE_PLANE_CHOICES = ("xy", "yz", "zx", "space")
+CIRCLE_PLANE_NORMALS = {"xy": (0, 0, 1), "yz": (1, 0, 0), "zx": (0, 1, 0)}
+
+#: [sampling]/[planning] geometry keys and their types
+GEOMETRY_KEYS = {
+    "r0_mm": "positive", "arc_deg": "positive", "gamma_deg": "positive",
+    "beta_deg": "positive", "half_height_mm": "positive", "half_length_mm": "positive",
+    "half_width_x_mm": "positive", "half_width_y_mm": "positive", "phi_deg": "number",
+    "theta_deg": "pair", "phi_range_deg": "pair",
+    "elevations_deg": "numbers", "points_per_ring": "counts",
+}
+COUNT_KEYS = ("n_points", "n_x", "n_y", "n_theta", "n_phi", "n_z")
+BOOL_KEYS = ("north_pole", "south_pole")
+SAMPLING_KEYS = set(GEOMETRY_KEYS) | set(COUNT_KEYS) | set(BOOL_KEYS) | {
+    "pattern", "center_mm", "axis", "ref_dir", "probe"}
+PLANNING_PATTERNS = ("circle_arc", "sphere_cap", "sphere_band", "sphere_segment",
+                     "sphere_patch", "sphere_full", "plane_rectangle", "line_segment",
+                     "cylinder_patch", "cone_patch")
+PLANNING_GEOMETRY = {
+    "circle_arc": ("arc_deg", "r0_mm"),
+    "sphere_cap": ("gamma_deg",),
+    "sphere_band": ("beta_deg",),
+    "sphere_segment": ("arc_deg",),
+    "sphere_patch": ("theta_deg", "phi_range_deg"),
+    "sphere_full": (),
+    "plane_rectangle": ("half_width_x_mm", "half_width_y_mm"),
+    "line_segment": ("half_length_mm",),
+    "cylinder_patch": ("arc_deg", "half_height_mm"),
+    "cone_patch": ("arc_deg", "half_height_mm", "r0_mm", "phi_deg"),
+}
+PLANNING_ELEMENT = {"sphere_full": "sphere", **{k: v["element"] for k, v in pa.PATTERNS.items()}}
+
+
+@dataclass
+class Planning:
+    """The a-priori evaluation: one analytic approximation per value of the sweep key."""
+
+    pattern: str
+    sweep: str | None
+    values: list[float]
+    geometry: dict
+    m_points: int
+    space: bool = False
+
+    def rows(self) -> list[tuple[float | None, pa.Approximation]]:
+        out = []
+        for v in (self.values if self.sweep else [None]):
+            g = dict(self.geometry)
+            if self.sweep:
+                g[self.sweep] = v
+            out.append((v, planning_approximation(self.pattern, g, self.space)))
+        return out
+
+
+def planning_approximation(pattern: str, g: dict, space: bool) -> pa.Approximation:
+    """:func:`xlfuncs.partial.approximation` with the task's key names."""
+    g = dict(g)
+    if pattern == "circle_arc":
+        g["space"] = space
+        g.setdefault("r0_mm", 1.0)
+    return pa.approximation(pattern, **g)
+
+
+@dataclass
+class Task:
+    path: Path
+    name: str
+    element: str
+    circle_plane: str | None          # None: circle in space
+    cloud: pc.PointCloud
+    params: pc.Parameters
+    weights: np.ndarray
+    axis_hint: tuple | None
+    reference_mm: tuple | None
+    max_iter: int
+    source: str                       # "[points]" or "[sampling]"
+    sampling: dict | None = None
+    planning: Planning | None = None
+    notes: list[str] = field(default_factory=list)
+    _fit: object = None
+    _unc: object = None
+
+
+# -- reading the task --------------------------------------------------------------------------
+
+def _integer(path, tbl, section, key, default=None, minimum=1) -> int:
+    value = tbl.get(key, default)
+    where = f"[{section}] {key}"
+    if value is None:
+        raise InputError("missing key", file=path, where=where)
+    if isinstance(value, bool) or not isinstance(value, int):
+        raise InputError(f"must be a whole number, got {value!r}", file=path, where=where)
+    if value < minimum:
+        raise InputError(f"must be >= {minimum}, got {value}", file=path, where=where)
+    return int(value)
+
+
+def _geometry(path, tbl, section) -> dict:
+    g = {}
+    for key, kind in GEOMETRY_KEYS.items():
+        if key not in tbl:
+            continue
+        where = f"[{section}] {key}"
+        if kind == "positive":
+            g[key] = number(path, tbl, section, key, positive=True)
+        elif kind == "number":
+            g[key] = number(path, tbl, section, key)
+        elif kind == "pair":
+            v = tbl[key]
+            if (not isinstance(v, list) or len(v) != 2 or
+                    not all(isinstance(x, (int, float)) and not isinstance(x, bool) and
+                            math.isfinite(x) for x in v) or not v[0] < v[1]):
+                raise InputError("must be [from, to] with from < to (degrees)", file=path,
+                                 where=where)
+            g[key] = [float(x) for x in v]
+        else:
+            v = tbl[key]
+            ok = isinstance(v, list) and v and all(
+                isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
+                for x in v)
+            if kind == "counts":
+                ok = ok and all(isinstance(x, int) and x >= 1 for x in v)
+            if not ok:
+                raise InputError("must be a list of " + ("whole numbers >= 1" if kind == "counts"
+                                                         else "numbers"), file=path, where=where)
+            g[key] = list(v)
+    return g
+
+
+def _unit_vector(path, tbl, section, key):
+    v = vector3(path, tbl, f"[{section}]", key)
+    if math.hypot(*v) == 0:
+        raise InputError("must not be the zero vector", file=path, where=f"[{section}] {key}")
+    return v
+
+
+def load(path: Path, doc: dict) -> Task:
+    path = Path(path)
+    kind, name = task_kind_and_name(path, doc)
+    check_keys(path, doc, "task file", {"task", "feature", "points", "sampling", "planning",
+                                        "parameters", "probes"})
+    t = table(path, doc, "task")
+    check_keys(path, t, "task", {"kind", "name", "notes"})
+    notes = t.get("notes", [])
+    if isinstance(notes, str):
+        notes = [notes]
+    if not isinstance(notes, list) or not all(isinstance(n, str) for n in notes):
+        raise InputError("must be text or a list of texts", file=path, where="[task] notes")
+
+    f = table(path, doc, "feature")
+    check_keys(path, f, "feature", {"type", "circle_plane", "axis_hint", "reference_mm",
+                                    "weights", "max_iter"})
+    element = string(path, f, "feature", "type")
+    if element not in ft.ELEMENTS:
+        raise InputError(f"unknown feature type {element!r}; expected one of "
+                         f"{', '.join(ft.ELEMENTS)}", file=path, where="[feature] type")
+    circle_plane: str | None = None
+    if element == "circle":
+        cp = string(path, f, "feature", "circle_plane", "xy")
+        if cp not in CIRCLE_PLANE_CHOICES:
+            raise InputError(f"must be one of {', '.join(CIRCLE_PLANE_CHOICES)}, got {cp!r}",
+                             file=path, where="[feature] circle_plane")
+        circle_plane = None if cp == "space" else cp
+    elif "circle_plane" in f:
+        raise InputError("only a circle has a circle_plane", file=path,
+                         where="[feature] circle_plane")
+    axis_hint = _unit_vector(path, f, "feature", "axis_hint") if "axis_hint" in f else None
+    reference = vector3(path, f, "[feature]", "reference_mm") if "reference_mm" in f else None
+    max_iter = _integer(path, f, "feature", "max_iter", 100)
+
+    has_points, has_sampling = "points" in doc, "sampling" in doc
+    if has_points == has_sampling:
+        raise InputError("give the points either as [points] file = ... or as a [sampling] "
+                         "strategy (exactly one of them)", file=path,
+                         where="[points]" if has_points else "[sampling]")
+    sampling = None
+    if has_points:
+        cloud, params, _ = read_point_cloud(path, doc)
+        source = "[points]"
+    else:
+        params = read_parameters(path, doc)
+        probes = read_probes(path, doc)
+        sampling, cloud = _read_sampling(path, doc, element, circle_plane, params, probes)
+        source = "[sampling]"
+
+    weights = np.ones(cloud.m)
+    if "weights" in f:
+        w = f["weights"]
+        if not isinstance(w, dict):
+            raise InputError("must be a table {point id = weight}", file=path,
+                             where="[feature] weights")
+        index = {lab: i for i, lab in enumerate(cloud.labels)}
+        for lab in w:
+            if lab not in index:
+                raise InputError(f"unknown point {lab!r}", file=path,
+                                 where=f"[feature] weights.{lab}")
+            weights[index[lab]] = _weight(path, w, lab)
+
+    planning = _read_planning(path, doc, element, circle_plane, sampling, cloud.m) \
+        if "planning" in doc else None
+    return Task(path, name, element, circle_plane, cloud, params, weights, axis_hint, reference,
+                max_iter, source, sampling, planning, list(notes))
+
+
+def _weight(path, w: dict, lab: str) -> float:
+    value = w[lab]
+    where = f"[feature] weights.{lab}"
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or \
+            not math.isfinite(float(value)):
+        raise InputError(f"must be a finite number, got {value!r}", file=path, where=where)
+    if value < 0:
+        raise InputError(f"must be >= 0, got {value:g}", file=path, where=where)
+    return float(value)
+
+
+def _read_sampling(path, doc, element, circle_plane, params, probes):
+    s = table(path, doc, "sampling")
+    check_keys(path, s, "sampling", SAMPLING_KEYS)
+    pattern = string(path, s, "sampling", "pattern")
+    if pattern not in pa.PATTERNS:
+        raise InputError(f"unknown pattern {pattern!r}; expected one of "
+                         f"{', '.join(pa.PATTERNS)}", file=path, where="[sampling] pattern")
+    if pa.PATTERNS[pattern]["element"] != element:
+        raise InputError(f"pattern {pattern!r} samples a {pa.PATTERNS[pattern]['element']}, "
+                         f"the feature is a {element}", file=path, where="[sampling] pattern")
+    g = _geometry(path, s, "sampling")
+    for key in COUNT_KEYS:
+        if key in s:
+            g[key] = _integer(path, s, "sampling", key, minimum=1)
+    for key in BOOL_KEYS:
+        if key in s:
+            if not isinstance(s[key], bool):
+                raise InputError("must be true or false", file=path, where=f"[sampling] {key}")
+            g[key] = s[key]
+    kw = {}
+    for key in ("center_mm", "axis", "ref_dir"):
+        if key in s:
+            kw[key] = (vector3(path, s, "[sampling]", key) if key == "center_mm"
+                       else _unit_vector(path, s, "sampling", key))
+    if circle_plane is not None and element == "circle":
+        want = np.array(CIRCLE_PLANE_NORMALS[circle_plane], float)
+        ax = np.array(kw.get("axis", (0, 0, 1)), float)
+        if abs(abs(ax @ want) / np.linalg.norm(ax) - 1) > 1e-12:
+            raise InputError(f"a circle in the {circle_plane} plane needs axis = "
+                             f"{list(CIRCLE_PLANE_NORMALS[circle_plane])}", file=path,
+                             where="[sampling] axis")
+    spec_keys = pa.PATTERNS[pattern]["keys"]
+    for key in spec_keys:
+        if key not in g:
+            raise InputError(f"pattern {pattern!r} needs {key}", file=path,
+                             where=f"[sampling] {key}")
+    g_core = dict(g)
+    for key in g:
+        if key not in spec_keys and key not in BOOL_KEYS:
+            raise InputError(f"not a key of pattern {pattern!r} (expected "
+                             f"{', '.join(spec_keys)})", file=path, where=f"[sampling] {key}")
+    probe_id = string(path, s, "sampling", "probe", probes[0].id)
+    ids = [p.id for p in probes]
+    if probe_id not in ids:
+        raise InputError(f"unknown probe {probe_id!r} (the task defines {', '.join(ids)})",
+                         file=path, where="[sampling] probe")
+    try:
+        smp = pa.sample(pattern, **kw, **g_core)
+        for p in probes:
+            p.resolved(params)
+        cloud = pc.PointCloud(smp.X_mm, smp.N, np.full(smp.m, ids.index(probe_id)), probes,
+                              smp.labels)
+    except ModelError as e:
+        raise InputError(str(e), file=path, where="[sampling]") from None
+    info = {"pattern": pattern, **{k: v for k, v in kw.items()}, **g, "probe": probe_id}
+    return info, cloud
+
+
+def _read_planning(path, doc, element, circle_plane, sampling, m) -> Planning:
+    p = table(path, doc, "planning")
+    allowed = {"pattern", "sweep", "values", "m_points", *GEOMETRY_KEYS}
+    check_keys(path, p, "planning", allowed)
+    default = sampling["pattern"] if sampling else None
+    pattern = string(path, p, "planning", "pattern", default)
+    if pattern not in PLANNING_PATTERNS:
+        raise InputError(f"no analytic approximation for {pattern!r}; expected one of "
+                         f"{', '.join(PLANNING_PATTERNS)}", file=path, where="[planning] pattern")
+    if PLANNING_ELEMENT[pattern] != element:
+        raise InputError(f"pattern {pattern!r} approximates a {PLANNING_ELEMENT[pattern]}, the "
+                         f"feature is a {element}", file=path, where="[planning] pattern")
+    needed = PLANNING_GEOMETRY[pattern]
+    g = {}
+    base = {k: v for k, v in (sampling or {}).items() if k in needed} if sampling and \
+        sampling["pattern"] == pattern else {}
+    g.update(base)
+    g.update({k: v for k, v in _geometry(path, p, "planning").items()})
+    for key in g:
+        if key not in needed:
+            raise InputError(f"not a key of pattern {pattern!r} (expected "
+                             f"{', '.join(needed) or 'none'})", file=path,
+                             where=f"[planning] {key}")
+    sweep = None
+    values: list[float] = []
+    if "sweep" in p:
+        sweep = string(path, p, "planning", "sweep")
+        if sweep not in needed or GEOMETRY_KEYS[sweep] not in ("positive", "number"):
+            raise InputError(f"must name a number key of pattern {pattern!r} "
+                             f"({', '.join(k for k in needed if GEOMETRY_KEYS[k] != 'pair')})",
+                             file=path, where="[planning] sweep")
+        raw = p.get("values")
+        if (not isinstance(raw, list) or not raw or
+                not all(isinstance(x, (int, float)) and not isinstance(x, bool) and
+                        math.isfinite(x) for x in raw)):
+            raise InputError("must be a non-empty list of numbers", file=path,
+                             where="[planning] values")
+        values = [float(x) for x in raw]
+        g.pop(sweep, None)
+    elif "values" in p:
+        raise InputError("values need a sweep key", file=path, where="[planning] values")
+    for key in needed:
+        if key != sweep and key not in g and not (pattern == "circle_arc" and key == "r0_mm"):
+            raise InputError(f"pattern {pattern!r} needs {key}", file=path,
+                             where=f"[planning] {key}")
+    m_points = _integer(path, p, "planning", "m_points", m)
+    plan = Planning(pattern, sweep, values, g, m_points,
+                    space=(element == "circle" and circle_plane is None))
+    _safe_rows(path, plan)  # bad geometry is an input error now, not at compute time
+    return plan
+
+
+def _safe_rows(path, plan: Planning):
+    try:
+        return plan.rows()
+    except ModelError as e:
+        raise InputError(str(e), file=path, where="[planning]") from None
+
+
+# -- computing -----------------------------------------------------------------------------
+
+def fitted(task: Task):
+    """The fit and the per-factor V_A (cached on the task)."""
+    if task._fit is None:
+        try:
+            f = ft.fit(task.element, task.cloud.X_mm, weights=task.weights,
+                       normals=task.cloud.N, axis_hint=task.axis_hint,
+                       circle_plane=task.circle_plane if task.element == "circle" else "xy",
+                       reference_mm=task.reference_mm, max_iter=task.max_iter)
+        except ModelError as e:
+            raise InputError(f"{e}", file=task.path, where=task.source) from None
+        try:
+            comps = pc.V_X_components(task.cloud, task.params)
+        except ModelError as e:
+            raise InputError(str(e), file=task.path, where="[parameters]") from None
+        task._fit = f
+        task._unc = ft.propagate(f, comps)
+    return task._fit, task._unc
+
+
+def _cov(V):
+    return [[float(x) for x in row] for row in V]
+
+
+def compute(task: Task) -> dict:
+    f, unc = fitted(task)
+    names = list(f.names)
+    feature = {
+        "type": task.element,
+        "parameters": {n: float(v) for n, v in zip(names, f.values)},
+        "u": {n: float(u) for n, u in zip(names, unc.u())},
+        "covariance": _cov(unc.V["total"]),
+        "parameter_names": names,
+        "components": {fac: {n: float(u) for n, u in zip(names, unc.u(fac))}
+                       for fac in pc.FACTORS},
+        "units": {n: _unit(n) for n in names},
+        "circle_plane": ("space" if task.element == "circle" and task.circle_plane is None
+                         else task.circle_plane),
+        "local": {
+            "parameter_names": list(f.local_names),
+            "values": {n: float(v) for n, v in zip(f.local_names, f.local_values)},
+            "u": {n: float(u) for n, u in zip(f.local_names, unc.u_local())},
+            "covariance": _cov(unc.V_local["total"]),
+            "components": {fac: {n: float(u) for n, u in zip(f.local_names, unc.u_local(fac))}
+                           for fac in pc.FACTORS},
+            "frame": {"origin_mm": [float(x) for x in f.origin_mm],
+                      "R": _cov(f.R)},
+            "note": "paper parametrisation (Forbes 2022) in the solution frame: element in "
+                    "standard position, rot_x/rot_y small rotations about the frame axes",
+        },
+        "fit": {"m": f.m, "iterations": f.iterations, "rms_residual_mm": f.rms_mm,
+                "source": task.source},
+    }
+    out = {"name": task.name, "kind": KIND, "version": __version__, "feature": feature}
+    if task.sampling is not None:
+        out["sampling"] = {k: (list(v) if isinstance(v, tuple) else v)
+                           for k, v in task.sampling.items()}
+    if task.planning is not None:
+        out["planning"] = planning_results(task)
+    return out
+
+
+def _unit(name: str) -> str:
+    return "mm" if name.endswith("_mm") else "rad" if name.endswith("_rad") else "1"
+
+
+def planning_results(task: Task) -> dict:
+    plan = task.planning
+    sigma_mm = task.params.sigma_R_um * 1e-3
+    rows = []
+    names: list[str] = []
+    for v, ap in _safe_rows(task.path, plan):
+        names = list(ap.parameter_names)
+        s = ap.s
+        u = sigma_mm * s / math.sqrt(plan.m_points)
+        row = {"s": dict(zip(names, map(float, s))), "u": dict(zip(names, map(float, u)))}
+        if plan.sweep:
+            row = {plan.sweep: v, **row}
+        rows.append(row)
+    return {"pattern": plan.pattern, "sweep": plan.sweep, "geometry": plan.geometry,
+            "m_points": plan.m_points, "sigma_R_um": task.params.sigma_R_um,
+            "parameter_names": names,
+            "note": "Forbes 2022 eq. (15): (1/m) J^T J ~ H of the patch; s = sqrt(diag H^-1); "
+                    "u = sigma_R s / sqrt(m) for V_X = sigma_R^2 I",
+            "rows": rows}
+
+
+# -- outputs ---------------------------------------------------------------------------------
+
+def write_book(task: Task, results: dict, path: Path) -> None:
+    from .feature_book import write_feature_book
+
+    write_feature_book(task, results, path)
+
+
+def write_plots(task: Task, results: dict, out_dir: Path) -> list[Path]:
+    from .plots import _plt
+
+    plt = _plt()
+    files = []
+    fe = results["feature"]
+    names = fe["parameter_names"]
+    live = [n for n in names if fe["u"][n] > 0]
+    fig, ax = plt.subplots(figsize=(7, 0.45 * len(live) + 1.6), dpi=110)
+    left = np.zeros(len(live))
+    for fac in pc.FACTORS:
+        # share of the variance u_f^2 / u^2 of each parameter (Forbes 2025 section 5.6)
+        share = np.array([(fe["components"][fac][n] / fe["u"][n]) ** 2 for n in live])
+        ax.barh(live, share, left=left, label=fac)
+        left += share
+    ax.set_xlim(0, 1)
+    ax.set_xlabel("share of u^2 per influence factor")
+    ax.set_title(f"{results['name']}: {fe['type']} fitted to {fe['fit']['m']} points")
+    ax.legend(fontsize=8, ncol=6, loc="lower center", bbox_to_anchor=(0.5, 1.08))
+    fig.tight_layout()
+    p = out_dir / f"{task.name}_factors.png"
+    fig.savefig(p)
+    plt.close(fig)
+    files.append(p)
+    if "planning" in results and results["planning"]["sweep"]:
+        pl = results["planning"]
+        fig, ax = plt.subplots(figsize=(7, 4.2), dpi=110)
+        x = [r[pl["sweep"]] for r in pl["rows"]]
+        for n in pl["parameter_names"]:
+            ax.semilogy(x, [r["s"][n] for r in pl["rows"]], "o-", ms=3, label=f"s({n})")
+        ax.set_xlabel(pl["sweep"])
+        ax.set_ylabel("s(a) = sqrt(diag V)")
+        ax.set_title(f"{results['name']}: {pl['pattern']} (Forbes 2022)")
+        ax.grid(alpha=0.3, which="both")
+        ax.legend(fontsize=8)
+        fig.tight_layout()
+        p = out_dir / f"{task.name}_planning.png"
+        fig.savefig(p)
+        plt.close(fig)
+        files.append(p)
+    return files
+
+
+def summary(results: dict) -> list[str]:
+    fe = results["feature"]
+    names = fe["parameter_names"]
+    key = next((n for n in ("r0_mm", "z_A_mm", "x0_mm") if n in names), names[0])
+    scale = 1e3 if key.endswith("_mm") else 1e6
+    unit = "µm" if key.endswith("_mm") else "µrad"
+    comps = {fac: fe["components"][fac][key] for fac in pc.FACTORS}
+    top = max(comps, key=comps.get)
+    lines = [f"{fe['type']} fitted to {fe['fit']['m']} points: {key} = {fe['parameters'][key]:.4f}, "
+             f"u = {fe['u'][key] * scale:.3f} {unit} (largest factor {top}: "
+             f"{comps[top] * scale:.3f} {unit})"]
+    if "planning" in results:
+        pl = results["planning"]
+        rows = pl["rows"]
+        if pl["sweep"]:
+            lines.append(f"planning ({pl['pattern']}): {len(rows)} rows of s(a) over "
+                         f"{pl['sweep']} = {rows[0][pl['sweep']]:g} .. {rows[-1][pl['sweep']]:g}")
+        else:
+            s = ", ".join(f"{k} {v:.2f}" for k, v in rows[0]["s"].items())
+            lines.append(f"planning ({pl['pattern']}): s = {s}")
+    return lines
+
+
+NEW_TASK = '''# cmmwb feature task (Forbes 2022 + Forbes 2025): uncertainty of a least-squares fitted
+# element under the six-factor point-cloud model, per influence factor.
+# Units: coordinates mm, uncertainties µm in [parameters]; results: lengths mm, angles rad.
+# Build with:  cmmwb build THIS.toml --out DIR
+
+[task]
+kind = "feature"
+name = "my_feature"             # file stem of the outputs
+
+[feature]
+type = "cylinder"               # line | plane | circle | sphere | cylinder | cone
+# circle_plane = "xy"           # circle only: xy | yz | zx (2D fit, section 4) or "space"
+# axis_hint = [0, 0, 1]         # rough axis/normal: starting estimate and sign of the result
+# reference_mm = [0, 0, 0]      # locating point = point of the axis nearest to this point
+#                               # (default: centroid of the points); a cone's r0 is taken there
+# weights = { X3 = 0.5, X7 = 0 } # w_i of Forbes 2022 eq. (11) by point id (default 1)
+
+# The points: either a file ...
+# [points]
+# file = "points.csv"           # id,x,y,z,nx,ny,nz,probe  (mm; n = outward unit normal)
+
+# ... or a sampling strategy that builds the nominal points (midpoint grid, uniform by area)
+[sampling]
+pattern = "cylinder_patch"      # line_segment | plane_rectangle | circle_arc | sphere_cap |
+                                # sphere_band | sphere_segment | sphere_patch | sphere_rings |
+                                # cylinder_patch | cone_patch
+center_mm = [0.0, 0.0, 0.0]
+axis = [0.0, 0.0, 1.0]          # element axis (plane normal, sphere pole, line direction)
+r0_mm = 25.0
+arc_deg = 360.0                 # full arc angle 2 alpha
+half_height_mm = 20.0           # a: points in -a <= z <= a
+n_theta = 24                    # points per ring
+n_z = 5                         # rings
+probe = "P1"
+
+# Optional: planning without data, the analytic approximation (Forbes 2022 Tables 1-8)
+[planning]
+sweep = "arc_deg"               # one row per value; other geometry keys from [sampling]
+values = [360, 270, 180, 120, 60, 20]
+
+[parameters]                    # Forbes 2025 Table 3 names; absent ones are 0
+sigma_R_um = 0.20
+sigma_S_ppm = 0.7
+sigma_Sa_ppm = 0.7
+sigma_Q_ppm = 0.7
+sigma_PQ_um = 0.20
+sigma_ET_um = 0.2
+lambda_ET_mm = 200
+sigma_ER_urad = 4.0
+lambda_ER_mm = 400
+sigma_P0_um = 0.10
+sigma_P_um = 0.10
+lambda_P = 0.5
+
+[[probes]]
+id = "P1"
+offset_mm = [0.0, 0.0, -50.0]
+'''
