@@ -138,9 +138,11 @@ def compute(task: Task) -> dict:
 
 def write_book(task: Task, results: dict, path: Path) -> None:
     if task.cloud.m > NATIVE_MAX_POINTS:
-        raise InputError(f"{task.cloud.m} points: the workbook holds at most {NATIVE_MAX_POINTS} points "
-                         "with native V_X formulas (the JSON has every result)", file=task.path,
-                         where="[points]")
+        # beyond the native V_X sheets: GP blocks as values + Excel add-in formulas
+        from .large_book import write_large_book
+
+        write_large_book(task, results, path)
+        return
     book = Book(KIND, task.name, f"Point-cloud uncertainty of distances — {task.name}")
     _instructions(book, task)
     extra = [("K", task.K, "1", "coverage factor for U = K u and for C(d)", 0.0)]
