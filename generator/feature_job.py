@@ -23,7 +23,9 @@ from pathlib import Path
 
 import numpy as np
 
+from xlfuncs import blocked as bl
 from xlfuncs import features as ft
+from xlfuncs.distributed import get_backend
 from xlfuncs import partial as pa
 from xlfuncs import pointcloud as pc
 from xlfuncs.errors import ModelError
@@ -383,6 +385,11 @@ def _safe_rows(path, plan: Planning):
 
 # -- computing -----------------------------------------------------------------------------
 
+#: up to this many points V_A = G V_X G^T uses the dense V_X (what the workbook shows); beyond,
+#: the blocked evaluation that never forms V_X (equal to 1e-10, tests/test_blocked.py)
+DENSE_MAX_POINTS = 300
+
+
 def fitted(task: Task):
     """The fit and the per-factor V_A (cached on the task)."""
     if task._fit is None:
@@ -394,11 +401,14 @@ def fitted(task: Task):
         except ModelError as e:
             raise InputError(f"{e}", file=task.path, where=task.source) from None
         try:
-            comps = pc.V_X_components(task.cloud, task.params)
+            if task.cloud.m <= DENSE_MAX_POINTS:
+                task._unc = ft.propagate(f, pc.V_X_components(task.cloud, task.params))
+            else:  # V_X would not fit in memory: G V_X G^T in row blocks (xlfuncs.blocked)
+                task._unc = bl.propagate_cloud(f, task.cloud, task.params, backend=get_backend(),
+                                               progress=bl.ProgressBar(f"V_A of {task.cloud.m} points"))
         except ModelError as e:
             raise InputError(str(e), file=task.path, where="[parameters]") from None
         task._fit = f
-        task._unc = ft.propagate(f, comps)
     return task._fit, task._unc
 
 

@@ -11,7 +11,9 @@ from pathlib import Path
 
 import numpy as np
 
+from xlfuncs import blocked as bl
 from xlfuncs import pointcloud as pc
+from xlfuncs.distributed import get_backend
 from xlfuncs.errors import ModelError
 
 from . import __version__
@@ -49,6 +51,7 @@ class Task:
     K: float
     mpe: MPE | None = None
     notes: list[str] = field(default_factory=list)
+    all_pairs: bool = False  # the distances are every pair i < j in all_pairs order
 
 
 def load(path: Path, doc: dict) -> Task:
@@ -77,8 +80,12 @@ def load(path: Path, doc: dict) -> Task:
     pairs: list[tuple[int, int]] = []
     groups: list[str] = []
     if raw is None:
-        pairs = [tuple(p) for p in pc.all_pairs(cloud.m)]
-        groups = [""] * len(pairs)
+        pairs_arr = pc.all_pairs(cloud.m)
+        if not len(pairs_arr):
+            raise InputError("no distances to evaluate (one point only?)", file=path, where="[points]")
+        # coincident points are found (and named) by the distance computation itself
+        return Task(path, name, cloud, params, pairs_arr, [""] * len(pairs_arr), K, mpe, list(notes),
+                    all_pairs=True)
     else:
         if not isinstance(raw, list) or not all(isinstance(d, dict) for d in raw):
             raise InputError("must be a list of {from, to} tables", file=path, where="[[distances]]")
@@ -105,12 +112,17 @@ def load(path: Path, doc: dict) -> Task:
     try:
         pc.check_pairs(cloud, pairs_arr)
     except ModelError as e:
-        raise InputError(str(e), file=path, where="[[distances]]" if raw is not None else "[points]") from None
+        raise InputError(str(e), file=path, where="[[distances]]") from None
     return Task(path, name, cloud, params, pairs_arr, groups, K, mpe, list(notes))
 
 
 def compute(task: Task) -> dict:
-    r = pc.distance_components(task.cloud, task.params, task.pairs)
+    pairs = None if task.all_pairs else task.pairs  # None: the row-block path, no index arrays
+    try:
+        r = bl.distance_components(task.cloud, task.params, pairs, backend=get_backend(),
+                                   progress=bl.ProgressBar(f"{len(task.pairs)} distances"))
+    except ModelError as e:
+        raise InputError(str(e), file=task.path, where="[points]") from None
     labels = task.cloud.labels
     out = {"name": task.name, "kind": KIND, "version": __version__, "distances": []}
     for q, (i, j) in enumerate(task.pairs):
