@@ -1,6 +1,8 @@
 """xlfuncs: the numerical core of cmmwb (numpy only, no spreadsheet knowledge).
 
-Modules: ``pointcloud`` (Forbes 2025 V_X and distances), ``budget`` (Wojtyla/Plowucha 2023),
-``features`` (Forbes 2022 fits and sensitivities), ``diagnose`` (mismatch locator), ``udf``
-(xlwings add-in functions).
+Modules: ``pointcloud`` (Forbes 2025 V_X and distances), ``blocked`` (the same without forming
+V_X), ``budget`` (Wojtyla/Plowucha 2023), ``features`` and ``partial`` (Forbes 2022 fits,
+sensitivities, partial-feature approximations), ``montecarlo`` (JCGM 101 comparison),
+``recordings``/``effects``/``diagnose``/``simulate`` (mismatch locator), ``distributed`` (Dask),
+``udf`` (xlwings add-in functions).
 """
