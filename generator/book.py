@@ -10,8 +10,10 @@ from __future__ import annotations
 import math
 import os
 import tempfile
+from contextlib import contextmanager
+from contextvars import ContextVar
 from pathlib import Path
-from typing import Iterable, Sequence
+from typing import Iterable, Iterator, Sequence
 
 from openpyxl import Workbook
 from openpyxl.comments import Comment
@@ -34,6 +36,20 @@ NUMBER_FORMAT = "0.000000"
 
 RESULTS = "Results"
 INSTRUCTIONS = "Instructions"
+#: the task description :meth:`Book.save` stores when the writer did not call task_info itself
+#: (set by ``generator.cli.build_task`` around ``write_book`` with :func:`describing`)
+_TASK_INFO: ContextVar[dict | None] = ContextVar("cmmwb_task_info", default=None)
+
+
+@contextmanager
+def describing(info: dict) -> Iterator[None]:
+    """Every :class:`Book` of kind ``info["kind"]`` saved inside this block stores ``info``
+    (see :meth:`Book.task_info`)."""
+    token = _TASK_INFO.set(info)
+    try:
+        yield
+    finally:
+        _TASK_INFO.reset(token)
 
 
 def _finite(value: float, what: str) -> float:
@@ -64,6 +80,7 @@ class Book:
         self.wb.properties.creator = f"cmmwb {__version__}"
         self.wb.properties.title = title
         self._validations: dict[tuple[str, float | None, float | None], DataValidation] = {}
+        self._task_info: dict | None = None
 
     # -- sheets ------------------------------------------------------------------------------
     def sheet(self, title: str, *, protect: bool = True) -> Worksheet:
@@ -229,10 +246,27 @@ class Book:
         ws.freeze_panes = "A2"
         return ws
 
+    # -- the way back (`cmmwb read`) -------------------------------------------------------------
+    def task_info(self, info: dict) -> None:
+        """Store the task this workbook was built from, for ``cmmwb read``.
+
+        ``info`` = ``{"kind", "name", "doc"}`` with ``doc`` the task file as a dict (the structure:
+        distances, characteristics, notes ...).  :meth:`save` writes it as JSON on the hidden sheet
+        ``_task`` together with a snapshot of every input cell's value
+        (:func:`generator.reader.write_task_sheet`); ``cmmwb read`` takes the structure from there
+        and every value from the named input cells and input tables.
+        """
+        self._task_info = dict(info)
+
     # -- saving --------------------------------------------------------------------------------
     def save(self, path: Path) -> Path:
         """Write the workbook atomically (temporary file in the same folder, then rename)."""
         path = Path(path)
+        info = self._task_info if self._task_info is not None else _TASK_INFO.get()
+        if info is not None and info.get("kind") == self.kind:
+            from .reader import write_task_sheet
+
+            write_task_sheet(self, info)
         self.wb.move_sheet(INSTRUCTIONS, offset=-self.wb.sheetnames.index(INSTRUCTIONS))
         self.wb.active = 0
         return save_atomic(self.wb, path)

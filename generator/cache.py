@@ -1,0 +1,274 @@
+"""Cached values in a generated workbook, for programs that do not calculate.
+
+openpyxl writes formulas without results (``<c><f>..</f><v/></c>``), so a previewer, pandas or
+openpyxl with ``data_only=True`` sees empty cells.  :func:`store` post-processes the saved
+``.xlsx`` and writes each chosen formula cell's value into its ``<v>`` element:
+
+``results`` (default, fast)
+    the ``Results`` sheet from the JSON the core computed (which the tests hold equal to what
+    ``formulas`` and LibreOffice compute, to 1e-9), and the cells those Results formulas point
+    at directly (``=Budget!$D$5`` -> ``Budget!D5`` gets the same value);
+``all``
+    every formula cell and every cell of every array formula, as the ``formulas`` engine computes
+    them (slow for big workbooks: about 25 s for the m = 52 step gauge);
+``none``
+    nothing.
+
+Excel recalculates on load anyway (openpyxl sets ``fullCalcOnLoad``); LibreOffice keeps cached
+values of formulas it is not told to recompute, which is why the values written here must be
+the engines' values and nothing else.  Strings are written as formula *results* (``t="str"``),
+never as formulas.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import posixpath
+import re
+import tempfile
+import zipfile
+from pathlib import Path
+from typing import Any
+from xml.sax.saxutils import escape
+
+from openpyxl.utils import column_index_from_string, get_column_letter, range_boundaries
+
+MODES = ("results", "all", "none")
+FACTORS = ("R", "PQ", "S", "ET", "ER", "P")
+ERRORS = {"#NULL!", "#DIV/0!", "#VALUE!", "#REF!", "#NAME?", "#NUM!", "#N/A", "#GETTING_DATA"}
+
+_SHEET = re.compile(rb'<sheet\b[^>]*?\bname="([^"]*)"[^>]*?\br:id="([^"]*)"')
+_REL = re.compile(rb'<Relationship\b[^>]*?\bId="([^"]*)"[^>]*?\bTarget="([^"]*)"')
+_REL2 = re.compile(rb'<Relationship\b[^>]*?\bTarget="([^"]*)"[^>]*?\bId="([^"]*)"')
+_ROW = re.compile(rb"<row\b([^>]*?)(/>|>(.*?)</row>)", re.S)
+_CELL = re.compile(rb"<c\b([^>]*?)(/>|>(.*?)</c>)", re.S)
+_ATTR_R = re.compile(rb'\br="([A-Z]+)([0-9]+)"')
+_ATTR_T = re.compile(rb'\s+t="[^"]*"')
+_F = re.compile(rb"<f\b([^>]*?)(?:/>|>(.*?)</f>)", re.S)
+_V = re.compile(rb"<v\s*/>|<v>.*?</v>|<v\s[^>]*?>.*?</v>", re.S)
+_REF_ATTR = re.compile(rb'\bref="([A-Z]+[0-9]+(?::[A-Z]+[0-9]+)?)"')
+_ARRAY = re.compile(rb'\bt="array"')
+_SINGLE_REF = re.compile(r"^=?(?:(?:'((?:[^']|'')+)'|([A-Za-z_][A-Za-z0-9_.]*))!)?\$?([A-Z]{1,3})\$?([0-9]+)$")
+_HEADER_TEXT = re.compile(rb"<t[^>]*>(.*?)</t>", re.S)
+
+
+# -- what the Results sheet holds, per kind (the contract of shared/spec/cli.md) ----------------
+
+def results_table(kind: str, results: dict) -> list[dict[str, Any]]:
+    """The rows of the ``Results`` sheet as the JSON gives them, keyed by column name."""
+    if kind == "pointcloud":
+        return [{"from": d["from"], "to": d["to"], "d_mm": d["d_mm"], "u_um": d["u_um"], "U_um": d["U_um"],
+                 **{f"u_{f}_um": d["components_um"][f] for f in FACTORS}} for d in results["distances"]]
+    if kind == "budget":
+        return [{"name": c["name"], "variant": c["variant"], "value_mm": c["value_mm"], "u_um": c["u_um"],
+                 "U_um": c["U_um"]} for c in results["characteristics"]]
+    if kind == "feature":
+        fe = results["feature"]
+        return [{"parameter": n, "value": fe["parameters"][n], "u": fe["u"][n]} for n in fe["parameter_names"]]
+    raise ValueError(f"unknown kind {kind!r}")
+
+
+# -- the xlsx parts ------------------------------------------------------------------------------
+
+def sheet_parts(z: zipfile.ZipFile) -> dict[str, str]:
+    """Sheet title -> part name (``xl/worksheets/sheet3.xml``)."""
+    wb = z.read("xl/workbook.xml")
+    rels = z.read("xl/_rels/workbook.xml.rels")
+    targets = {i: t for i, t in _REL.findall(rels)}
+    targets.update({i: t for t, i in _REL2.findall(rels)})
+    out = {}
+    for name, rid in _SHEET.findall(wb):
+        target = targets.get(rid)
+        if target is None:
+            continue
+        t = target.decode()
+        part = t.lstrip("/") if t.startswith("/") else posixpath.normpath(posixpath.join("xl", t))
+        out[_unescape(name.decode())] = part
+    return out
+
+
+def _unescape(s: str) -> str:
+    return (s.replace("&lt;", "<").replace("&gt;", ">").replace("&quot;", '"').replace("&apos;", "'")
+            .replace("&amp;", "&"))
+
+
+def _value_xml(value) -> tuple[bytes, bytes] | None:
+    """(type attribute, <v> element) of a cached value, or None when there is nothing to write."""
+    if value is None:
+        return None
+    if isinstance(value, bool):
+        return b' t="b"', b"<v>%d</v>" % int(value)
+    if isinstance(value, (int, float)):
+        v = float(value)
+        if not math.isfinite(v):
+            return b' t="e"', b"<v>#NUM!</v>"
+        text = repr(int(value)) if isinstance(value, int) else repr(v)
+        return b"", b"<v>" + text.encode() + b"</v>"
+    s = str(value)
+    if s in ERRORS:
+        return b' t="e"', b"<v>" + s.encode() + b"</v>"
+    return b' t="str"', b"<v>" + escape(s).encode("utf-8") + b"</v>"
+
+
+def _set_value(attrs: bytes, body: bytes | None, value) -> bytes:
+    """A ``<c>`` element with ``value`` as its cached value (formula, style kept)."""
+    vx = _value_xml(value)
+    attrs = _ATTR_T.sub(b"", attrs)
+    body = _V.sub(b"", body or b"")
+    if vx is None:
+        return b"<c" + attrs + (b">" + body + b"</c>" if body else b"/>")
+    t, v = vx
+    return b"<c" + attrs + t + b">" + body + v + b"</c>"
+
+
+def _rewrite(xml: bytes, values: dict[str, Any], *, arrays: bool) -> tuple[bytes, int]:
+    """Write ``values`` (coordinate -> value) into the formula cells of one sheet.  With
+    ``arrays`` also into the cells covered by array formulas, creating them when absent."""
+    start = xml.find(b"<sheetData")
+    end = xml.find(b"</sheetData>")
+    if start < 0 or end < 0:
+        return xml, 0
+    open_end = xml.index(b">", start) + 1
+    data = xml[open_end:end]
+    covered: set[str] = set()
+    if arrays:
+        for m in _F.finditer(data):
+            ref = _REF_ATTR.search(m.group(1)) if _ARRAY.search(m.group(1)) else None
+            if ref:
+                c0, r0, c1, r1 = range_boundaries(ref.group(1).decode())
+                covered.update(f"{get_column_letter(c)}{r}" for r in range(r0, r1 + 1)
+                               for c in range(c0, c1 + 1))
+        covered &= set(values)
+    rows: dict[int, tuple[bytes, list[tuple[int, bytes]]]] = {}
+    count = 0
+    for rm in _ROW.finditer(data):
+        rattrs = rm.group(1)
+        rnum = int(re.search(rb'\br="([0-9]+)"', rattrs).group(1))
+        cells: list[tuple[int, bytes]] = []
+        for cm in _CELL.finditer(rm.group(3) or b""):
+            attrs, body = cm.group(1), cm.group(3)
+            am = _ATTR_R.search(attrs)
+            coord = (am.group(1) + am.group(2)).decode() if am else ""
+            col = column_index_from_string(am.group(1).decode()) if am else 0
+            if coord in values and ((body is not None and b"<f" in body) or coord in covered):
+                cells.append((col, _set_value(attrs, body, values[coord])))
+                count += 1
+            else:
+                cells.append((col, cm.group(0)))
+            covered.discard(coord)
+        rows[rnum] = (rattrs, cells)
+    for coord in covered:  # array cells openpyxl did not write
+        m = re.match(r"([A-Z]+)([0-9]+)$", coord)
+        rnum, col = int(m.group(2)), column_index_from_string(m.group(1))
+        rattrs, cells = rows.setdefault(rnum, (b' r="%d"' % rnum, []))
+        cells.append((col, _set_value(b' r="' + coord.encode() + b'"', None, values[coord])))
+        count += 1
+    body = b"".join(b"<row" + rows[r][0] + b">" + b"".join(c for _, c in sorted(rows[r][1], key=lambda t: t[0]))
+                    + b"</row>" for r in sorted(rows))
+    return xml[:open_end] + body + xml[end:], count
+
+
+def _results_header(xml: bytes) -> dict[str, str]:
+    """Column name -> column letter of the Results sheet's first row (inline strings)."""
+    for rm in _ROW.finditer(xml):
+        if re.search(rb'\br="1"', rm.group(1)) is None:
+            continue
+        out = {}
+        for cm in _CELL.finditer(rm.group(3) or b""):
+            am = _ATTR_R.search(cm.group(1))
+            t = _HEADER_TEXT.search(cm.group(3) or b"")
+            if am and t:
+                out[_unescape(t.group(1).decode("utf-8"))] = am.group(1).decode()
+        return out
+    return {}
+
+
+def _formulas_of(xml: bytes, coords: set[str]) -> dict[str, str]:
+    out = {}
+    for cm in _CELL.finditer(xml):
+        am = _ATTR_R.search(cm.group(1))
+        if not am or cm.group(3) is None:
+            continue
+        coord = (am.group(1) + am.group(2)).decode()
+        if coord in coords:
+            f = _F.search(cm.group(3))
+            if f and f.group(2) is not None:
+                out[coord] = _unescape(f.group(2).decode("utf-8"))
+    return out
+
+
+# -- entry point ---------------------------------------------------------------------------------
+
+def store(path: Path, kind: str, results: dict, mode: str = "results") -> int:
+    """Write cached values into the workbook at ``path`` (rewritten atomically); returns the
+    number of cells that got a value."""
+    if mode not in MODES:
+        raise ValueError(f"unknown cache mode {mode!r}; choose one of {', '.join(MODES)}")
+    if mode == "none":
+        return 0
+    path = Path(path)
+    with zipfile.ZipFile(path) as z:
+        parts = sheet_parts(z)
+        if mode == "all":
+            from .recalc import recalculate
+
+            values = recalculate(path, "formulas")
+            per_part = {parts[s]: v for s, v in values.items() if s in parts}
+            arrays = True
+        else:
+            per_part = _results_values(z, parts, kind, results)
+            arrays = False
+        new = {}
+        count = 0
+        for part, vals in per_part.items():
+            if vals:
+                new[part], n = _rewrite(z.read(part), vals, arrays=arrays)
+                count += n
+        _replace_parts(path, z, new)
+    return count
+
+
+def _results_values(z: zipfile.ZipFile, parts: dict[str, str], kind: str, results: dict
+                    ) -> dict[str, dict[str, Any]]:
+    if "Results" not in parts:
+        return {}
+    xml = z.read(parts["Results"])
+    header = _results_header(xml)
+    values: dict[str, Any] = {}
+    for r, row in enumerate(results_table(kind, results), start=2):
+        for name, value in row.items():
+            if name in header:
+                values[f"{header[name]}{r}"] = value
+    out: dict[str, dict[str, Any]] = {parts["Results"]: values}
+    # one hop: Results cells that are plain references to one cell give that cell the same value
+    for coord, formula in _formulas_of(xml, set(values)).items():
+        m = _SINGLE_REF.match(formula)
+        if not m:
+            continue
+        sheet = (m.group(1) or "").replace("''", "'") or m.group(2) or "Results"
+        if sheet in parts:
+            out.setdefault(parts[sheet], {})[f"{m.group(3)}{m.group(4)}"] = values[coord]
+    return out
+
+
+def _replace_parts(path: Path, z: zipfile.ZipFile, new: dict[str, bytes]) -> None:
+    """Copy the archive with some parts replaced; atomic rename over ``path``."""
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=".xlsx.tmp", dir=path.parent)
+    os.close(fd)
+    try:
+        with zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as out:
+            for info in z.infolist():
+                data = new.get(info.filename)
+                if data is None:
+                    data = z.read(info)
+                zi = zipfile.ZipInfo(info.filename, date_time=info.date_time)
+                zi.compress_type = zipfile.ZIP_DEFLATED
+                zi.external_attr = info.external_attr
+                out.writestr(zi, data)
+        os.chmod(tmp, 0o644)
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
