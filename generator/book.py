@@ -19,11 +19,12 @@ from openpyxl import Workbook
 from openpyxl.comments import Comment
 from openpyxl.styles import Alignment, Border, Font, PatternFill, Protection, Side
 from openpyxl.workbook.defined_name import DefinedName
+from openpyxl.worksheet.cell_range import MultiCellRange
 from openpyxl.worksheet.datavalidation import DataValidation
 from openpyxl.worksheet.worksheet import Worksheet
 
 from . import __version__
-from .xlref import Block, array_formula, cell, check_name
+from .xlref import Block, array_formula, block, cell, check_name
 
 INPUT_FILL = PatternFill("solid", fgColor="FFF2CC")      # pale yellow: type here
 VALUE_FILL = PatternFill("solid", fgColor="EDEDED")      # grey: values computed by the core
@@ -80,6 +81,9 @@ class Book:
         self.wb.properties.creator = f"cmmwb {__version__}"
         self.wb.properties.title = title
         self._validations: dict[tuple[str, float | None, float | None], DataValidation] = {}
+        # cells of each validation rule, given to the rule once at save time (openpyxl's
+        # DataValidation.add is O(n) per cell: 12,000 cells took 30 s)
+        self._validation_cells: dict[tuple[str, float | None, float | None], list[tuple[int, int]]] = {}
         self._task_info: dict | None = None
 
     # -- sheets ------------------------------------------------------------------------------
@@ -163,7 +167,23 @@ class Book:
             dv.showErrorMessage = True
             ws.add_data_validation(dv)
             self._validations[key] = dv
-        dv.add(c)
+            self._validation_cells[key] = []
+        self._validation_cells[key].append((c.column, c.row))
+
+    def _flush_validations(self) -> None:
+        """Give every validation rule its cells as column runs (``B2:B53 E2:G53 ...``)."""
+        for key, cells in self._validation_cells.items():
+            runs: list[str] = []
+            for column, rows in _by_column(cells):
+                start = prev = rows[0]
+                for r in rows[1:] + [None]:
+                    if r is not None and r == prev + 1:
+                        prev = r
+                        continue
+                    runs.append(block(start, column, prev - start + 1, 1, absolute=False))
+                    if r is not None:
+                        start = prev = r
+            self._validations[key].sqref = MultiCellRange(" ".join(runs))
 
     def input(self, ws: Worksheet, row: int, column: int, name: str | None, value: float, *,
               lo: float | None = None, hi: float | None = None, note: str | None = None,
@@ -178,6 +198,15 @@ class Book:
             self.define(name, cell(row, column, ws.title))
         if note:
             self.note(c, note)
+        return c
+
+    def default(self, ws: Worksheet, row: int, column: int, name: str, formula: str, *,
+                lo: float | None = None, hi: float | None = None, note: str | None = None):
+        """An editable input whose default is a formula (e.g. a per-probe sigma defaulting to the
+        task-wide value): styled, unlocked and validated like :meth:`input`; typing a number
+        overrides it."""
+        c = self.formula(ws, row, column, formula, note=note, fmt="General", name=name)
+        self._style_input(ws, c, lo, hi)
         return c
 
     def formula(self, ws: Worksheet, row: int, column: int, formula: str, *, note: str | None = None,
@@ -262,6 +291,7 @@ class Book:
     def save(self, path: Path) -> Path:
         """Write the workbook atomically (temporary file in the same folder, then rename)."""
         path = Path(path)
+        self._flush_validations()
         info = self._task_info if self._task_info is not None else _TASK_INFO.get()
         if info is not None and info.get("kind") == self.kind:
             from .reader import write_task_sheet
@@ -270,6 +300,14 @@ class Book:
         self.wb.move_sheet(INSTRUCTIONS, offset=-self.wb.sheetnames.index(INSTRUCTIONS))
         self.wb.active = 0
         return save_atomic(self.wb, path)
+
+
+def _by_column(cells: list[tuple[int, int]]):
+    """(column, sorted unique rows) for a list of (column, row) cells."""
+    cols: dict[int, set[int]] = {}
+    for column, row in cells:
+        cols.setdefault(column, set()).add(row)
+    return [(c, sorted(rows)) for c, rows in sorted(cols.items())]
 
 
 class Formula(str):

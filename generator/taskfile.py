@@ -147,9 +147,7 @@ def read_probes(path: Path, doc: dict) -> tuple[Probe, ...]:
     for n, p in enumerate(raw, start=1):
         section = f"[[probes]] #{n}"
         check_keys(path, p, section, {"id", "offset_mm", *PROBE_OVERRIDES})
-        pid = string(path, p, section, "id").strip()
-        if not pid:
-            raise InputError("empty probe id", file=path, where=f"{section} id")
+        pid = check_label(string(path, p, section, "id").strip(), path, f"{section} id")
         if pid in seen:
             raise InputError(f"probe id {pid!r} used twice", file=path, where=f"{section} id")
         seen.add(pid)
@@ -157,6 +155,36 @@ def read_probes(path: Path, doc: dict) -> tuple[Probe, ...]:
         over = {k: number(path, p, section, k, lo=0.0) for k in PROBE_OVERRIDES if k in p}
         probes.append(Probe(pid, offset, **over))
     return tuple(probes)
+
+
+MAX_LABEL = 100
+
+
+def check_label(label: str, path: Path, where: str) -> str:
+    """A point or probe label: not empty, at most 100 characters, no control characters.
+    (Labels that start with =, +, - or @ are fine: they are always written as text.)"""
+    if not label:
+        raise InputError("empty label", file=path, where=where)
+    if len(label) > MAX_LABEL:
+        raise InputError(f"label longer than {MAX_LABEL} characters", file=path, where=where)
+    bad = [ch for ch in label if ord(ch) < 32 or ord(ch) == 127]
+    if bad:
+        raise InputError(f"label {label[:40]!r} holds a control character ({ord(bad[0]):#04x})",
+                         file=path, where=where)
+    return label
+
+
+def _csv_rows(reader, path: Path, start: int):
+    """(file line, fields) of each record; a malformed record (e.g. a field over the csv
+    module's limit, an unclosed quote) is named by its line."""
+    while True:
+        try:
+            row = next(reader)
+        except StopIteration:
+            return
+        except csv.Error as e:
+            raise InputError(f"malformed CSV: {e}", file=path, where=f"line {start + reader.line_num}") from None
+        yield start + reader.line_num, row
 
 
 @dataclass(frozen=True)
@@ -207,15 +235,14 @@ def read_points_csv(path: Path, probes: tuple[Probe, ...]) -> PointTable:
     probe_ids = {p.id for p in probes}
     labels, X, N, pids, where = [], [], [], [], []
     seen: dict[str, int] = {}
-    for offset, row in enumerate(reader, start=start + 2):
+    rows = _csv_rows(reader, path, start)
+    for offset, row in rows:
         if not row or all(not c.strip() for c in row):
             continue
         if len(row) < len(header):
             raise InputError(f"{len(row)} fields, the header has {len(header)}", file=path,
                              where=f"line {offset}")
-        label = row[colmap["id"]].strip()
-        if not label:
-            raise InputError("empty point id", file=path, where=f"line {offset}, column 'id'")
+        label = check_label(row[colmap["id"]].strip(), path, f"line {offset}, column 'id'")
         if label in seen:
             raise InputError(f"point id {label!r} also on line {seen[label]}", file=path,
                              where=f"line {offset}, column 'id'")

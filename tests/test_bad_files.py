@@ -131,5 +131,5 @@ def test_a_huge_csv_field_is_a_clear_error(tmp_path, capsys):
     (tmp_path / "small.toml").write_text(POINTCLOUD_TASK)
     (tmp_path / "small.csv").write_text(POINTCLOUD_CSV + '"' + "x" * 200_000 + '",1,2,3,1,0,0,P1\n')
     code, err = run_cli(capsys, "build", str(tmp_path / "small.toml"), "--out", str(tmp_path / "out"))
-    assert_clear_failure(code, err, "small.toml", ["malformed points table", "field larger than field limit"])
+    assert_clear_failure(code, err, "small.csv", ["line 6", "malformed CSV", "field larger than field limit"])
     assert not (tmp_path / "out").exists()

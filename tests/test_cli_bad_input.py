@@ -112,3 +112,12 @@ def test_new_writes_a_task_that_builds(tmp_path):
     assert (tmp_path / "out" / "my_pointcloud.xlsx").exists()
     r = run("new", "pointcloud", "--out", str(tmp_path / "t.toml"))
     assert r.returncode == 2 and "exists already" in r.stderr
+
+
+def test_control_characters_and_huge_fields_are_named(tmp_path, task):
+    set_field(task.with_suffix(".csv"), 2, 0, "Q\x072")
+    r = run("build", str(task), "--out", str(tmp_path / "out"))
+    assert r.returncode == 2 and "line 3, column 'id'" in r.stderr and "control character" in r.stderr
+    set_field(task.with_suffix(".csv"), 2, 0, "x" * 200_000)
+    r = run("build", str(task), "--out", str(tmp_path / "out"))
+    assert r.returncode == 2 and "line 3" in r.stderr and "malformed CSV" in r.stderr

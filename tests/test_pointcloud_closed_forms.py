@@ -162,3 +162,7 @@ def test_negative_or_missing_length_scale_is_refused():
         pc.Parameters(sigma_R_um=-1)
     with pytest.raises(ModelError, match="lambda_ET_mm"):
         pc.Parameters(sigma_ET_um=0.2)
+    with pytest.raises(ModelError, match="lambda_ET_mm must be at least"):
+        pc.Parameters(sigma_ET_um=0.2, lambda_ET_mm=1e-217)  # its square would underflow to 0
+    with pytest.raises(ModelError, match="sigma_R_um = 1e\\+200 is beyond any CMM"):
+        pc.Parameters(sigma_R_um=1e200)

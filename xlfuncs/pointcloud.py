@@ -44,6 +44,17 @@ FACTORS: tuple[str, ...] = ("R", "PQ", "S", "ET", "ER", "P")
 MILLI = 1e-3
 
 
+#: largest value any hyper-parameter may take (µm, ppm, µrad, mm); squares stay far from overflow
+MAX_PARAMETER = 1e9
+#: smallest length scale of a switched-on GP; exp(-d^2/lambda^2) stays well defined
+MIN_LENGTH_SCALE = 1e-6
+
+
+def _check_length_scale(lam_name: str, lam: float, sigma_name: str, sigma: float) -> None:
+    if sigma > 0 and lam < MIN_LENGTH_SCALE:
+        raise ModelError(f"{lam_name} must be at least {MIN_LENGTH_SCALE:g} when {sigma_name} > 0, got {lam!r}")
+
+
 @dataclass(frozen=True)
 class Parameters:
     """Statistical hyper-parameters of Forbes 2025, Tables 1 and 3 (task-file names and units).
@@ -78,10 +89,11 @@ class Parameters:
                 raise ModelError(f"{name} must be a finite number, got {value!r}")
             if value < 0:
                 raise ModelError(f"{name} must not be negative, got {value!r}")
+            if value > MAX_PARAMETER:
+                raise ModelError(f"{name} = {value!r} is beyond any CMM (at most {MAX_PARAMETER:g})")
         for sigma, lam in (("sigma_ET_um", "lambda_ET_mm"), ("sigma_ER_urad", "lambda_ER_mm"),
                            ("sigma_P_um", "lambda_P")):
-            if getattr(self, sigma) > 0 and getattr(self, lam) <= 0:
-                raise ModelError(f"{lam} must be positive when {sigma} > 0")
+            _check_length_scale(lam, getattr(self, lam), sigma, getattr(self, sigma))
 
     def scaled(self, factor: float) -> "Parameters":
         """All standard deviations divided by ``factor`` (section 6.8: divide by C_max)."""
@@ -107,10 +119,9 @@ class Probe:
         vals = {n: getattr(params, n) if getattr(self, n) is None else getattr(self, n)
                 for n in ("sigma_PQ_um", "sigma_P0_um", "sigma_P_um", "lambda_P")}
         for n, v in vals.items():
-            if not math.isfinite(v) or v < 0:
-                raise ModelError(f"probe {self.id}: {n} must be a finite non-negative number")
-        if vals["sigma_P_um"] > 0 and vals["lambda_P"] <= 0:
-            raise ModelError(f"probe {self.id}: lambda_P must be positive when sigma_P_um > 0")
+            if not math.isfinite(v) or v < 0 or v > MAX_PARAMETER:
+                raise ModelError(f"probe {self.id}: {n} must be a finite number from 0 to {MAX_PARAMETER:g}")
+        _check_length_scale(f"probe {self.id}: lambda_P", vals["lambda_P"], "sigma_P_um", vals["sigma_P_um"])
         return replace(self, **vals)
 
 

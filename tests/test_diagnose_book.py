@@ -1,0 +1,117 @@
+"""Three engines, one answer: the diagnosis workbook's native refit (GLS normal equations with
+MMULT/MINVERSE over the chosen sensitivity columns, themselves formulas of the record cells)
+recomputed by `formulas` and by LibreOffice agrees with diagnosis.json to relative 1e-9."""
+
+import json
+
+import pytest
+
+from conftest import ENGINES, close, recalc
+from generator import diagnose_book
+from generator.diagnose_cli import run_diagnose
+from generator.recalc import results_rows
+from xlfuncs import diagnose as dg
+from xlfuncs import pointcloud as pc
+from xlfuncs import simulate as sm
+from xlfuncs.recordings import write_recordings
+
+MPE1 = pc.Parameters(sigma_R_um=0.20, sigma_S_ppm=0.7, sigma_Sa_ppm=0.7, sigma_Q_ppm=0.7, sigma_PQ_um=0.20,
+                     sigma_ET_um=0.2, lambda_ET_mm=200.0, sigma_ER_urad=4.0, lambda_ER_mm=400.0,
+                     sigma_P0_um=0.10, sigma_P_um=0.10, lambda_P=0.5)
+ONE = (pc.Probe("P1", (0.0, 0.0, -50.0)),)
+PAIR = (pc.Probe("P1", (0.0, 20.0, -30.0)), pc.Probe("P2", (0.0, -20.0, -30.0)))
+THREE = (pc.Probe("P1", (0.0, 0.0, -50.0)), pc.Probe("P2", (150.0, 0.0, -50.0)), pc.Probe("P3", (0.0, 150.0, -50.0)))
+
+CASES = {
+    # name: (layout, kwargs, probes, planted, temperature, effects that must be chosen)
+    "lengths": ("iso10360", {"repeats": 1}, ONE, {"squareness_xy": 40.0, "thermal_expansion": 3.0},
+                ("bump",), {"squareness_xy", "thermal_expansion"}),
+    "lengths, three probes, whitened": ("iso10360", {"repeats": 3}, THREE, {"ECZ": 300.0, "scale_drift": 2.0},
+                                        None, {"ECZ", "scale_drift"}),
+    "points": ("ballplate", {"grid": 3}, PAIR, {"probe_qualification": {"P2": [2.5, -2.0, 1.5]},
+                                                "squareness_xy": 40.0}, None,
+               {"probe_qualification", "squareness_xy"}),
+    "points 2-D": ("holeplate", {"grid": 2, "passes": 2}, PAIR[:1], {"probe_radius": 2.0, "offset_drift": [3.0, -2.0, 0.0]},
+                   (19.0, 23.0), {"probe_radius", "offset_drift"}),
+}
+
+
+def _build(tmp_path, case, monkeypatch):
+    layout, kw, probes, planted, T, _ = CASES[case]
+    L = sm.layout(layout, probes, **kw)
+    if T == ("bump",):
+        import numpy as np
+
+        T = 20.0 + 3.0 * np.sin(np.pi * L.time_s / L.time_s.max())
+    rec = sm.simulate(L, MPE1, planted, seed=17, temperature_C=T)
+    path = tmp_path / "rec.csv"
+    write_recordings(rec, path)
+    if "whitened" in case:
+        monkeypatch.setattr(diagnose_book, "NATIVE_MAX_OBS", 20)
+    result, files = run_diagnose(path, dg.Model(MPE1, probes, True), tmp_path / "out", plots=False)
+    return result, tmp_path / "out" / "diagnosis.xlsx"
+
+
+@pytest.fixture(scope="module")
+def books(tmp_path_factory):
+    out = {}
+    mp = pytest.MonkeyPatch()
+    try:
+        for case in CASES:
+            out[case] = _build(tmp_path_factory.mktemp(case.replace(" ", "_").replace(",", "")), case, mp)
+            mp.undo()
+    finally:
+        mp.undo()
+    return out
+
+
+def expected_rows(result):
+    exp = {k: result[k] for k in ("chi2_before", "dof_before", "p_before", "chi2_after", "dof_after",
+                                  "rms_before_um", "rms_after_um")}
+    unc = {}
+    for e in result["effects"]:
+        if isinstance(e["estimate"], list):
+            labels = ([f"{pp['probe']}.d{a}" for pp in e["per_probe"] for a in "xyz"]
+                      if e["name"] == "probe_qualification" else [f"v{a}" for a in "xyz"])
+            for lab, v, u in zip(labels, e["estimate"], e["u"]):
+                if v is not None:
+                    exp[f"{e['name']} {lab}"], unc[f"{e['name']} {lab}"] = v, u
+        else:
+            exp[e["name"]], unc[e["name"]] = e["estimate"], e["u"]
+    return exp, unc
+
+
+@pytest.mark.parametrize("engine", ENGINES)
+@pytest.mark.parametrize("case", list(CASES))
+def test_native_refit_agrees_with_the_json(books, case, engine):
+    result, book = books[case]
+    assert {e["name"] for e in result["effects"]} >= CASES[case][5], result["summary"]
+    values = recalc(book, engine)
+    rows = {r["quantity"]: r for r in results_rows(values)}
+    exp, unc = expected_rows(result)
+    assert set(rows) == set(exp)
+    for q, v in exp.items():
+        assert close(rows[q]["value"], v), f"{engine} {case}: {q} {rows[q]['value']!r} != {v!r}"
+        if q in unc:
+            assert close(rows[q]["u"], unc[q]), f"{engine} {case}: u({q})"
+    errors = [(s, c, v) for s, cells in values.items() for c, v in cells.items()
+              if isinstance(v, str) and v.startswith("#")]
+    assert not errors, errors[:5]
+
+
+@pytest.mark.parametrize("engine", ENGINES)
+def test_standardized_residuals_of_the_located_records_agree(books, engine):
+    result, book = books["lengths"]
+    values = recalc(book, engine)["Records"]
+    header = {v: k[:-1] for k, v in values.items() if k.endswith("1") and k[:-1].isalpha()}
+    col_id, col_z = header["id"], header["z"]
+    by_id = {values[f"{col_id}{r}"]: values[f"{col_z}{r}"] for r in range(2, result["records"] + 2)}
+    for item in result["located"]:
+        assert close(by_id[item["id"]], item["z"]), item
+
+
+def test_the_json_written_is_the_contract(books):
+    result, book = books["lengths"]
+    on_disk = json.loads((book.parent / "diagnosis.json").read_text())
+    assert on_disk == json.loads(json.dumps(result))
+    assert on_disk["kind"] == "length" and on_disk["records"] == 35

@@ -1,0 +1,331 @@
+"""Candidate effects of the mismatch locator (``shared/spec/recordings.md`` section 4).
+
+Every candidate is an explicit sensitivity of the records to a few parameters, derived from the
+physics of the effect: a displacement field delta(x) of the indicated point per unit parameter,
+in µm, evaluated at the machine (ram) position u = x - p (Forbes 2025 sections 4.3 and 5.3,
+multiple probes) or at the artefact point.
+
+* length record a between ends 1 and 2:  column = n_a . (delta(end 2) - delta(end 1)),
+  n_a = (x2 - x1)/||x2 - x1|| (the sensitivity of eq. 29 of Forbes 2025 applied to delta);
+* point record i, coordinate c: column = delta_c(point i).
+
+Sign convention: ``measured - true = sum of effects + noise``.  Units of the parameters are those
+of spec section 4, so the estimates come out in them directly:
+
+=====================  =========================================================  =========
+name                   delta (µm) per unit parameter                              unit
+=====================  =========================================================  =========
+scale                  1e-3 u                          (x' = (1+s) x)             µm/m
+scale_x/_y/_z          1e-3 u_x e_x, ...                                          µm/m
+squareness_xy/xz/yz    1e-3 u_y e_x, 1e-3 u_z e_x, 1e-3 u_z e_y  (Forbes eq. 10)  µrad
+thermal_expansion      lengths: 1e-3 (T - 20) L;  points: 1e-3 (T - 20)(y - c)    ppm/K
+probe_radius           n (outward normal)          (Forbes eq. 26, e_P0)          µm
+probe_qualification    e_c for points probed with probe k (k >= 2)                µm
+E<R><A>                1e-6 t_A (e_R x p)    t_A = u_A (travel from machine zero) µrad/m
+scale_drift            1e-3 (t_s/3600) u                                          µm/m/h
+offset_drift           (t_s/3600) e_c             (point records only)            µm/h
+=====================  =========================================================  =========
+
+For point records the scale-type effects, thermal expansion and scale drift act about the
+centroid c of the nominal points (spec section 6); the rigid alignment absorbs the choice
+for the effects that do not vary from record to record.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+MILLI = 1e-3
+MICRO = 1e-6
+T_REF_C = 20.0
+AXES = "xyz"
+
+
+@dataclass(frozen=True)
+class Effect:
+    name: str
+    unit: str                  # spec section 5 spelling
+    plain: str                 # "a squareness error between x and y"
+    hint: str                  # what separates it from look-alikes
+    vector: bool = False
+
+
+def _angular(rot: str, carriage: str) -> Effect:
+    about = {"A": "x", "B": "y", "C": "z"}[rot]
+    return Effect(f"E{rot}{carriage}", "urad/m",
+                  f"an angular error motion E{rot}{carriage} (the {carriage} carriage rotating about "
+                  f"{about} in proportion to its travel)",
+                  "a second probe offset, in another direction, at the same positions (Forbes 2025 "
+                  "section 3.3: rotation errors act through the probe offset)")
+
+
+#: the table of spec section 4, in its order (the order decides among exact aliases)
+EFFECTS: tuple[Effect, ...] = (
+    Effect("scale", "um/m", "a scale error", "lengths in several directions (ISO 10360-2: seven positions)"),
+    Effect("scale_x", "um/m", "an x-axis scale error", "lengths along other directions than x"),
+    Effect("scale_y", "um/m", "a y-axis scale error", "lengths along other directions than y"),
+    Effect("scale_z", "um/m", "a z-axis scale error", "lengths along other directions than z"),
+    Effect("squareness_xy", "urad", "a squareness error between x and y", "diagonal lengths in the xy plane"),
+    Effect("squareness_xz", "urad", "a squareness error between x and z", "diagonal lengths in the xz plane"),
+    Effect("squareness_yz", "urad", "a squareness error between y and z", "diagonal lengths in the yz plane"),
+    Effect("thermal_expansion", "ppm/K", "an expansion-coefficient error of the artefact",
+           "records at different artefact temperatures (temperature_C varying)"),
+    Effect("probe_radius", "um", "a probe radius error",
+           "both unidirectional and bidirectional probing (normals of both signs)"),
+    Effect("probe_qualification", "um", "a probe qualification (offset) error",
+           "lengths whose ends are probed with different probes, and with the probes swapped", vector=True),
+    *(_angular(r, c) for c in "XYZ" for r in "ABC"),
+    Effect("scale_drift", "um/m/h", "a scale drifting in time",
+           "records spread in time in an order not tied to length or position (time_s)"),
+    Effect("offset_drift", "um/h", "a drift of every point in time",
+           "point records spread in time, repeated positions at different times (time_s)", vector=True),
+)
+BY_NAME = {e.name: e for e in EFFECTS}
+NAMES = tuple(e.name for e in EFFECTS)
+ANGULAR = tuple(e.name for e in EFFECTS if e.unit == "urad/m")
+ROT_AXIS = {"A": 0, "B": 1, "C": 2}
+CARRIAGE_AXIS = {"X": 0, "Y": 1, "Z": 2}
+
+#: a column whose largest entry is below REL_ZERO times its natural full-scale value is "no
+#: sensitivity" (noise-level coordinates of planar or axis-parallel data must not make an effect
+#: look identifiable)
+REL_ZERO = 1e-4
+
+
+class NotApplicable(Exception):
+    """The records lack what the effect needs (``str`` is the reason for ``not_identifiable``)."""
+
+
+@dataclass
+class Design:
+    """What the sensitivities are built from (arrays in mm, °C, s; probe index into probe_ids).
+
+    Length records (``kind == "length"``): per record ``na`` (unit direction), ``U1``/``U2`` (ram
+    positions x - p), ``N1``/``N2`` (normals or None), ``k1``/``k2`` (probe index), ``P1``/``P2``
+    (offsets), ``ref`` (reference length).  Point records (``kind == "point"``): per record ``Y``
+    (nominal point in machine coordinates), ``U`` (= Y - p), ``N``, ``k``, ``P``, centroid ``c``
+    and ``dims`` (2 or 3); the residual vector is coordinate-major (x1, y1, [z1,] x2, ...).
+    """
+
+    kind: str
+    probe_ids: tuple[str, ...]
+    offsets_given: bool
+    T: np.ndarray | None = None
+    t: np.ndarray | None = None
+    # length
+    na: np.ndarray | None = None
+    U1: np.ndarray | None = None
+    U2: np.ndarray | None = None
+    N1: np.ndarray | None = None
+    N2: np.ndarray | None = None
+    k1: np.ndarray | None = None
+    k2: np.ndarray | None = None
+    P1: np.ndarray | None = None
+    P2: np.ndarray | None = None
+    ref: np.ndarray | None = None
+    # point
+    Y: np.ndarray | None = None
+    U: np.ndarray | None = None
+    N: np.ndarray | None = None
+    k: np.ndarray | None = None
+    P: np.ndarray | None = None
+    c: np.ndarray | None = None
+    dims: int = 3
+    extent_mm: float = field(default=0.0)
+
+    @property
+    def n_records(self) -> int:
+        return len(self.na) if self.kind == "length" else len(self.Y)
+
+    @property
+    def n_obs(self) -> int:
+        return self.n_records if self.kind == "length" else self.dims * len(self.Y)
+
+    def point_rows(self, delta: np.ndarray) -> np.ndarray:
+        """(m, 3) or (m, 3, q) point displacements -> (dims*m,) or (dims*m, q) rows."""
+        d = delta[:, : self.dims]
+        return d.reshape(-1) if d.ndim == 2 else d.reshape(-1, d.shape[-1])
+
+
+@dataclass
+class Columns:
+    """Sensitivity columns of one candidate: ``X`` (n_obs x q), labels of the q parameters."""
+
+    name: str
+    X: np.ndarray
+    labels: list[str]
+    full_scale: float          # natural size of an entry (for the no-sensitivity test)
+
+
+def _varying(v: np.ndarray | None) -> bool:
+    return v is not None and float(np.ptp(v)) > 1e-9
+
+
+def rotation_vector(rot: str, P: np.ndarray) -> np.ndarray:
+    """e_R x p for every row of P (mm): the tip displacement per radian of rotation about axis R
+    (Forbes 2025 eq. 24: G alpha = alpha x p)."""
+    e = np.zeros(3)
+    e[ROT_AXIS[rot]] = 1.0
+    return np.cross(e, P)
+
+
+def columns(design: Design, name: str) -> Columns:
+    """The sensitivity columns of candidate ``name`` for these records (raises NotApplicable)."""
+    if name not in BY_NAME:
+        raise KeyError(name)
+    D = design
+    if D.kind == "length":
+        return _length_columns(D, name)
+    return _point_columns(D, name)
+
+
+def _needs(D: Design, name: str) -> None:
+    if name == "thermal_expansion":
+        if D.T is None:
+            raise NotApplicable("needs temperature_C (absent from the records)")
+        if not _varying(D.T):
+            raise NotApplicable("temperature_C is the same for every record: an expansion error then "
+                                "looks exactly like a scale error; records at different temperatures "
+                                "separate them")
+    if name == "probe_radius":
+        if (D.N1 if D.kind == "length" else D.N) is None:
+            raise NotApplicable("needs normals (" + ("n1x..n2z" if D.kind == "length" else "nx,ny,nz")
+                                + ") to know the direction in which a radius error moves each point")
+    if name == "probe_qualification" and len(D.probe_ids) < 2:
+        raise NotApplicable("needs two or more probes (one probe: its offset error cancels or is "
+                            "absorbed)")
+    if name in ANGULAR:
+        P = np.vstack([D.P1, D.P2]) if D.kind == "length" else D.P
+        if not D.offsets_given or not np.any(P):
+            raise NotApplicable("needs probe offsets (p1x..p2z, px..pz or [[probes]] offset_mm): an "
+                                "angular error motion moves the stylus tip through the probe offset "
+                                "only (Forbes 2025 eq. 24)")
+    if name in ("scale_drift", "offset_drift"):
+        if name == "offset_drift" and D.kind == "length":
+            raise NotApplicable("needs point records with time_s: a drift of every point cancels in a "
+                                "length between two points probed at one time")
+        if D.t is None:
+            raise NotApplicable("needs time_s (absent from the records)")
+        if not _varying(D.t):
+            raise NotApplicable("time_s is the same for every record: a drift is then a constant "
+                                "error; records spread in time separate them")
+
+
+def _length_columns(D: Design, name: str) -> Columns:
+    _needs(D, name)
+    na = D.na
+    du = D.U2 - D.U1
+    L = D.extent_mm
+    if name == "scale":
+        return Columns(name, (MILLI * np.einsum("ij,ij->i", na, du))[:, None], [name], MILLI * L)
+    if name.startswith("scale_") and name[-1] in AXES:
+        a = AXES.index(name[-1])
+        return Columns(name, (MILLI * na[:, a] * du[:, a])[:, None], [name], MILLI * L)
+    if name.startswith("squareness_"):
+        a, b = AXES.index(name[-2]), AXES.index(name[-1])   # x' = x + b_xy y: moves a by u_b
+        return Columns(name, (MILLI * na[:, a] * du[:, b])[:, None], [name], MILLI * L)
+    if name == "thermal_expansion":
+        dT = D.T - T_REF_C
+        return Columns(name, (MILLI * dT * D.ref)[:, None], [name],
+                       MILLI * float(np.max(np.abs(dT))) * float(np.max(D.ref)))
+    if name == "probe_radius":
+        col = np.einsum("ij,ij->i", na, D.N2) - np.einsum("ij,ij->i", na, D.N1)
+        return Columns(name, col[:, None], [name], 1.0)
+    if name == "probe_qualification":
+        cols, labels = [], []
+        for k in range(1, len(D.probe_ids)):
+            w = (D.k2 == k).astype(float) - (D.k1 == k).astype(float)
+            for a in range(3):
+                cols.append(na[:, a] * w)
+                labels.append(f"{D.probe_ids[k]}.d{AXES[a]}")
+        return Columns(name, np.column_stack(cols), labels, 1.0)
+    if name in ANGULAR:
+        rot, ax = name[1], CARRIAGE_AXIS[name[2]]
+        v1, v2 = rotation_vector(rot, D.P1), rotation_vector(rot, D.P2)
+        col = MICRO * (D.U2[:, ax] * np.einsum("ij,ij->i", na, v2) - D.U1[:, ax] * np.einsum("ij,ij->i", na, v1))
+        umax = float(np.max(np.abs(np.vstack([D.U1, D.U2]))))
+        pmax = float(np.max(np.linalg.norm(np.vstack([D.P1, D.P2]), axis=1)))
+        return Columns(name, col[:, None], [name], MICRO * umax * pmax)
+    if name == "scale_drift":
+        h = D.t / 3600.0
+        return Columns(name, (MILLI * h * np.einsum("ij,ij->i", na, du))[:, None], [name],
+                       MILLI * float(np.max(np.abs(h))) * L)
+    raise AssertionError(name)
+
+
+def _point_columns(D: Design, name: str) -> Columns:
+    _needs(D, name)
+    m = len(D.Y)
+    R = D.U - D.c            # ram positions about the centroid of the nominal points
+    L = D.extent_mm
+
+    def field3(delta: np.ndarray) -> np.ndarray:
+        return D.point_rows(delta)
+
+    def unit_axis(a: int, weight: np.ndarray) -> np.ndarray:
+        d = np.zeros((m, 3))
+        d[:, a] = weight
+        return field3(d)
+
+    if name == "scale":
+        return Columns(name, field3(MILLI * R)[:, None], [name], MILLI * L)
+    if name.startswith("scale_") and name[-1] in AXES:
+        a = AXES.index(name[-1])
+        return Columns(name, unit_axis(a, MILLI * R[:, a])[:, None], [name], MILLI * L)
+    if name.startswith("squareness_"):
+        a, b = AXES.index(name[-2]), AXES.index(name[-1])
+        return Columns(name, unit_axis(a, MILLI * R[:, b])[:, None], [name], MILLI * L)
+    if name == "thermal_expansion":
+        dT = D.T - T_REF_C
+        return Columns(name, field3(MILLI * dT[:, None] * (D.Y - D.c))[:, None], [name],
+                       MILLI * float(np.max(np.abs(dT))) * L)
+    if name == "probe_radius":
+        return Columns(name, field3(D.N)[:, None], [name], 1.0)
+    if name == "probe_qualification":
+        cols, labels = [], []
+        for k in range(1, len(D.probe_ids)):
+            for a in range(3):
+                cols.append(unit_axis(a, (D.k == k).astype(float)))
+                labels.append(f"{D.probe_ids[k]}.d{AXES[a]}")
+        return Columns(name, np.column_stack(cols), labels, 1.0)
+    if name in ANGULAR:
+        rot, ax = name[1], CARRIAGE_AXIS[name[2]]
+        v = rotation_vector(rot, D.P)
+        col = field3(MICRO * D.U[:, ax][:, None] * v)
+        umax = float(np.max(np.abs(D.U)))
+        pmax = float(np.max(np.linalg.norm(D.P, axis=1)))
+        return Columns(name, col[:, None], [name], MICRO * umax * pmax)
+    if name == "scale_drift":
+        h = D.t / 3600.0
+        return Columns(name, field3(MILLI * h[:, None] * R)[:, None], [name],
+                       MILLI * float(np.max(np.abs(h))) * L)
+    if name == "offset_drift":
+        h = D.t / 3600.0
+        cols = [unit_axis(a, h) for a in range(3)]
+        return Columns(name, np.column_stack(cols), [f"v{AXES[a]}" for a in range(3)],
+                       float(np.max(np.abs(h))))
+    raise AssertionError(name)
+
+
+def alignment_columns(D: Design) -> tuple[np.ndarray, list[str]]:
+    """Rigid-body alignment of point records (baseline nuisance, spec section 1b): translations
+    (µm) and small rotations (µrad) about the centroid, delta = t + 1e-3 omega x (y - c).
+    2-D data: t_x, t_y and the rotation about z."""
+    m = len(D.Y)
+    r = D.Y - D.c
+    cols, labels = [], []
+    axes = range(D.dims)
+    for a in axes:
+        d = np.zeros((m, 3))
+        d[:, a] = 1.0
+        cols.append(D.point_rows(d))
+        labels.append(f"t{AXES[a]}_um")
+    rots = (2,) if D.dims == 2 else (0, 1, 2)
+    for a in rots:
+        e = np.zeros(3)
+        e[a] = 1.0
+        cols.append(D.point_rows(MILLI * np.cross(e, r)))
+        labels.append(f"w{AXES[a]}_urad")
+    return np.column_stack(cols), labels

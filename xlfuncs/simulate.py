@@ -1,0 +1,448 @@
+"""Simulated recordings: realistic layouts measured by a CMM drawn from the Forbes 2025
+point-cloud model, with chosen planted effects (``cmmwb simulate``).
+
+The machine's own errors are drawn factor by factor from the generative model behind eq. (28)
+(not from the record covariance that ``diagnose`` computes, so the two are independent checks of
+each other):
+
+* R   every probing: N(0, sigma_R^2 I)                                           eq. (8)
+* PQ  every probe: one vector N(0, sigma_PQ,k^2 I)                               eq. (9)
+* S   seven scale/squareness parameters b ~ N(0, V_B), delta = G(x - p) b       eqs. (10)-(13)
+* ET  three independent Gaussian processes over the ram positions x - p         eq. (21)
+* ER  three rotation processes alpha, delta = alpha x p                          eqs. (22)-(25)
+* P   per probe: radius error e_P0 + process over the normals, along n          eqs. (26)-(27)
+
+The planted effects follow the definitions of ``shared/spec/recordings.md`` section 4, written
+here independently of :mod:`xlfuncs.effects` (the angular motions with exact rotation matrices,
+lengths recomputed from the disturbed points).
+
+Layouts (machine coordinates in mm, working volume from machine zero):
+
+``iso10360``  ISO 10360-2 length test: 7 positions (x, y, z and the 4 space diagonals) through
+              the centre of the volume, 5 bidirectional gauge-block lengths each, repeated
+              (each repetition one probe of the task, in turn)
+``stepgauge`` step gauge of Forbes 2025 section 7 (26 steps, faces at 20(k-1) and 20(k-1)+10),
+              lengths from the first face to every other face (the first probing is shared),
+              along x, y and the xy diagonal; with two probes left faces use the first, right
+              faces the second (scenario II)
+``ballplate`` 5 x 5 ball plate (pitch 100 mm, ball centres) placed rotated in the xy plane,
+              measured in passes (one probe per pass); point records
+``holeplate`` 4 x 4 hole plate, 4 points on every hole wall with their normals, 2-D records
+``spheres``   four spheres at different heights, 13 points each with outward normals, measured
+              with every probe; point records
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from . import pointcloud as pc
+from .errors import ModelError
+from .recordings import LengthRecords, PointRecords
+
+LAYOUTS = ("iso10360", "stepgauge", "ballplate", "holeplate", "spheres")
+VOLUME_MM = (1000.0, 800.0, 600.0)
+EFFECT_NAMES = (
+    "scale", "scale_x", "scale_y", "scale_z", "squareness_xy", "squareness_xz", "squareness_yz",
+    "thermal_expansion", "probe_radius", "probe_qualification",
+    "EAX", "EBX", "ECX", "EAY", "EBY", "ECY", "EAZ", "EBZ", "ECZ", "scale_drift", "offset_drift")
+
+
+@dataclass
+class Layout:
+    """True geometry of a measurement: the probings (tip positions, normals, probe index) and
+    the records (length: two probings each; point: one probing each)."""
+
+    kind: str
+    name: str
+    probes: tuple[pc.Probe, ...]
+    X: np.ndarray                      # (m, 3) true tip positions, mm
+    N: np.ndarray | None               # (m, 3) outward normals
+    k: np.ndarray                      # (m,) probe index
+    ids: list[str]
+    group: list[str]
+    time_s: np.ndarray                 # per record
+    I: np.ndarray | None = None        # length records: probing index of each end
+    J: np.ndarray | None = None
+    X_nom: np.ndarray | None = None    # point records: nominal coordinates (artefact frame)
+    planar_z: float | None = None      # point records written as 2-D data at this z
+    temperature_C: np.ndarray | None = None
+    extra: dict = field(default_factory=dict)
+
+    @property
+    def n(self) -> int:
+        return len(self.ids)
+
+
+def _centre() -> np.ndarray:
+    return np.array(VOLUME_MM) / 2.0
+
+
+ISO_DIRECTIONS = {
+    "X": (1, 0, 0), "Y": (0, 1, 0), "Z": (0, 0, 1),
+    "D1": (1, 1, 1), "D2": (-1, 1, 1), "D3": (1, -1, 1), "D4": (1, 1, -1),
+}
+
+
+def _times(n: int, hours: float) -> np.ndarray:
+    return np.arange(1, n + 1) * (hours * 3600.0 / n)
+
+
+def iso10360(probes, repeats: int = 3, fractions=(0.1, 0.25, 0.4, 0.55, 0.7), hours: float = 6.0,
+             positions=tuple(ISO_DIRECTIONS)) -> Layout:
+    """ISO 10360-2: 7 positions x 5 lengths x repeats; bidirectional gauge blocks centred at the
+    centre of the volume; repetition r uses probe r mod (number of probes)."""
+    c = _centre()
+    half = np.array(VOLUME_MM) / 2.0 - 25.0
+    X, N, K, I, J, ids, grp = [], [], [], [], [], [], []
+    for r in range(repeats):
+        kprobe = r % len(probes)
+        for pos in positions:
+            d = np.array(ISO_DIRECTIONS[pos], dtype=float)
+            d /= np.linalg.norm(d)
+            tmax = float(np.min(half / np.maximum(np.abs(d), 1e-12)))
+            for q, f in enumerate(fractions):
+                L = round(2 * tmax * f)
+                for sgn in (-1.0, 1.0):
+                    X.append(c + sgn * 0.5 * L * d)
+                    N.append(sgn * d)
+                    K.append(kprobe)
+                I.append(len(X) - 2)
+                J.append(len(X) - 1)
+                ids.append(f"{pos}-L{q + 1}-r{r + 1}")
+                grp.append(pos)
+    n = len(ids)
+    return Layout("length", "iso10360", tuple(probes), np.array(X), np.array(N), np.array(K), ids, grp,
+                  _times(n, hours), I=np.array(I), J=np.array(J))
+
+
+def stepgauge(probes, positions=("x", "y", "xy"), steps: int = 26, repeats: int = 1,
+              hours: float = 3.0) -> Layout:
+    """Forbes 2025 section 7 step gauge: lengths from the first (left) face to every other face."""
+    c = _centre()
+    dirs = {"x": (1, 0, 0), "y": (0, 1, 0), "z": (0, 0, 1), "xy": (1, 1, 0), "x-y": (1, -1, 0), "xz": (1, 0, 1)}
+    X, N, K, I, J, ids, grp = [], [], [], [], [], [], []
+    two = len(probes) >= 2
+    span = 20.0 * (steps - 1) + 10.0
+    for r in range(repeats):
+        for pos in positions:
+            d = np.array(dirs[pos], dtype=float)
+            d /= np.linalg.norm(d)
+            o = c - 0.5 * span * d + (0, 0, -50.0 * (positions.index(pos)))
+            first = None
+            for kstep in range(steps):
+                for side, off, sgn in (("L", 0.0, -1.0), ("R", 10.0, 1.0)):
+                    X.append(o + (20.0 * kstep + off) * d)
+                    N.append(sgn * d)
+                    K.append(1 if (two and side == "R") else 0)
+                    q = len(X) - 1
+                    if first is None:
+                        first = q
+                        continue
+                    I.append(first)
+                    J.append(q)
+                    ids.append(f"{pos}-L1-{side}{kstep + 1}-r{r + 1}")
+                    grp.append(f"{pos} L{side}")
+    n = len(ids)
+    return Layout("length", "stepgauge", tuple(probes), np.array(X), np.array(N), np.array(K), ids, grp,
+                  _times(n, hours), I=np.array(I), J=np.array(J))
+
+
+def _placed(Xn: np.ndarray, angle_deg: float, centre: np.ndarray) -> np.ndarray:
+    th = math.radians(angle_deg)
+    R = np.array([[math.cos(th), -math.sin(th), 0.0], [math.sin(th), math.cos(th), 0.0], [0, 0, 1.0]])
+    Xc = Xn - Xn.mean(axis=0)
+    return Xc @ R.T + centre
+
+
+def ballplate(probes, grid: int = 5, pitch: float = 100.0, passes: int = 2, angle_deg: float = 30.0,
+              hours: float = 2.0, z_mm: float = 150.0) -> Layout:
+    """Ball plate (ball centres, no normals) in the xy plane; pass p uses probe p mod K, passes
+    alternate the scanning direction (serpentine)."""
+    grid_pts = [(i, j) for j in range(grid) for i in (range(grid) if j % 2 == 0 else reversed(range(grid)))]
+    Xn, ids, grp, K = [], [], [], []
+    for p in range(passes):
+        seq = grid_pts if p % 2 == 0 else grid_pts[::-1]
+        for (i, j) in seq:
+            Xn.append((i * pitch, j * pitch, 0.0))
+            ids.append(f"B{i + 1}{j + 1}-p{p + 1}")
+            grp.append(f"pass {p + 1}")
+            K.append(p % len(probes))
+    Xn = np.array(Xn)
+    centre = _centre().copy()
+    centre[2] = z_mm
+    X = _placed(Xn, angle_deg, centre)
+    n = len(ids)
+    return Layout("point", "ballplate", tuple(probes), X, None, np.array(K), ids, grp, _times(n, hours),
+                  X_nom=Xn)
+
+
+def holeplate(probes, grid: int = 4, pitch: float = 120.0, radius: float = 10.0, passes: int = 1,
+              angle_deg: float = -20.0, hours: float = 2.0, z_mm: float = 100.0) -> Layout:
+    """Hole plate: 4 points on every hole wall (outward surface normal points to the hole axis),
+    written as 2-D point records."""
+    Xn, N, ids, grp, K = [], [], [], [], []
+    for p in range(passes):
+        for j in range(grid):
+            for i in range(grid):
+                for q, phi in enumerate((0.0, 90.0, 180.0, 270.0)):
+                    e = np.array([math.cos(math.radians(phi)), math.sin(math.radians(phi)), 0.0])
+                    Xn.append(np.array([i * pitch, j * pitch, 0.0]) + radius * e)
+                    N.append(-e)
+                    ids.append(f"H{i + 1}{j + 1}-{q + 1}-p{p + 1}")
+                    grp.append(f"hole {i + 1}{j + 1}")
+                    K.append(p % len(probes))
+    Xn = np.array(Xn)
+    th = math.radians(angle_deg)
+    R = np.array([[math.cos(th), -math.sin(th), 0.0], [math.sin(th), math.cos(th), 0.0], [0, 0, 1.0]])
+    centre = _centre().copy()
+    centre[2] = z_mm
+    X = _placed(Xn, angle_deg, centre)
+    N = np.array(N) @ R.T
+    n = len(ids)
+    return Layout("point", "holeplate", tuple(probes), X, N, np.array(K), ids, grp, _times(n, hours),
+                  X_nom=Xn, planar_z=z_mm)
+
+
+def spheres(probes, radius: float = 12.5, hours: float = 2.0) -> Layout:
+    """Four spheres at different places and heights, 13 points each (pole and two rings of six),
+    measured with every probe."""
+    centres = np.array([[250.0, 200.0, 100.0], [750.0, 200.0, 300.0], [750.0, 600.0, 150.0],
+                        [250.0, 600.0, 450.0]])
+    dirs = [np.array([0.0, 0.0, 1.0])]
+    for el in (45.0, 0.0):
+        for az in range(0, 360, 60):
+            a, e = math.radians(az + (30 if el == 0 else 0)), math.radians(el)
+            dirs.append(np.array([math.cos(e) * math.cos(a), math.cos(e) * math.sin(a), math.sin(e)]))
+    X, N, ids, grp, K = [], [], [], [], []
+    for kp in range(len(probes)):
+        for s, c in enumerate(centres):
+            for q, d in enumerate(dirs):
+                X.append(c + radius * d)
+                N.append(d)
+                ids.append(f"S{s + 1}-{q + 1}-{probes[kp].id}")
+                grp.append(f"sphere {s + 1}")
+                K.append(kp)
+    X = np.array(X)
+    n = len(ids)
+    # nominal coordinates in an artefact frame: shifted and rotated copy of the true ones
+    th = math.radians(10.0)
+    R = np.array([[math.cos(th), -math.sin(th), 0.0], [math.sin(th), math.cos(th), 0.0], [0, 0, 1.0]])
+    Xn = (X - X.mean(axis=0)) @ R
+    return Layout("point", "spheres", tuple(probes), X, np.array(N), np.array(K), ids, grp,
+                  _times(n, hours), X_nom=Xn)
+
+
+def layout(name: str, probes, **kw) -> Layout:
+    builders = {"iso10360": iso10360, "stepgauge": stepgauge, "ballplate": ballplate,
+                "holeplate": holeplate, "spheres": spheres}
+    if name not in builders:
+        raise ModelError(f"unknown layout {name!r}; choose one of {', '.join(LAYOUTS)}")
+    return builders[name](tuple(probes), **kw)
+
+
+# ---------------------------------------------------------------------------------------------
+# the machine's own errors: a draw from the Forbes 2025 model
+# ---------------------------------------------------------------------------------------------
+
+def _gp(points: np.ndarray, sigma: float, lam: float, rng, size: int = 1) -> np.ndarray:
+    """``size`` independent draws of a Gaussian process with kernel sigma^2 exp(-d^2/lam^2)."""
+    m = len(points)
+    if sigma <= 0 or m == 0:
+        return np.zeros((m, size))
+    D2 = np.sum((points[:, None, :] - points[None, :, :]) ** 2, axis=-1) if m <= 1500 else \
+        np.maximum(np.sum(points**2, 1)[:, None] + np.sum(points**2, 1)[None, :] - 2 * points @ points.T, 0)
+    K = sigma**2 * np.exp(-D2 / lam**2)
+    w, V = np.linalg.eigh(K)
+    return V @ (np.sqrt(np.maximum(w, 0.0))[:, None] * rng.standard_normal((m, size)))
+
+
+def model_errors(X: np.ndarray, N: np.ndarray | None, k: np.ndarray, probes, params: pc.Parameters,
+                 rng) -> np.ndarray:
+    """Displacement (µm, m x 3) of every probing drawn from the generative model of eq. (28)."""
+    m = len(X)
+    P = np.array([p.offset_mm for p in probes], dtype=float)[k]
+    U = X - P
+    pr = [p.resolved(params) for p in probes]
+    delta = params.sigma_R_um * rng.standard_normal((m, 3))
+    ePQ = np.array([p.sigma_PQ_um * rng.standard_normal(3) for p in pr])
+    delta += ePQ[k]
+    b = np.sqrt(pc.V_S_diag_um_per_mm2(params)) * rng.standard_normal(7)   # µm/mm
+    b_aa, b_xx, b_yy, b_zz, b_xy, b_xz, b_yz = b
+    delta[:, 0] += U[:, 0] * (b_aa + b_xx) + U[:, 1] * b_xy + U[:, 2] * b_xz
+    delta[:, 1] += U[:, 1] * (b_aa + b_yy) + U[:, 2] * b_yz
+    delta[:, 2] += U[:, 2] * (b_aa + b_zz)
+    if params.sigma_ET_um > 0:
+        delta += _gp(U, params.sigma_ET_um, params.lambda_ET_mm, rng, 3)
+    if params.sigma_ER_urad > 0 and np.any(P):
+        alpha = _gp(U, params.sigma_ER_urad, params.lambda_ER_mm, rng, 3)     # µrad
+        delta += 1e-3 * np.cross(alpha, P)                                  # µrad * mm = 1e-3 µm
+    if N is not None:
+        for kk, p in enumerate(pr):
+            sel = np.flatnonzero(k == kk)
+            if sel.size == 0:
+                continue
+            e = p.sigma_P0_um * rng.standard_normal()
+            if p.sigma_P_um > 0:
+                e = e + _gp(N[sel], p.sigma_P_um, p.lambda_P, rng, 1)[:, 0]
+            delta[sel] += np.asarray(e)[..., None] * N[sel] if np.ndim(e) else e * N[sel]
+    return delta
+
+
+# ---------------------------------------------------------------------------------------------
+# planted effects (spec section 4), written independently of xlfuncs.effects
+# ---------------------------------------------------------------------------------------------
+
+def _rot(axis: int, angle_rad: float) -> np.ndarray:
+    c, s = math.cos(angle_rad), math.sin(angle_rad)
+    if axis == 0:
+        return np.array([[1, 0, 0], [0, c, -s], [0, s, c]])
+    if axis == 1:
+        return np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]])
+    return np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])
+
+
+def check_effects(planted: dict, probes) -> dict:
+    ids = [p.id for p in probes]
+    out = {}
+    for name, v in planted.items():
+        if name not in EFFECT_NAMES:
+            raise ModelError(f"unknown effect {name!r}; choose one of {', '.join(EFFECT_NAMES)}")
+        if name == "probe_qualification":
+            if not isinstance(v, dict):
+                raise ModelError("probe_qualification needs {probe id: (dx, dy, dz)} in µm")
+            for pid, vec in v.items():
+                if pid not in ids:
+                    raise ModelError(f"probe_qualification: unknown probe {pid!r} (probes: {', '.join(ids)})")
+                if pid == ids[0]:
+                    raise ModelError(f"probe_qualification: {pid} is the reference probe (the first); "
+                                     "plant the error on another probe")
+                if len(vec) != 3:
+                    raise ModelError("probe_qualification: three components (dx, dy, dz) per probe")
+            out[name] = {pid: np.asarray(vec, dtype=float) for pid, vec in v.items()}
+        elif name == "offset_drift":
+            vec = np.asarray(v, dtype=float).reshape(-1)
+            if vec.shape != (3,):
+                raise ModelError("offset_drift needs three components (vx, vy, vz) in µm/h")
+            out[name] = vec
+        else:
+            val = float(v)
+            if not math.isfinite(val):
+                raise ModelError(f"{name}: not a finite number")
+            out[name] = val
+    return out
+
+
+def planted_probing(L: Layout, planted: dict, t_probe: np.ndarray, T_probe: np.ndarray) -> np.ndarray:
+    """Displacement (µm) of every probing by the planted probing-level effects."""
+    X = L.X
+    m = len(X)
+    P = np.array([p.offset_mm for p in L.probes], dtype=float)[L.k]
+    U = X - P
+    point = L.kind == "point"
+    c = X.mean(axis=0) if point else np.zeros(3)
+    Uc = U - c if point else U
+    delta = np.zeros((m, 3))
+    # scale and squareness: x' = B x (Forbes 2025 eq. 10) on the ram positions
+    B = np.zeros((3, 3))
+    B += planted.get("scale", 0.0) * np.eye(3)
+    for a, ax in enumerate("xyz"):
+        B[a, a] += planted.get(f"scale_{ax}", 0.0)
+    B[0, 1] += planted.get("squareness_xy", 0.0)
+    B[0, 2] += planted.get("squareness_xz", 0.0)
+    B[1, 2] += planted.get("squareness_yz", 0.0)
+    delta += 1e-3 * Uc @ B.T                      # (µm/m or µrad) * mm = 1e-3 µm
+    if "probe_radius" in planted:
+        if L.N is None:
+            raise ModelError("probe_radius needs a layout with normals")
+        delta += planted["probe_radius"] * L.N
+    for pid, vec in planted.get("probe_qualification", {}).items():
+        kk = [p.id for p in L.probes].index(pid)
+        delta[L.k == kk] += vec
+    for name in EFFECT_NAMES:
+        if name.startswith("E") and name in planted:
+            rot, car = "ABC".index(name[1]), "XYZ".index(name[2])
+            kappa = planted[name] * 1e-6 * 1e-3        # µrad/m -> rad/mm
+            for i in range(m):
+                Rm = _rot(rot, kappa * U[i, car])
+                delta[i] += (Rm @ P[i] - P[i]) * 1000.0
+    if point:
+        if "thermal_expansion" in planted:
+            delta += 1e-3 * planted["thermal_expansion"] * (T_probe - 20.0)[:, None] * (X - c)
+        if "scale_drift" in planted:
+            delta += 1e-3 * planted["scale_drift"] * (t_probe / 3600.0)[:, None] * Uc
+        if "offset_drift" in planted:
+            delta += (t_probe / 3600.0)[:, None] * planted["offset_drift"][None, :]
+    elif "offset_drift" in planted:
+        raise ModelError("offset_drift is a point-record effect (it cancels in lengths)")
+    return delta
+
+
+def simulate(L: Layout, params: pc.Parameters, planted: dict | None = None, seed: int | None = 0,
+             temperature_C=None, rng=None):
+    """Recordings of layout ``L`` measured by a CMM drawn from the model ``params``, with the
+    planted effects ``planted`` ({name: value in the unit of spec section 4}).
+
+    ``temperature_C``: None (no temperature column), a number (constant), a pair (linear ramp
+    over the session) or an array (one value per record)."""
+    rng = np.random.default_rng(seed) if rng is None else rng
+    planted = check_effects(planted or {}, L.probes)
+    n = L.n
+    t_rec = L.time_s
+    if temperature_C is None:
+        T_rec = None
+        if "thermal_expansion" in planted:
+            raise ModelError("thermal_expansion needs temperatures (give temperature_C)")
+    elif np.ndim(temperature_C) == 0:
+        T_rec = np.full(n, float(temperature_C))
+    elif len(temperature_C) == 2 and n != 2:
+        T0, T1 = map(float, temperature_C)
+        T_rec = T0 + (T1 - T0) * (t_rec - t_rec.min()) / max(np.ptp(t_rec), 1e-9)
+    else:
+        T_rec = np.asarray(temperature_C, dtype=float).reshape(n)
+    # probing times / temperatures: those of the record that uses the probing last
+    m = len(L.X)
+    if L.kind == "length":
+        t_probe = np.zeros(m)
+        t_probe[L.I] = t_rec
+        t_probe[L.J] = t_rec
+        T_probe = np.full(m, 20.0) if T_rec is None else np.zeros(m)
+        if T_rec is not None:
+            T_probe[L.I] = T_rec
+            T_probe[L.J] = T_rec
+    else:
+        t_probe = t_rec
+        T_probe = np.full(m, 20.0) if T_rec is None else T_rec
+    delta = model_errors(L.X, L.N, L.k, L.probes, params, rng)
+    delta += planted_probing(L, planted, t_probe, T_probe)
+    Xind = L.X + delta * 1e-3
+    P = np.array([p.offset_mm for p in L.probes], dtype=float)[L.k]
+    pid = [p.id for p in L.probes]
+    if L.kind == "length":
+        I, J = L.I, L.J
+        ref = np.linalg.norm(L.X[J] - L.X[I], axis=1)
+        meas = np.linalg.norm(Xind[J] - Xind[I], axis=1)
+        if "thermal_expansion" in planted:
+            meas = meas + 1e-6 * planted["thermal_expansion"] * (T_rec - 20.0) * ref
+        if "scale_drift" in planted:
+            na = (L.X[J] - L.X[I]) / ref[:, None]
+            du = (L.X[J] - P[J]) - (L.X[I] - P[I])
+            meas = meas + 1e-6 * planted["scale_drift"] * (t_rec / 3600.0) * np.einsum("ij,ij->i", na, du)
+        rec = LengthRecords(kind="length", ids=tuple(L.ids), lines=tuple(range(2, n + 2)),
+                            temperature_C=T_rec, time_s=t_rec.copy(), group=tuple(L.group),
+                            X1_mm=Xind[I], X2_mm=Xind[J], reference_mm=ref, measured_mm=meas,
+                            N1=None if L.N is None else L.N[I], N2=None if L.N is None else L.N[J],
+                            P1_mm=P[I], P2_mm=P[J], probe1=tuple(pid[k] for k in L.k[I]),
+                            probe2=tuple(pid[k] for k in L.k[J]))
+        return rec
+    Xm = Xind.copy()
+    Xn = L.X_nom.copy()
+    if L.planar_z is not None:
+        Xm[:, 2] = L.planar_z
+        Xn[:, 2] = 0.0
+    return PointRecords(kind="point", ids=tuple(L.ids), lines=tuple(range(2, n + 2)),
+                        temperature_C=T_rec, time_s=t_rec.copy(), group=tuple(L.group),
+                        X_nom_mm=Xn, X_mm=Xm, N=L.N, P_mm=P, probe=tuple(pid[k] for k in L.k))
