@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 import resource
 import sys
 import tempfile
@@ -45,30 +46,53 @@ def cylinder_scan(m_theta: int, m_z: int, seed: int = 1):
 
 
 def bench_core(m_theta: int = 100, m_z: int = 20) -> None:
+    """Fit + per-factor V_A, first without forming V_X (xlfuncs.blocked, what `cmmwb build` uses
+    beyond 300 points; its peak memory is measured before the dense path runs), then with the
+    dense V_X of eq. (28), and the largest relative difference of the two V_A."""
+    from xlfuncs import blocked
+
     cloud, s = cylinder_scan(m_theta, m_z)
     t0 = time.perf_counter()
     f = features.fit("cylinder", cloud.X_mm, normals=cloud.N)
     t1 = time.perf_counter()
     G = features.G_A_X(f)
     t2 = time.perf_counter()
-    comps = pointcloud.V_X_components(cloud, PARAMS)
+    unc_b = blocked.propagate_cloud(f, cloud, PARAMS, G=G)
     t3 = time.perf_counter()
-    unc = features.propagate(f, comps, G=G)
+    peak_blocked = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2 ** 20
+    comps = pointcloud.V_X_components(cloud, PARAMS)
     t4 = time.perf_counter()
-    peak_gb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2 ** 20
-    u = dict(zip(f.names, unc.u()))
-    print(f"cylinder scan m = {cloud.m} points ({m_z} rings x {m_theta}), two probes, full GP V_X "
+    unc = features.propagate(f, comps, G=G)
+    t5 = time.perf_counter()
+    peak_dense = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2 ** 20
+    diff = max(float(np.max(np.abs(unc_b.V[k] - unc.V[k])) / np.max(np.abs(unc.V[k])))
+               for k in unc.V if np.max(np.abs(unc.V[k])) > 0)
+    u = dict(zip(f.names, unc_b.u()))
+    lines: list[str] = []
+
+    def say(text: str) -> None:
+        lines.append(text)
+        print(text, flush=True)
+
+    say(f"cylinder scan m = {cloud.m} points ({m_z} rings x {m_theta}), two probes, full GP V_X "
           f"(3m = {3 * cloud.m}):")
     rows = [(f"fit (Gauss-Newton, {f.iterations} iterations, multi-start)", t1 - t0),
             (f"G_A|X ({f.n} x {3 * cloud.m})", t2 - t1),
-            (f"V_X components (6 x {3 * cloud.m}^2, xlfuncs.pointcloud)", t3 - t2),
-            ("V_A per factor (G V_X,f G^T, 6 factors)", t4 - t3),
-            ("total: fit + per-factor V_A", t4 - t0)]
+            ("V_A per factor without V_X (xlfuncs.blocked)", t3 - t2),
+            ("total: fit + per-factor V_A (blocked, what build uses)", t3 - t0),
+            (f"dense: V_X components (6 x {3 * cloud.m}^2, xlfuncs.pointcloud)", t4 - t3),
+            ("dense: V_A per factor (G V_X,f G^T, 6 factors)", t5 - t4),
+            ("total: fit + per-factor V_A (dense)", (t1 - t0) + (t2 - t1) + (t5 - t3))]
     for label, dt in rows:
-        print(f"  {label:<58s}{dt:8.3f} s")
-    print(f"  peak RSS {peak_gb:.1f} GB")
-    print(f"  u(r0) = {u['r0_mm'] * 1e3:.4f} µm, u(x_A) = {u['x_A_mm'] * 1e3:.4f} µm; components (µm): "
-          + ", ".join(f"{fac} {unc.u(fac)[f.names.index('r0_mm')] * 1e3:.4f}" for fac in pointcloud.FACTORS))
+        say(f"  {label:<58s}{dt:8.3f} s")
+    say(f"  peak RSS {peak_blocked:.2f} GB after the blocked path, {peak_dense:.2f} GB after the dense one; "
+          f"largest relative difference of V_A: {diff:.1e}")
+    say(f"  u(r0) = {u['r0_mm'] * 1e3:.4f} µm, u(x_A) = {u['x_A_mm'] * 1e3:.4f} µm; components (µm): "
+          + ", ".join(f"{fac} {unc_b.u(fac)[f.names.index('r0_mm')] * 1e3:.4f}" for fac in pointcloud.FACTORS))
+    out = Path(__file__).resolve().parent / "results" / "feature.md"
+    out.write_text("Measured by `python bench/bench_feature.py` on the 2-core machine "
+                   f"(1-minute load average at the end: {os.getloadavg()[0]:.1f}).\n\n```\n"
+                   + "\n".join(lines) + "\n```\n")
 
 
 def bench_workbooks(sizes: list[int], engines: list[str]) -> None:

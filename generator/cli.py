@@ -236,9 +236,12 @@ def cmd_demo(args) -> int:
 def cmd_recalc(args) -> int:
     from .recalc import RecalcError, recalculate, results_rows
 
+    from .safe_xlsx import check
+
     path = Path(args.book)
     if not path.exists():
         raise InputError("no such file", file=path)
+    check(path)  # an untrusted file: size, zip bomb, entities, macros
     try:
         values = recalculate(path, args.engine)
     except RecalcError as e:

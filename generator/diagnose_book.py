@@ -16,7 +16,6 @@ core) instead of Cov and its inverse; the normal equations stay native.
 from __future__ import annotations
 
 import math
-from copy import copy
 from pathlib import Path
 
 import numpy as np
@@ -175,23 +174,9 @@ def _inputs(book: Book, diag: Diagnosis, params: Parameters | None) -> dict:
 # -- records -------------------------------------------------------------------------------------
 
 def _input_column(book: Book, ws, r0: int, c: int, values) -> None:
-    """A column of numeric input cells.  The first goes through :meth:`Book.number` (style,
-    protection, validation); the others copy its style and join its validation range in one step
-    (per-cell ``DataValidation.add`` is quadratic in openpyxl: minutes for 1,000 records)."""
-    values = [float(v) for v in values]
-    first = book.number(ws, r0, c, values[0], fmt="General")
-    if len(values) == 1:
-        return
-    for k, v in enumerate(values[1:], start=1):
-        if not math.isfinite(v):
-            raise ValueError(f"{ws.title}!{col(c)}{r0 + k}: {v!r} is not a finite number")
-        cc = ws.cell(row=r0 + k, column=c)
-        cc.value = v
-        cc._style = copy(first._style)
-    for dv in ws.data_validations.dataValidation:
-        if first.coordinate in dv.sqref:
-            dv.add(f"{col(c)}{r0 + 1}:{col(c)}{r0 + len(values) - 1}")
-            break
+    """A column of numeric input cells (styled, unlocked, validated by :meth:`Book.number`)."""
+    for k, v in enumerate(values):
+        book.number(ws, r0 + k, c, float(v), fmt="General")
 
 
 def _length_records(book: Book, diag: Diagnosis, inputs: dict):

@@ -407,6 +407,7 @@ offset_mm = [0.0, 0.0, -20.0]   # stylus tip centre from the probe-head referenc
 
 [points]
 file = "points.csv"             # id,x,y,z,nx,ny,nz,probe  (mm; n = outward unit normal)
+# or the points in this file:   rows = [{id = "G1L", x_mm = 0, y_mm = 0, z_mm = 0, nx = -1, ny = 0, nz = 0, probe = "P1"}, ...]
 
 # Optional: which distances (default: every pair of points).  to = "*" means every other point.
 # [[distances]]

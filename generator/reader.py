@@ -590,10 +590,22 @@ def _points_csv(rows: list[list]) -> str:
     return out.getvalue()
 
 
+FORMULA_LIKE = ("=", "+", "-", "@")
+
+
 def _use_points_file(rt: ReadTask, rows: list[list], where: list[int], points_file: str) -> None:
-    rt.files[points_file] = _points_csv(rows)
-    rt.doc["points"] = {"file": points_file}
-    rt.csv_rows = {line: f"sheet Points, row {r}" for line, r in enumerate(where, start=2)}
+    """Points go to a CSV file beside the task, unless a label starts with = + - @: a spreadsheet
+    program opening that CSV would take it for a formula, so those points stay in the task file
+    (``[points] rows``), where no program evaluates anything."""
+    if any(str(row[0]).startswith(FORMULA_LIKE) or str(row[7]).startswith(FORMULA_LIKE) for row in rows):
+        rt.doc["points"] = {"rows": [dict(zip(CSV_HEADER, [row[0], *(float(v) for v in row[1:7]), row[7]]))
+                                     for row in rows]}
+        for n, r in enumerate(where, start=1):
+            rt.sources[f"[points] rows #{n}"] = f"sheet Points, row {r}"
+    else:
+        rt.files[points_file] = _points_csv(rows)
+        rt.doc["points"] = {"file": points_file}
+        rt.csv_rows = {line: f"sheet Points, row {r}" for line, r in enumerate(where, start=2)}
     rt.sources["[points]"] = "sheet Points"
 
 

@@ -202,6 +202,73 @@ POINT_COLUMNS = {
 }
 
 
+class _PointRows:
+    """Validates point rows one by one (from a CSV file or from ``[points] rows`` of a task) and
+    collects them into a :class:`PointTable`.  ``where(column)`` names the place of a value."""
+
+    def __init__(self, path: Path, probes: tuple[Probe, ...]):
+        self.path = path
+        self.probes = probes
+        self.probe_ids = {p.id for p in probes}
+        self.labels: list[str] = []
+        self.X: list[list[float]] = []
+        self.N: list[np.ndarray] = []
+        self.pids: list[str] = []
+        self.lines: list[int] = []
+        self.seen: dict[str, str] = {}
+
+    def number(self, raw, where: str) -> float:
+        if isinstance(raw, str):
+            try:
+                v = float(raw.strip())
+            except ValueError:
+                raise InputError(f"{raw.strip()!r} is not a number", file=self.path, where=where) from None
+        elif isinstance(raw, bool) or not isinstance(raw, (int, float)):
+            raise InputError(f"{raw!r} is not a number", file=self.path, where=where)
+        else:
+            v = float(raw)
+        if not math.isfinite(v):
+            raise InputError(f"{raw!r} is not a finite number", file=self.path, where=where)
+        return v
+
+    def add(self, line: int, origin: str, raw_label, raw_values: list, raw_probe, where) -> None:
+        """One point: ``raw_values`` = x, y, z, nx, ny, nz; ``where(column)`` names each value."""
+        if not isinstance(raw_label, str):
+            raise InputError(f"{raw_label!r} is not text", file=self.path, where=where("id"))
+        label = check_label(raw_label.strip(), self.path, where("id"))
+        if label in self.seen:
+            raise InputError(f"point id {label!r} also {self.seen[label]}", file=self.path, where=where("id"))
+        self.seen[label] = origin
+        vals = [self.number(v, where(c)) for v, c in zip(raw_values, ("x", "y", "z", "nx", "ny", "nz"))]
+        n = np.array(vals[3:])
+        if abs(np.linalg.norm(n) - 1.0) > NORMAL_TOL:
+            raise InputError(f"normal ({vals[3]:g}, {vals[4]:g}, {vals[5]:g}) is not a unit vector "
+                             f"(length {np.linalg.norm(n):.6g})", file=self.path, where=where(None))
+        if isinstance(raw_probe, str) and raw_probe.strip():
+            pid = raw_probe.strip()
+        elif raw_probe is None or isinstance(raw_probe, str):
+            if len(self.probes) != 1:
+                raise InputError("no probe given and the task has several", file=self.path,
+                                 where=where("probe"))
+            pid = self.probes[0].id
+        else:
+            raise InputError(f"{raw_probe!r} is not a probe id", file=self.path, where=where("probe"))
+        if pid not in self.probe_ids:
+            raise InputError(f"unknown probe {pid!r} (the task defines {', '.join(sorted(self.probe_ids))})",
+                             file=self.path, where=where("probe"))
+        self.labels.append(label)
+        self.X.append(vals[:3])
+        self.N.append(n / np.linalg.norm(n))
+        self.pids.append(pid)
+        self.lines.append(line)
+
+    def table(self) -> PointTable:
+        if not self.labels:
+            raise InputError("no points", file=self.path)
+        return PointTable(tuple(self.labels), np.array(self.X), np.array(self.N), tuple(self.pids),
+                          tuple(self.lines))
+
+
 def read_points_csv(path: Path, probes: tuple[Probe, ...]) -> PointTable:
     """``id,x,y,z,nx,ny,nz,probe`` (mm; n = outward unit normal).  Lines starting with ``#``
     before the header are comments.  ``probe`` may be omitted when the task has one probe."""
@@ -232,66 +299,69 @@ def read_points_csv(path: Path, probes: tuple[Probe, ...]) -> PointTable:
         if key not in colmap:
             raise InputError(f"missing column {POINT_COLUMNS[key][0]!r} (header: {','.join(header)})",
                              file=path, where=f"line {start + 1}")
-    probe_ids = {p.id for p in probes}
-    labels, X, N, pids, where = [], [], [], [], []
-    seen: dict[str, int] = {}
-    rows = _csv_rows(reader, path, start)
-    for offset, row in rows:
+    points = _PointRows(path, probes)
+    for offset, row in _csv_rows(reader, path, start):
         if not row or all(not c.strip() for c in row):
             continue
         if len(row) < len(header):
             raise InputError(f"{len(row)} fields, the header has {len(header)}", file=path,
                              where=f"line {offset}")
-        label = check_label(row[colmap["id"]].strip(), path, f"line {offset}, column 'id'")
-        if label in seen:
-            raise InputError(f"point id {label!r} also on line {seen[label]}", file=path,
-                             where=f"line {offset}, column 'id'")
-        seen[label] = offset
+
+        def where(column, offset=offset):
+            if column is None:
+                return f"line {offset}"
+            name = header[colmap[column]] if column in colmap else column
+            return f"line {offset}, column {name!r}"
+
+        points.add(offset, f"on line {offset}", row[colmap["id"]],
+                   [row[colmap[k]] for k in ("x", "y", "z", "nx", "ny", "nz")],
+                   row[colmap["probe"]] if "probe" in colmap else None, where)
+    return points.table()
+
+
+POINT_ROW_KEYS = {"id", "x", "y", "z", "x_mm", "y_mm", "z_mm", "nx", "ny", "nz", "probe"}
+
+
+def read_points_rows(path: Path, rows, probes: tuple[Probe, ...]) -> PointTable:
+    """Points written in the task file itself: ``[points] rows = [{id = "A", x_mm = 0, ...}, ...]``
+    (keys as the CSV columns).  ``cmmwb read`` writes them so when a label starts with ``=``,
+    ``+``, ``-`` or ``@``, which a spreadsheet program would take for a formula in a CSV file."""
+    if not isinstance(rows, list) or not all(isinstance(r, dict) for r in rows):
+        raise InputError("must be a list of tables {id, x_mm, y_mm, z_mm, nx, ny, nz, probe}",
+                         file=path, where="[points] rows")
+    points = _PointRows(path, probes)
+    for n, row in enumerate(rows, start=1):
+        section = f"[points] rows #{n}"
+        check_keys(path, row, section, POINT_ROW_KEYS)
+
+        def where(column, section=section):
+            return section if column is None else f"{section} key {column!r}"
+
         vals = []
         for key in ("x", "y", "z", "nx", "ny", "nz"):
-            cell = row[colmap[key]].strip()
-            try:
-                v = float(cell)
-            except ValueError:
-                raise InputError(f"{cell!r} is not a number", file=path,
-                                 where=f"line {offset}, column {header[colmap[key]]!r}") from None
-            if not math.isfinite(v):
-                raise InputError(f"{cell!r} is not a finite number", file=path,
-                                 where=f"line {offset}, column {header[colmap[key]]!r}")
-            vals.append(v)
-        n = np.array(vals[3:])
-        if abs(np.linalg.norm(n) - 1.0) > NORMAL_TOL:
-            raise InputError(f"normal ({vals[3]:g}, {vals[4]:g}, {vals[5]:g}) is not a unit vector "
-                             f"(length {np.linalg.norm(n):.6g})", file=path, where=f"line {offset}")
-        if "probe" in colmap and row[colmap["probe"]].strip():
-            pid = row[colmap["probe"]].strip()
-        elif len(probes) == 1:
-            pid = probes[0].id
-        else:
-            raise InputError("no probe given and the task has several", file=path,
-                             where=f"line {offset}, column 'probe'")
-        if pid not in probe_ids:
-            raise InputError(f"unknown probe {pid!r} (the task defines {', '.join(sorted(probe_ids))})",
-                             file=path, where=f"line {offset}, column 'probe'")
-        labels.append(label)
-        X.append(vals[:3])
-        N.append(n / np.linalg.norm(n))
-        pids.append(pid)
-        where.append(offset)
-    if not labels:
-        raise InputError("no points", file=path)
-    return PointTable(tuple(labels), np.array(X), np.array(N), tuple(pids), tuple(where))
+            value = row.get(key, row.get(f"{key}_mm")) if key in "xyz" else row.get(key)
+            if value is None:
+                raise InputError("missing key", file=path, where=where(key))
+            vals.append(value)
+        if "id" not in row:
+            raise InputError("missing key", file=path, where=where("id"))
+        points.add(n, f"in {section}", row["id"], vals, row.get("probe"), where)
+    return points.table()
 
 
 def read_point_cloud(path: Path, doc: dict) -> tuple[PointCloud, Parameters, PointTable]:
-    """The point-cloud model of a task: points (from ``[points] file``), probes, parameters."""
+    """The point-cloud model of a task: points (``[points] file`` or ``rows``), probes, parameters."""
     params = read_parameters(path, doc)
     probes = read_probes(path, doc)
     pts = table(path, doc, "points")
-    check_keys(path, pts, "points", {"file"})
-    rel = string(path, pts, "points", "file")
-    csv_path = (Path(path).parent / rel)
-    tablep = read_points_csv(csv_path, probes)
+    check_keys(path, pts, "points", {"file", "rows"})
+    if ("file" in pts) == ("rows" in pts):
+        raise InputError("give either 'file' (a CSV of points) or 'rows' (points in the task file)",
+                         file=path, where="[points]")
+    if "rows" in pts:
+        tablep = read_points_rows(path, pts["rows"], probes)
+    else:
+        tablep = read_points_csv(Path(path).parent / string(path, pts, "points", "file"), probes)
     index = {p.id: k for k, p in enumerate(probes)}
     try:
         for p in probes:

@@ -121,3 +121,30 @@ def test_control_characters_and_huge_fields_are_named(tmp_path, task):
     set_field(task.with_suffix(".csv"), 2, 0, "x" * 200_000)
     r = run("build", str(task), "--out", str(tmp_path / "out"))
     assert r.returncode == 2 and "line 3" in r.stderr and "malformed CSV" in r.stderr
+
+
+def test_recalc_refuses_a_workbook_with_an_entity_declaration(tmp_path, task):
+    import zipfile
+
+    assert run("build", str(task), "--out", str(tmp_path / "out")).returncode == 0
+    good = zipfile.ZipFile(tmp_path / "out" / "t.xlsx")
+    bad = tmp_path / "bad.xlsx"
+    with zipfile.ZipFile(bad, "w") as z:
+        for item in good.infolist():
+            data = good.read(item.filename)
+            if item.filename == "xl/workbook.xml":
+                data = b'<!DOCTYPE x [<!ENTITY a "a"><!ENTITY b "&a;&a;&a;">]>' + data
+            z.writestr(item, data)
+    r = run("recalc", str(bad))
+    assert r.returncode == 2 and "bad.xlsx" in r.stderr and "document type declaration" in r.stderr
+
+
+def test_points_in_the_task_file_are_checked_like_a_csv(tmp_path, task):
+    text = task.read_text().replace('file = "t.csv"', 'rows = [\n'
+                                    '  {id = "A", x_mm = 0, y_mm = 0, z_mm = 0, nx = 1, ny = 0, nz = 0, probe = "P1"},\n'
+                                    '  {id = "B", x_mm = "ten", y_mm = 0, z_mm = 0, nx = 1, ny = 0, nz = 0, probe = "P1"},\n]')
+    task.write_text(text)
+    r = run("build", str(task), "--out", str(tmp_path / "out"))
+    assert r.returncode == 2 and "[points] rows #2 key 'x'" in r.stderr and "'ten' is not a number" in r.stderr
+    task.write_text(text.replace('x_mm = "ten"', "x_mm = 10"))
+    assert run("build", str(task), "--out", str(tmp_path / "out")).returncode == 0

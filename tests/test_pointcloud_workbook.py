@@ -35,7 +35,7 @@ def assert_workbook_matches_json(book, results, engine):
 
 
 @pytest.mark.parametrize("engine", ENGINES)
-@pytest.mark.parametrize("example", ["stepgauge_I_MPE1", "stepgauge_II_MPE2"])
+@pytest.mark.parametrize("example", ["stepgauge_I_MPE1", "stepgauge_I_MPE2", "stepgauge_II_MPE1", "stepgauge_II_MPE2"])
 def test_paper_workbooks_agree_with_json(tmp_path, example, engine):
     results, _ = build_task(EXAMPLES / f"{example}.toml", tmp_path, plots=False)
     assert_workbook_matches_json(tmp_path / f"{example}.xlsx", results, engine)

@@ -345,3 +345,17 @@ def test_cache_all_gives_every_formula_cell_a_value(tmp_path, small_task):
     assert len(rows) == len(results["distances"])
     for d, row in zip(results["distances"], rows):
         assert close(row["u_um"], d["u_um"]) and close(row["U_um"], d["U_um"])
+
+
+def test_labels_that_look_like_formulas_come_back_in_the_task_file_not_a_csv(tmp_path):
+    """A CSV opened in a spreadsheet would turn `=SUM(A1)` into a formula: `read` keeps such
+    points in the task file (`[points] rows`), and the rebuild gives the same results."""
+    from pointcloud_tasks import write_random_task
+
+    task = write_random_task(tmp_path, 5, m=5, probes=2, labels=["=SUM(A1)", "+1", "-2", "@x", "Q5"], mpe=False)
+    first, book = build(task, tmp_path / "b1")
+    again = read_and_build(book, tmp_path / "read")
+    assert again["distances"] == first["distances"]
+    doc = tomllib.loads((tmp_path / "read" / "read" / "task.toml").read_text(encoding="utf-8"))
+    assert [r["id"] for r in doc["points"]["rows"]] == ["=SUM(A1)", "+1", "-2", "@x", "Q5"]
+    assert not list((tmp_path / "read" / "read").glob("*.csv"))

@@ -201,7 +201,7 @@ def V_X_block(cloud: pc.PointCloud, params: pc.Parameters, I, J,
     for f in factors:
         if f not in FACTORS:
             raise ModelError(f"unknown influence factor {f!r}; known: {', '.join(FACTORS)}")
-    pa = pc._probe_arrays(cloud, params)
+    pa = pc.probe_arrays(cloud, params)
     ki, kj = cloud.probe_index[I], cloud.probe_index[J]
     same = (ki[:, None] == kj[None, :]).astype(float)
     nI, nJ = len(I), len(J)
@@ -286,7 +286,7 @@ def pair_blocks(cloud: pc.PointCloud, params: pc.Parameters, pairs,
         raise ModelError("pair index out of range")
     i, j = pairs[:, 0], pairs[:, 1]
     n = len(pairs)
-    pa = pc._probe_arrays(cloud, params)
+    pa = pc.probe_arrays(cloud, params)
     same = cloud.probe_index[i] == cloud.probe_index[j]
     I3 = np.broadcast_to(np.eye(3), (n, 3, 3))
     U = cloud.ram_mm
@@ -388,7 +388,7 @@ def distance_components(cloud: pc.PointCloud, params: pc.Parameters, pairs=None,
         out = {"d_mm": np.empty(total), "u_um": np.empty(total)}
         for f in FACTORS:
             out[f"u_{f}_um"] = np.empty(total)
-        shared = {"cloud": cloud, "params": params, "pa": pc._probe_arrays(cloud, params)}
+        shared = {"cloud": cloud, "params": params, "pa": pc.probe_arrays(cloud, params)}
         sizes = [rows * (m - 1 - i0) - rows * (rows - 1) // 2 for i0, rows, _ in blocks]
         results = _run(_distance_rows, blocks, shared, backend, progress, sizes)
         for (i0, rows, pos), (d, var) in zip(blocks, results):
@@ -480,7 +480,7 @@ def V_A_components(G: np.ndarray, cloud: pc.PointCloud, params: pc.Parameters, *
     nA = G.shape[0]
     Gp = G.reshape(nA, m, 3)                   # Gp[:, i, :] = G_i
     Wx = np.ascontiguousarray(Gp.transpose(1, 0, 2))   # m x n_A x 3
-    pa = pc._probe_arrays(cloud, params)
+    pa = pc.probe_arrays(cloud, params)
     k = cloud.probe_index
     out: dict[str, np.ndarray] = {}
     if "R" in factors:
@@ -629,7 +629,7 @@ def record_covariance(cloud: pc.PointCloud, params: pc.Parameters, I, J, *, comp
     na = d / dn[:, None]
     rows = max(1, block // max(n, 1))
     items = [(a0, min(a0 + rows, n)) for a0 in range(0, n, rows)]
-    shared = {"cloud": cloud, "params": params, "pa": pc._probe_arrays(cloud, params),
+    shared = {"cloud": cloud, "params": params, "pa": pc.probe_arrays(cloud, params),
               "I": I, "J": J, "na": na}
     out = {f: np.empty((n, n)) for f in FACTORS}
     for (a0, a1), part in zip(items, _run(_record_rows, items, shared, backend, progress,

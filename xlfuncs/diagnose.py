@@ -317,7 +317,7 @@ def length_covariance(cloud: pc.PointCloud, params: pc.Parameters, I: np.ndarray
     kp = cloud.probe_index
     d = X[J] - X[I]
     na = d / np.linalg.norm(d, axis=1)[:, None]
-    pa = pc._probe_arrays(cloud, params)
+    pa = pc.probe_arrays(cloud, params)
     NN = na @ na.T
     out: dict[str, np.ndarray] = {}
 

@@ -71,7 +71,7 @@ class PointCloudSampler:
             if f not in FACTORS:
                 raise ModelError(f"unknown influence factor {f!r}")
         self.cloud, self.params, self.factors = cloud, params, tuple(factors)
-        pa = pc._probe_arrays(cloud, params)
+        pa = pc.probe_arrays(cloud, params)
         k = cloud.probe_index
         U, N = cloud.ram_mm, cloud.N
         maps: dict[str, np.ndarray | float] = {}

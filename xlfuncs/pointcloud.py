@@ -202,7 +202,9 @@ def V_S_diag_um_per_mm2(params: Parameters) -> np.ndarray:
     return s**2
 
 
-def _probe_arrays(cloud: PointCloud, params: Parameters) -> dict[str, np.ndarray]:
+def probe_arrays(cloud: PointCloud, params: Parameters) -> dict[str, np.ndarray]:
+    """Per point (length m): the sigma_PQ_um, sigma_P0_um, sigma_P_um and lambda_P of its probe,
+    per-probe overrides resolved against the task-wide defaults."""
     probes = [p.resolved(params) for p in cloud.probes]
     k = cloud.probe_index
     return {n: np.array([getattr(p, n) for p in probes], dtype=float)[k]
@@ -222,7 +224,7 @@ def V_X_components(cloud: PointCloud, params: Parameters) -> dict[str, np.ndarra
     """
     m = cloud.m
     n3 = 3 * m
-    pa = _probe_arrays(cloud, params)
+    pa = probe_arrays(cloud, params)
     k = cloud.probe_index
     same_probe = (k[:, None] == k[None, :]).astype(float)
     I3 = np.eye(3)
@@ -419,7 +421,7 @@ def distance_components(cloud: PointCloud, params: Parameters, pairs: np.ndarray
     time, so memory grows only through the outputs.  Returns a dict with keys ``d_mm``,
     ``u_um`` and ``u_<factor>_um``.  ``progress(done, total)`` is called after every block.
     """
-    pa = _probe_arrays(cloud, params)
+    pa = probe_arrays(cloud, params)
     m = cloud.m
     if pairs is None:
         total = m * (m - 1) // 2
