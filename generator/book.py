@@ -8,8 +8,6 @@ Writers lay out arrays with :class:`Book`; they never touch openpyxl styles dire
 from __future__ import annotations
 
 import math
-import os
-import tempfile
 from contextlib import contextmanager
 from contextvars import ContextVar
 from pathlib import Path
@@ -24,6 +22,7 @@ from openpyxl.worksheet.datavalidation import DataValidation
 from openpyxl.worksheet.worksheet import Worksheet
 
 from . import __version__
+from .atomic import replacing
 from .xlref import Block, array_formula, block, cell, check_name
 
 INPUT_FILL = PatternFill("solid", fgColor="FFF2CC")      # pale yellow: type here
@@ -318,16 +317,6 @@ class Formula(str):
 
 
 def save_atomic(wb: Workbook, path: Path) -> Path:
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=".xlsx.tmp", dir=path.parent)
-    os.close(fd)
-    try:
+    with replacing(path, ".xlsx.tmp") as tmp:
         wb.save(tmp)
-        os.chmod(tmp, 0o644)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
-    return path
+    return Path(path)

@@ -23,16 +23,16 @@ never as formulas.
 from __future__ import annotations
 
 import math
-import os
 import posixpath
 import re
-import tempfile
 import zipfile
 from pathlib import Path
 from typing import Any
 from xml.sax.saxutils import escape
 
 from openpyxl.utils import column_index_from_string, get_column_letter, range_boundaries
+
+from .atomic import replacing
 
 MODES = ("results", "all", "none")
 FACTORS = ("R", "PQ", "S", "ET", "ER", "P")
@@ -254,9 +254,7 @@ def _results_values(z: zipfile.ZipFile, parts: dict[str, str], kind: str, result
 
 def _replace_parts(path: Path, z: zipfile.ZipFile, new: dict[str, bytes]) -> None:
     """Copy the archive with some parts replaced; atomic rename over ``path``."""
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=".xlsx.tmp", dir=path.parent)
-    os.close(fd)
-    try:
+    with replacing(path, ".xlsx.tmp") as tmp:
         with zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as out:
             for info in z.infolist():
                 data = new.get(info.filename)
@@ -266,9 +264,3 @@ def _replace_parts(path: Path, z: zipfile.ZipFile, new: dict[str, bytes]) -> Non
                 zi.compress_type = zipfile.ZIP_DEFLATED
                 zi.external_attr = info.external_attr
                 out.writestr(zi, data)
-        os.chmod(tmp, 0o644)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise

@@ -18,6 +18,7 @@ from pathlib import Path
 from xlfuncs.errors import ModelError
 
 from . import __version__
+from .atomic import write_text
 from .errors import InputError
 from .jobs import available, job
 from .taskfile import KINDS, read_toml, task_kind_and_name
@@ -192,18 +193,14 @@ def cmd_new(args) -> int:
     out = Path(args.out)
     if out.exists() and not args.force:
         raise InputError("exists already (use --force to overwrite)", file=out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    text = job(args.kind).NEW_TASK
-    tmp = out.with_name(f".{out.name}.tmp")
-    tmp.write_text(text, encoding="utf-8")
-    os.replace(tmp, out)
+    write_text(out, job(args.kind).NEW_TASK)
     print(out)
     for fname, content in getattr(job(args.kind), "NEW_TASK_FILES", {}).items():
         extra = out.parent / fname
         if extra.exists():
             print(f"{extra} exists already: kept as it is")
             continue
-        extra.write_text(content, encoding="utf-8")
+        write_text(extra, content)
         print(extra)
     return 0
 

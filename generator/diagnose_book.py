@@ -546,13 +546,11 @@ def _gls(book: Book, diag: Diagnosis, obs: dict, native: bool) -> dict:
 
 def _fill_after(book: Book, diag: Diagnosis, obs: dict, gls: dict) -> None:
     """Per-row u, z, fitted, residual after; then the statistics on GLS."""
-    prep = diag.prep
     sheet, ci = obs["sheet"], obs["ci"]
     ws = book.wb[sheet]
     p, p0 = gls["p"], gls["p0"]
     native = gls["native"]
     n = len(obs["rows"])
-    b = gls.get("b")
     for q, r in enumerate(obs["rows"]):
         L = lambda k: cell(r, ci[k])
         # u: sqrt of the diagonal of C (baseline-adjusted for point records)

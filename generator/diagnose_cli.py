@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import json
 import math
-import os
 import time
 from pathlib import Path
 
@@ -26,6 +25,7 @@ from xlfuncs.errors import ModelError
 from xlfuncs.recordings import RecordingsError, read_recordings, write_recordings
 
 from . import __version__
+from .atomic import write_text
 from .errors import InputError
 
 #: Forbes 2025 Table 3, MPE1: the model of the demonstrations
@@ -196,13 +196,6 @@ def _temperature(text: str | None):
     return vals[0] if len(vals) == 1 else tuple(vals)
 
 
-def _atomic_text(path: Path, text: str) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.tmp")
-    tmp.write_text(text, encoding="utf-8")
-    os.replace(tmp, path)
-
-
 def cmd_simulate(args) -> int:
     model, label = load_model(args.task, args.sigma_um, default_mpe1=True)
     probes = model.probes
@@ -231,7 +224,7 @@ def cmd_simulate(args) -> int:
                 f"simulation: {label}",
                 "planted: " + (", ".join(f"{k}={v}" for k, v in planted.items()) or "nothing")]
     out = Path(args.out)
-    _atomic_text(out, write_recordings(rec, comments=comments))
+    write_text(out, write_recordings(rec, comments=comments))
     print(f"{rec.n} {rec.kind} records ({args.layout}), planted "
           + (", ".join(f"{k} = {v}" for k, v in planted.items()) or "nothing") + f" -> {out}")
     return 0

@@ -13,7 +13,6 @@ compare it with the checked-in file.
 from __future__ import annotations
 
 import argparse
-import os
 import re
 import shutil
 import sys
@@ -21,6 +20,7 @@ import tempfile
 import zipfile
 from pathlib import Path
 
+from .atomic import replacing
 from .jobs import available, job
 
 TEMPLATE_DIR = Path(__file__).resolve().parents[1] / "workbook_templates"
@@ -45,9 +45,7 @@ def normalise(path: Path) -> None:
     path = Path(path)
     with zipfile.ZipFile(path) as z:
         parts = [(i, z.read(i)) for i in z.infolist()]
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=".tmp", dir=path.parent)
-    os.close(fd)
-    try:
+    with replacing(path) as tmp:
         with zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as out:
             for info, data in parts:
                 if info.filename == "docProps/core.xml":
@@ -56,12 +54,6 @@ def normalise(path: Path) -> None:
                 zi.compress_type = zipfile.ZIP_DEFLATED
                 zi.external_attr = 0o644 << 16
                 out.writestr(zi, data)
-        os.chmod(tmp, 0o644)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
 
 
 def build_one(kind: str, example: Path | None, target: Path) -> Path:

@@ -341,18 +341,6 @@ def pair_blocks(cloud: pc.PointCloud, params: pc.Parameters, pairs,
 # distances (eq. 29-30): the row blocks of xlfuncs.pointcloud, on any backend
 # ---------------------------------------------------------------------------------------------
 
-def _row_blocks(m: int, block: int) -> list[tuple[int, int, int]]:
-    """(first row, rows, first output position) of the all-pairs blocks (i < j), each with
-    about ``block`` pairs: the scheme of :func:`xlfuncs.pointcloud.distance_components`."""
-    blocks = []
-    i0 = pos = 0
-    while i0 < m - 1:
-        rows = max(1, min(m - 1 - i0, block // max(m - i0 - 1, 1)))
-        blocks.append((i0, rows, pos))
-        pos += rows * (m - 1 - i0) - rows * (rows - 1) // 2
-        i0 += rows
-    return blocks
-
 
 def _distance_rows(item, shared):
     """All pairs (i, j > i) with i in rows i0 .. i0+rows-1: d (mm) and variances (µm²)."""
@@ -383,7 +371,7 @@ def distance_components(cloud: pc.PointCloud, params: pc.Parameters, pairs=None,
         return pc.distance_components(cloud, params, pairs, block=block, progress=progress)
     m = cloud.m
     if pairs is None:
-        blocks = _row_blocks(m, block)
+        blocks = pc.row_blocks(m, block)
         total = m * (m - 1) // 2
         out = {"d_mm": np.empty(total), "u_um": np.empty(total)}
         for f in FACTORS:

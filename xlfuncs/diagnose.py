@@ -528,7 +528,6 @@ class Diagnosis:
 def _group_labels(prep: Prepared) -> dict[str, list[str]]:
     """Labels of every record under each grouping of spec section 3.2."""
     rec, D = prep.rec, prep.design
-    n = rec.n
     out: dict[str, list[str]] = {}
     if rec.group is not None:
         out["group"] = [g or "(none)" for g in rec.group]

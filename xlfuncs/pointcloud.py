@@ -32,7 +32,6 @@ import math
 import os
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
-from typing import Iterable, Sequence
 
 import numpy as np
 
@@ -412,6 +411,19 @@ def _rect_variances(cloud: PointCloud, params: Parameters, pa: dict, I: slice, J
     return d, var
 
 
+def row_blocks(m: int, block: int) -> list[tuple[int, int, int]]:
+    """(first row, rows, first output position) of the all-pairs blocks (i < j in ``all_pairs``
+    order), each with about ``block`` pairs: rows i0 .. i0+rows-1 against columns i0+1 .. m-1."""
+    blocks = []
+    i0 = pos = 0
+    while i0 < m - 1:
+        rows = max(1, min(m - 1 - i0, block // max(m - i0 - 1, 1)))
+        blocks.append((i0, rows, pos))
+        pos += rows * (m - 1 - i0) - rows * (rows - 1) // 2
+        i0 += rows
+    return blocks
+
+
 def distance_components(cloud: PointCloud, params: Parameters, pairs: np.ndarray | None = None,
                         *, block: int = 262_144, progress=None) -> dict[str, np.ndarray]:
     """d_ij (mm), u(d_ij) (µm) and the per-factor u (µm) of eq. (30) for many pairs.
@@ -428,13 +440,7 @@ def distance_components(cloud: PointCloud, params: Parameters, pairs: np.ndarray
         out = {"d_mm": np.empty(total), "u_um": np.empty(total)}
         for f in FACTORS:
             out[f"u_{f}_um"] = np.empty(total)
-        blocks = []  # (first row, rows, first output position)
-        i0 = pos = 0
-        while i0 < m - 1:
-            rows = max(1, min(m - 1 - i0, block // max(m - i0 - 1, 1)))
-            blocks.append((i0, rows, pos))
-            pos += rows * (m - 1 - i0) - rows * (rows - 1) // 2
-            i0 += rows
+        blocks = row_blocks(m, block)
 
         def work(b):
             i0, rows, pos = b
