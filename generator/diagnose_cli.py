@@ -110,7 +110,7 @@ def run_diagnose(rec_path: Path, model: dg.Model, out_dir: Path, *, alpha: float
                  workbook: bool = True, source: str = "", rec=None, task_label: str = "",
                  force: bool = False) -> tuple[dict, list[Path]]:
     """Diagnose ``rec_path`` into ``out_dir`` (all or nothing); returns the JSON and the files."""
-    from .cli import _Staging
+    from .build import Staging as _Staging
     from .diagnose_book import write_book, write_plots
 
     rec_path = Path(rec_path)
@@ -250,7 +250,7 @@ def demo(out_dir: Path) -> list[Path]:
     (no larger in any record than noise reaches anyway, only in the diagonal lengths) found and
     modelled; and a pitch
     error measured with one probe offset, reported as aliased with an x scale error."""
-    from .cli import _Staging
+    from .build import Staging as _Staging
 
     out_dir = Path(out_dir)
     params = pc.Parameters(**MPE1)

@@ -1,0 +1,167 @@
+"""Building a task: load, compute, write the workbook, JSON and plots into a folder, all or
+nothing, never over a file someone edited (unless forced, with a backup)."""
+
+from __future__ import annotations
+
+import csv
+import hashlib
+import json
+import math
+import os
+import shutil
+import sys
+import tempfile
+import time
+import warnings
+from pathlib import Path
+
+from openpyxl.utils.exceptions import IllegalCharacterError
+
+from xlfuncs.errors import ModelError
+
+from . import cache as cached_values
+from .atomic import write_text
+from .book import describing
+from .errors import InputError
+from .jobs import job
+from .taskfile import read_toml, task_kind_and_name
+
+
+def non_finite(obj, where: str = "results"):
+    """The first NaN or infinity in the results (JSON path, value), or None."""
+    if isinstance(obj, float):
+        return None if math.isfinite(obj) else (where, obj)
+    items = obj.items() if isinstance(obj, dict) else enumerate(obj) if isinstance(obj, list) else ()
+    for k, v in items:
+        hit = non_finite(v, f"{where}.{k}" if isinstance(k, str) else f"{where}[{k}]")
+        if hit is not None:
+            return hit
+    return None
+
+
+class Staging:
+    """A private folder inside DIR; its files move into DIR only when the whole run succeeded.
+
+    Files in DIR that cmmwb did not write, or that changed since cmmwb wrote them (someone edited
+    the workbook), are never overwritten: the run fails with a message, unless ``force``, in which
+    case each is first renamed to a backup (``NAME.bak``, or ``NAME.<time>.bak`` when that exists).
+    What cmmwb wrote is recorded (SHA-256 per file) in ``DIR/.cmmwb-manifest.json``.
+    """
+
+    MANIFEST = ".cmmwb-manifest.json"
+
+    def __init__(self, out_dir: Path, *, force: bool = False):
+        self.out_dir = Path(out_dir)
+        self.created = not self.out_dir.exists()
+        self.force = force
+        self.backups: list[Path] = []
+
+    def __enter__(self) -> Path:
+        try:
+            self.out_dir.mkdir(parents=True, exist_ok=True)
+        except OSError as e:
+            raise InputError(f"cannot create the output folder: {e.strerror}", file=self.out_dir) from None
+        self.tmp = Path(tempfile.mkdtemp(prefix=".cmmwb-", dir=self.out_dir))
+        return self.tmp
+
+    def __exit__(self, exc_type, exc, tb) -> None:
+        ok = False
+        try:
+            if exc_type is None:
+                self._commit()
+            ok = exc_type is None
+        finally:
+            shutil.rmtree(self.tmp, ignore_errors=True)
+            if not ok and self.created:
+                shutil.rmtree(self.out_dir, ignore_errors=True)
+
+    def _commit(self) -> None:
+        manifest = self._manifest()
+        files = sorted(self.tmp.iterdir())
+        edited = [f.name for f in files if (self.out_dir / f.name).exists()
+                  and manifest.get(f.name) != self._sha256(self.out_dir / f.name)]
+        if edited and not self.force:
+            raise InputError("changed since cmmwb wrote it, or not written by cmmwb: not overwritten (use "
+                             "--force to replace it and keep a backup, or another --out)",
+                             file=self.out_dir / edited[0])
+        for name in edited:
+            self.backups.append(self._backup(self.out_dir / name))
+        for f in files:
+            manifest[f.name] = self._sha256(f)
+            os.replace(f, self.out_dir / f.name)
+        write_text(self.out_dir / self.MANIFEST,
+                   json.dumps({"format": 1, "files": manifest}, indent=1, sort_keys=True) + "\n")
+
+    def _manifest(self) -> dict:
+        try:
+            files = json.loads((self.out_dir / self.MANIFEST).read_text(encoding="utf-8"))["files"]
+            return {str(k): str(v) for k, v in files.items()}
+        except (OSError, ValueError, KeyError, TypeError, AttributeError):
+            return {}
+
+    @staticmethod
+    def _sha256(path: Path) -> str:
+        h = hashlib.sha256()
+        with open(path, "rb") as fh:
+            for chunk in iter(lambda: fh.read(1 << 20), b""):
+                h.update(chunk)
+        return h.hexdigest()
+
+    @staticmethod
+    def _backup(path: Path) -> Path:
+        """Rename ``path`` to a backup name that does not exist yet; return it."""
+        bak = path.with_name(path.name + ".bak")
+        if bak.exists():
+            stamp = time.strftime("%Y%m%d-%H%M%S")
+            bak = path.with_name(f"{path.name}.{stamp}.bak")
+            n = 1
+            while bak.exists():
+                bak = path.with_name(f"{path.name}.{stamp}-{n}.bak")
+                n += 1
+        os.replace(path, bak)
+        return bak
+
+
+def build_task(task_path: Path, out_dir: Path, *, plots: bool = True, force: bool = False,
+               cache: str = "results") -> tuple[dict, list[Path]]:
+    """Build one task into ``out_dir``: workbook, JSON and plots, all or nothing.
+
+    ``force``: replace outputs someone edited (keeping backups); ``cache``: which formula cells
+    get cached values for programs that do not calculate (see :mod:`generator.cache`)."""
+    task_path = Path(task_path)
+    doc = read_toml(task_path)
+    kind, _ = task_kind_and_name(task_path, doc)
+    mod = job(kind)
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)   # numpy's; a non-finite result is caught below
+            task = mod.load(task_path, doc)
+            results = mod.compute(task)
+    except ModelError as e:
+        raise InputError(str(e), file=task_path) from None
+    except csv.Error as e:  # a malformed points table that the CSV module itself rejects
+        raise InputError(f"malformed points table ({e})", file=task_path, where="[points]") from None
+
+    bad = non_finite(results)
+    if bad is not None:
+        raise InputError(f"the model gives {bad[1]!r} for {bad[0]}: check the inputs for extreme values "
+                         "(e.g. a length scale so small that its square underflows)", file=task_path)
+    staging = Staging(out_dir, force=force)
+    with staging as tmp:
+        name = results["name"]
+        book = tmp / f"{name}.xlsx"
+        try:
+            with describing({"kind": kind, "name": name, "doc": doc, "task_file": task_path.name}):
+                mod.write_book(task, results, book)
+        except IllegalCharacterError:
+            raise InputError("a text (a point, probe or characteristic name, or a note) contains a control "
+                             "character that a workbook cannot store", file=task_path) from None
+        cached_values.store(book, kind, results, cache)
+        (tmp / f"{name}.json").write_text(json.dumps(results, indent=1, ensure_ascii=False) + "\n",
+                                          encoding="utf-8")
+        made = [tmp / f"{name}.xlsx", tmp / f"{name}.json"]
+        if plots:
+            made += list(mod.write_plots(task, results, tmp))
+    for b in staging.backups:
+        print(f"cmmwb: kept a backup of the replaced file: {b}", file=sys.stderr)
+    return results, [Path(out_dir) / p.name for p in made]
