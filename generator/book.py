@@ -8,8 +8,10 @@ Writers lay out arrays with :class:`Book`; they never touch openpyxl styles dire
 from __future__ import annotations
 
 import math
+import textwrap
 from contextlib import contextmanager
 from contextvars import ContextVar
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Iterable, Iterator, Sequence
 
@@ -34,6 +36,7 @@ THIN = Side(style="thin", color="BFBFBF")
 BOX = Border(left=THIN, right=THIN, top=THIN, bottom=THIN)
 NUMBER_FORMAT = "0.000000"
 
+PARA_WIDTH = 95
 RESULTS = "Results"
 INSTRUCTIONS = "Instructions"
 #: the task description :meth:`Book.save` stores when the writer did not call task_info itself
@@ -76,7 +79,7 @@ class Book:
         self.text(ws, 1, 1, title, font=TITLE_FONT)
         self.text(ws, 2, 1, f"cmmwb {__version__} — task kind '{kind}', task '{name}'")
         self._instr_row = 4
-        ws.column_dimensions["A"].width = 110
+        ws.column_dimensions["A"].width = 100
         self.wb.properties.creator = f"cmmwb {__version__}"
         self.wb.properties.title = title
         self._validations: dict[tuple[str, float | None, float | None], DataValidation] = {}
@@ -95,12 +98,15 @@ class Book:
             ws.protection.formatRows = False
         return ws
 
-    def para(self, *lines: str, bold: bool = False) -> None:
-        """Lines of text on the instruction sheet."""
-        for line in lines:
-            self.text(self.instructions, self._instr_row, 1, line,
-                      font=HEADER_FONT if bold else None, wrap=True)
-            self._instr_row += 1
+    def para(self, *paragraphs: str, bold: bool = False) -> None:
+        """Paragraphs on the instruction sheet, wrapped into rows of at most ``PARA_WIDTH``
+        characters (a wrapped cell's row height is not recomputed by every program, so one
+        long cell would overlap the rows below it)."""
+        for paragraph in paragraphs:
+            lines = textwrap.wrap(paragraph, PARA_WIDTH, subsequent_indent="   ") or [""]
+            for line in lines:
+                self.text(self.instructions, self._instr_row, 1, line, font=HEADER_FONT if bold else None)
+                self._instr_row += 1
 
     def gap(self) -> None:
         self._instr_row += 1
@@ -251,6 +257,44 @@ class Book:
         cm.height = 120
         c.comment = cm
 
+    # -- charts ------------------------------------------------------------------------------
+    @staticmethod
+    def scatter(ws: Worksheet, anchor: str, title: str, x_title: str, y_title: str,
+                series: Sequence["ChartSeries"], *, width: float = 16, height: float = 9) -> None:
+        """A native XY chart with explicit colours (LibreOffice draws unstyled markers white)
+        and visible axes (openpyxl 3.1 hides them in Excel unless told otherwise)."""
+        from openpyxl.chart import ScatterChart, Series
+
+        chart = ScatterChart()
+        chart.title = title
+        chart.style = 13
+        chart.x_axis.title = x_title
+        chart.y_axis.title = y_title
+        for axis, fmt in ((chart.x_axis, "General"), (chart.y_axis, "General")):
+            axis.delete = False
+            axis.number_format = fmt
+            axis.majorTickMark = "out"
+        for k, cs in enumerate(series):
+            colour = PALETTE[k % len(PALETTE)]
+            if cs.title_from_data:
+                s = Series(cs.y, cs.x, title_from_data=True)
+            else:
+                s = Series(cs.y, cs.x, title=cs.title)
+            if cs.markers:
+                s.marker.symbol = MARKERS[k % len(MARKERS)]
+                s.marker.size = 6
+                s.marker.graphicalProperties.solidFill = colour
+                s.marker.graphicalProperties.line.solidFill = colour
+                s.graphicalProperties.line.noFill = True
+            else:
+                s.marker.symbol = "none"
+                s.graphicalProperties.line.solidFill = colour
+                s.graphicalProperties.line.width = 19050  # 1.5 pt
+            s.smooth = False
+            chart.series.append(s)
+        chart.width, chart.height = width, height
+        ws.add_chart(chart, anchor)
+
     # -- the Results sheet ---------------------------------------------------------------------
     def results(self, columns: Sequence[str], rows: Iterable[Sequence[str | float]],
                 notes: Sequence[str | None] | None = None) -> Worksheet:
@@ -307,6 +351,22 @@ def _by_column(cells: list[tuple[int, int]]):
     for column, row in cells:
         cols.setdefault(column, set()).add(row)
     return [(c, sorted(rows)) for c, rows in sorted(cols.items())]
+
+
+PALETTE = ("1F77B4", "FF7F0E", "2CA02C", "D62728", "9467BD", "8C564B", "E377C2", "7F7F7F")
+MARKERS = ("circle", "square", "diamond", "triangle", "x", "star", "dash", "plus")
+
+
+@dataclass(frozen=True)
+class ChartSeries:
+    """One series of :meth:`Book.scatter`: y (and x) as openpyxl ``Reference``s; the title is
+    text, or the first cell of ``y`` when ``title_from_data``."""
+
+    title: str | None
+    x: object
+    y: object
+    markers: bool = True
+    title_from_data: bool = False
 
 
 class Formula(str):

@@ -24,7 +24,7 @@ from xlfuncs import effects as fx
 from xlfuncs.diagnose import Diagnosis
 from xlfuncs.pointcloud import Parameters
 
-from .book import Book, Formula
+from .book import Book, ChartSeries, Formula
 from .xlref import Block, block, cell, col
 
 NATIVE_MAX_OBS = 160
@@ -713,28 +713,19 @@ def _results(book: Book, diag: Diagnosis, gls: dict) -> None:
 
 
 def _chart(book: Book, diag: Diagnosis, obs: dict) -> None:
-    from openpyxl.chart import Reference, ScatterChart, Series
+    from openpyxl.chart import Reference
 
     ws = book.wb[obs["sheet"]]
     ci = obs["ci"]
     r0, r1 = obs["rows"][0], obs["rows"][-1]
-    chart = ScatterChart()
-    chart.title = "Standardized residuals before and after the refit"
-    chart.y_axis.title = "z"
     if diag.prep.design.kind == "length":
-        x = Reference(ws, min_col=ci["d_mm"], min_row=r0, max_row=r1)
-        chart.x_axis.title = "d / mm"
+        x, x_title = Reference(ws, min_col=ci["d_mm"], min_row=r0, max_row=r1), "d / mm"
     else:
-        x = None
-        chart.x_axis.title = "coordinate row"
-    for key, title in (("z", "before"), ("z_after", "after")):
-        y = Reference(ws, min_col=ci[key], min_row=r0, max_row=r1)
-        s = Series(y, x, title=title) if x is not None else Series(y, title=title)
-        s.marker.symbol = "circle"
-        s.graphicalProperties.line.noFill = True
-        chart.series.append(s)
-    chart.height, chart.width = 9, 16
-    ws.add_chart(chart, f"{col(len(ci) + 2)}2")
+        x, x_title = None, "coordinate row"
+    series = [ChartSeries(title, x, Reference(ws, min_col=ci[key], min_row=r0, max_row=r1))
+              for key, title in (("z", "before"), ("z_after", "after"))]
+    book.scatter(ws, f"{col(len(ci) + 2)}2", "Standardized residuals before and after the refit",
+                 x_title, "z", series)
 
 
 # -- PNG plots -----------------------------------------------------------------------------------

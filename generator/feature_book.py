@@ -24,18 +24,28 @@ Sheets (in order):
 ``Results``       parameter, value, u (the contract)
 
 Above FEATURE_NATIVE_MAX_POINTS points the V_X sheets are not written; V_A,f of the factors
-other than R are then values computed by xlfuncs (grey cells, with a note saying so); J, H,
-G and the R factor stay native formulas.
+other than R are then values computed by xlfuncs (grey cells, with a note naming the core
+function: ``feature_job.propagation_method``); J, H, G and the R factor stay native formulas.
+Such workbooks also carry, as the large point-cloud workbook does (``generator.large_book``):
+
+``Live_addin``    the same numbers as Excel add-in formulas (``xlfuncs.udf``): ``cmm_feature``
+                  (value, u and the six components of each reported parameter) and, per grey
+                  factor, ``cmm_feature_va`` (reported V_A,f, at the cells of T V_A,f T^T on
+                  'V_A') and T^T V_A,f T x 1e12 at the cells of the grey values.  #NAME? in
+                  LibreOffice and without the add-in -- by design, no other cell refers to it.
+``xlwings.conf``  ``UDF Modules = xlfuncs.udf`` for this workbook.
 """
 
 from __future__ import annotations
 
 from xlfuncs import pointcloud as pc
 
+from . import __version__
 from .book import Book, Formula
-from .feature_job import KIND, Task, fitted
+from .feature_job import KIND, Task, fitted, propagation_method
+from .large_book import LIVE, addin_ranges, write_xlwings_conf
 from .vx_sheets import write_inputs, write_point_cloud_model, write_points
-from .xlref import Block, cell
+from .xlref import Block, block, cell
 
 #: native V_X formulas up to this many points (7 matrices of 3m x 3m plus J, G, V_A).  Measured
 #: with `python bench/bench_feature.py --workbooks 24 48 72 100` (cylinder, full model; formulas
@@ -63,6 +73,7 @@ def write_feature_book(task: Task, results: dict, path, *, native_max_points: in
     if native:
         layout = write_point_cloud_model(book, task.cloud, task.params)
         X, V = layout.X, layout.V
+        probe_rows = None
     else:
         _, probe_rows = write_inputs(book, task.params, task.cloud)
         X, _, _ = write_points(book, task.cloud, probe_rows)
@@ -77,11 +88,15 @@ def write_feature_book(task: Task, results: dict, path, *, native_max_points: in
     rows = _write_budget(book, f, va, fitref)
     if task.planning is not None:
         _write_planning(book, task, results)
+    if not native:
+        _write_live(book, task, f, va, probe_rows)
     book.results(["parameter", "value", "u"],
                  [[name, Formula(f"={cell(r, 2, 'Budget')}"), Formula(f"={cell(r, 4, 'Budget')}")]
                   for name, r in rows],
                  notes=[None, "fitted value (mm, rad, or unit-vector component)",
                         "standard uncertainty in the parameter's unit"])
+    if not native:
+        write_xlwings_conf(book)
     book.save(path)
 
 
@@ -136,8 +151,18 @@ def _instructions(book: Book, task: Task, f, native: bool, limit: int) -> None:
         book.para(
             f"4. This task has {f.m} points, more than the {limit} for which the 3m x 3m V_X matrices are "
             "laid out as native formulas: the V_X sheets are omitted and V_A of the factors PQ, S, ET, ER and "
-            "P on 'V_A' are values computed by xlfuncs (pointcloud.V_X_components, features.propagate), "
-            "marked grey with a note. J, H, G and the R factor remain formulas.")
+            f"P on 'V_A' are VALUES computed when the workbook was built by {propagation_method(f.m)} "
+            f"(cmmwb {__version__}), marked grey with a note; they do not follow edits of the inputs. J, H, "
+            "G and the R factor remain formulas.",
+            f"5. '{LIVE}' holds the same numbers as formulas of the cmmwb Excel add-in (xlwings user-defined "
+            "functions cmm_feature and cmm_feature_va in xlfuncs.udf) over 'Points', the probes and "
+            "parameters on 'Inputs' and the weights on 'Local': value, u and u per factor of each parameter "
+            "(as on 'Budget'), and per grey factor V_A of the reported parameters and of the paper "
+            "parameters (x 1e12) in the cells where 'V_A' has them. In Excel with the add-in they refit and "
+            "recompute live; install and use: docs/excel_addin.md of cmmwb (save as .xlsm, reference "
+            "xlwings, Import Functions; 'xlwings.conf' already names the module). In LibreOffice, or in "
+            f"Excel without the add-in, '{LIVE}' shows #NAME?: by design, no other cell refers to it, so "
+            "every result stays visible.")
     book.gap()
     book.para("Conventions", bold=True)
     book.para(*ERRATA, *task.notes)
@@ -290,7 +315,6 @@ def _write_jacobian(book: Book, f, local: dict, labels) -> dict:
             ["unit normal of the residual in the frame"] + [None] * 2 + \
             ["normal in machine coordinates, n = R nl: the columns of N in G_A|X = G_A|D N^T (eq. (8))"] + [None] * 2
     book.header(ws, 1, 1, cols, notes)
-    P = local["P"]
     c0 = 5
     for i in range(m):
         lr = 2 + i
@@ -451,7 +475,7 @@ def _write_V_A(book: Book, f, unc, G: Block, V) -> dict:
     book.note(ws.cell(row=3, column=2),
               "Locating point: R (dx_A, dy_A, dz_A); direction: R (rot_y, -rot_x, 0); r0, phi "
               "unchanged (xlfuncs.features, reported parameters)")
-    out_local, out_glob = {}, {}
+    out_local, out_glob, grey = {}, {}, {}
     Gt = G.ref
     for fac, (L, Gl) in v_a_layout(n, g).items():
         top = L.row
@@ -480,17 +504,19 @@ def _write_V_A(book: Book, f, unc, G: Block, V) -> dict:
                     book.number(ws, top + a, vb.column + b, Vv[a, b], fmt="0.000000E+00",
                                 computed=True)
             book.note(ws.cell(row=top, column=vb.column),
-                      f"VALUES, not formulas: V_A,{fac} = G_A|X V_{fac} G_A|X^T computed by "
-                      f"xlfuncs.features.propagate from xlfuncs.pointcloud.V_X_components "
-                      f"({3 * f.m} x {3 * f.m} matrix, too large for native formulas), in units "
-                      f"of 1e-12 (mm^2 -> nm^2, rad^2 -> (µrad)^2), scaled back on the left")
+                      f"VALUES, not formulas: V_A,{fac} = G_A|X V_{fac} G_A|X^T computed at build "
+                      f"time by {propagation_method(f.m)} (cmmwb {__version__}); V_X "
+                      f"({3 * f.m} x {3 * f.m}) is too large for native formulas. In units of 1e-12 "
+                      f"(mm^2 -> nm^2, rad^2 -> (µrad)^2), scaled back on the left. Live: the same "
+                      f"cells on sheet {LIVE} (add-in function cmm_feature_va)")
+            grey[fac] = vb
             book.array(L, f"={vb.ref}*{1 / VALUE_SCALE:.0E}", fmt=SMALL,
                        note=f"V_A,{fac}: the grey values on the right (computed by xlfuncs, "
                             "not formulas) x 1e-12")
         book.array(Gl, f"=MMULT(MMULT({T.ref},{L.ref}),TRANSPOSE({T.ref}))", fmt=SMALL,
                    note="T V_A T^T: covariance of the reported parameters")
         out_local[fac], out_glob[fac] = L, Gl
-    return {"local": out_local, "global": out_glob, "T": T}
+    return {"local": out_local, "global": out_glob, "T": T, "grey": grey}
 
 
 def _write_budget(book: Book, f, va: dict, fitref: dict) -> list[tuple[str, int]]:
@@ -540,6 +566,72 @@ def _write_budget(book: Book, f, va: dict, fitref: dict) -> list[tuple[str, int]
 
 def _unit(name: str) -> str:
     return "mm" if name.endswith("_mm") else "rad" if name.endswith("_rad") else "1"
+
+
+# -- the same numbers as Excel add-in formulas (above the native limit) -----------------------------
+
+#: 'Live_addin' columns of the fit options the add-in formulas read (rows 3, 4)
+LIVE_OPTION_COLUMN = 11
+
+
+def _write_live(book: Book, task: Task, f, va: dict, probe_rows: dict) -> None:
+    """The sheet ``Live_addin``: ``cmm_feature`` (rows 3.., the parameters of 'Budget') and, per
+    factor whose V_A is a grey value block on 'V_A', ``cmm_feature_va`` at the cells of the
+    reported covariance T V_A,f T^T and T^T V_A,f T x 1e12 at the cells of the grey values (T
+    has orthonormal columns: T^T T = I, so this is V_A,f of the paper parameters).  The add-in
+    refits the points with the task's options: the element, circle_plane, the weights on
+    'Local', axis_hint and reference_mm (cells on this sheet).  LibreOffice shows #NAME? here
+    (no add-in); no other cell refers to this sheet.  Protected like every sheet with formulas
+    (no password)."""
+    ws = book.sheet(LIVE)
+    m, n, g = f.m, f.n, len(f.names)
+    points, probes, params = addin_ranges(m, probe_rows)
+    weights = block(2, 2, m, 1, "Local")
+    circle_plane = (task.circle_plane or "space") if task.element == "circle" else ""
+    book.text(ws, 1, 1, "The numbers of 'Budget' and the grey values of 'V_A' as formulas of the cmmwb "
+                        "Excel add-in (xlfuncs.udf, docs/excel_addin.md): live in Excel with the add-in, "
+                        "#NAME? elsewhere (no other cell refers to this sheet)", font=None)
+    # the fit options of the task (the add-in refits the points with them)
+    oc = LIVE_OPTION_COLUMN
+    book.header(ws, 2, oc, ["fit option", "x", "y", "z"],
+                ["[feature] keys of the task file as built, read by the add-in formulas of this "
+                 "sheet (empty: the default); change them in the task file", None, None, None])
+    for r, (key, v) in enumerate((("axis_hint", task.axis_hint), ("reference_mm", task.reference_mm)),
+                                 start=3):
+        book.text(ws, r, oc, key)
+        if v is not None:
+            for a in range(3):
+                ws.cell(row=r, column=oc + 1 + a).value = float(v[a])
+    options = f'"{circle_plane}",{weights},{block(3, oc + 1, 1, 3)},{block(4, oc + 1, 1, 3)}'
+    head = f'"{task.element}",{points},{probes},{params}'
+    cols = ["parameter", "value", "u", *(f"u_{fac}" for fac in pc.FACTORS)]
+    book.header(ws, 2, 1, cols,
+                [f"cmm_feature(element, points, probes, params, circle_plane, weights, axis_hint, "
+                 "reference_mm): each reported parameter with its value, u and u per factor, the "
+                 "rows and columns A, B, D:J of 'Budget', computed live by the Excel add-in "
+                 "(Forbes 2022 fit; Forbes 2025 section 5.6)"] + [None] * (len(cols) - 1))
+    book.array(Block(LIVE, 3, 1, g, len(cols)), f"=cmm_feature({head},{options})", fmt=None)
+    names, lnames = list(f.names), list(f.local_names)
+    T = va["T"].ref
+    for fac, vb in va["grey"].items():
+        Gl = va["global"][fac]
+        top = Gl.row
+        book.text(ws, top - 2, 1, f"{fac}: V_A,{fac} of the reported parameters = cmm_feature_va(..., "
+                                  f"\"{fac}\", ...) at the cells of T V_A,{fac} T^T on 'V_A' (left); "
+                                  f"T^T V_A,{fac} T x 1e12 (paper parameters) at the cells of the grey "
+                                  "values (right)")
+        _matrix_labels(book, ws, top, Gl.column, names, names)
+        _matrix_labels(book, ws, top, vb.column, lnames, lnames)
+        live = Block(LIVE, top, Gl.column, g, g)
+        book.array(live, f'=cmm_feature_va({head},"{fac}",{options})', fmt=SMALL,
+                   note=f"V_A,{fac} = G_A|X V_{fac} G_A|X^T of the reported parameters (their units "
+                        "squared), computed live by the Excel add-in in row blocks (xlfuncs.blocked)")
+        book.array(Block(LIVE, top, vb.column, n, n),
+                   f"=MMULT(TRANSPOSE({T}),MMULT({live.local},{T}))*{VALUE_SCALE:.0E}",
+                   fmt="0.000000E+00",
+                   note=f"T^T V_A,{fac} T x 1e12: V_A,{fac} of the paper parameters in the frame on "
+                        "'Fit' (T^T T = I), the grey values of 'V_A' computed live")
+    ws.freeze_panes = "B3"
 
 
 def _value_refs(f) -> list[str]:

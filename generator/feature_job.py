@@ -390,6 +390,15 @@ def _safe_rows(path, plan: Planning):
 DENSE_MAX_POINTS = 300
 
 
+def propagation_method(m: int) -> str:
+    """The core function :func:`fitted` uses for V_A = G V_X G^T of m points, as the workbook
+    notes name it (the grey V_A values above the native-formula limit)."""
+    if m <= DENSE_MAX_POINTS:
+        return ("xlfuncs.features.propagate of the dense V_X of xlfuncs.pointcloud.V_X_components "
+                f"({3 * m} x {3 * m})")
+    return "xlfuncs.blocked.propagate_cloud (G V_X G^T in row blocks, V_X never formed)"
+
+
 def fitted(task: Task):
     """The fit and the per-factor V_A (cached on the task)."""
     if task._fit is None:

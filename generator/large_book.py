@@ -96,23 +96,37 @@ def write_large_book(task, results: dict, path: Path) -> None:
         rows.append([task.cloud.labels[i], task.cloud.labels[j]] +
                     [Formula(f"={cell(r, c, 'Budget')}") for c in range(4, 13)])
     book.results(RESULT_COLUMNS, rows)
+    write_xlwings_conf(book)
+    book.save(path)
+
+
+def addin_ranges(m: int, probe_rows: dict) -> tuple[str, str, str]:
+    """The ranges every add-in formula reads (``xlfuncs.udf`` argument layout): ``points`` =
+    Points!A:H of the m points, ``probes`` = the probes table on Inputs (rows ``probe_rows``
+    of :func:`generator.vx_sheets.write_inputs`), ``params`` = names and values of the 12
+    hyper-parameters on Inputs.  Shared by the pointcloud and the feature workbooks."""
+    rows = sorted(probe_rows.values())
+    return (block(2, 1, m, 8, "Points"),
+            block(rows[0], 1, rows[-1] - rows[0] + 1, 8, "Inputs"),
+            block(2, 1, len(pc.Parameters.__dataclass_fields__), 2, "Inputs"))
+
+
+def write_xlwings_conf(book: Book) -> None:
+    """The sheet ``xlwings.conf``: the add-in setting ``UDF Modules = xlfuncs.udf`` for this
+    workbook (read by xlwings' Import Functions; ignored by every other program)."""
     ws = book.sheet("xlwings.conf", protect=False)
     book.text(ws, 1, 1, "UDF Modules")
     book.text(ws, 1, 2, "xlfuncs.udf")
-    book.save(path)
 
 
 class _Refs:
     """Ranges the add-in formulas read: the points table, the ids, the probes, the parameters."""
 
     def __init__(self, task, probe_rows: dict):
-        m, n = task.cloud.m, len(task.pairs)
-        self.points = block(2, 1, m, 8, "Points")
+        n = len(task.pairs)
+        self.points, self.probes, self.params = addin_ranges(task.cloud.m, probe_rows)
         self.from_ids = block(2, 1, n, 1, "Budget")
         self.to_ids = block(2, 2, n, 1, "Budget")
-        rows = sorted(probe_rows.values())
-        self.probes = block(rows[0], 1, rows[-1] - rows[0] + 1, 8, "Inputs")
-        self.params = block(2, 1, len(pc.Parameters.__dataclass_fields__), 2, "Inputs")
 
     def args(self) -> str:
         return ",".join((self.points, self.from_ids, self.to_ids, self.probes, self.params))
@@ -234,7 +248,6 @@ def _write_points(book: Book, cloud, probe_rows: dict) -> tuple[Block, Block, Bl
 def _write_gp_blocks(book: Book, task, blocks: dict) -> dict:
     """The GP pair blocks as labelled values; returns {factor: first column}."""
     ws = book.sheet(GP)
-    n = len(task.pairs)
     labels = task.cloud.labels
     cols = {f: 3 + 9 * k for k, f in enumerate(GP_FACTORS)}
     header = ["from", "to"] + [f"B_{f}_{ab}_um2" for f in GP_FACTORS for ab in BLOCK_COLUMNS]

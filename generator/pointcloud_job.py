@@ -17,7 +17,7 @@ from xlfuncs.distributed import get_backend
 from xlfuncs.errors import ModelError
 
 from . import __version__
-from .book import Book, Formula
+from .book import Book, ChartSeries, Formula
 from .errors import InputError
 from .taskfile import check_keys, number, read_point_cloud, string, table, task_kind_and_name
 from .vx_sheets import NATIVE_MAX_POINTS, point_block, write_point_cloud_model
@@ -254,31 +254,22 @@ def _write_budget(book: Book, task: Task, layout) -> int:
 
 
 def _budget_chart(book: Book, ws, task: Task, first: int) -> None:
-    from openpyxl.chart import Reference, ScatterChart, Series
+    """K u(d) against d, one series per contiguous run of a group (Forbes 2025 Figures 6/7)."""
+    from openpyxl.chart import Reference
 
-    groups = [g for g in dict.fromkeys(task.groups)]
-    chart = ScatterChart()
-    chart.title = "Expanded uncertainty K u(d) against d (Forbes 2025 Figures 6/7)"
-    chart.x_axis.title = "d / mm"
-    chart.y_axis.title = "U / µm"
-    chart.style = 13
-    # contiguous runs of one group make one series each
-    start = 0
-    n = len(task.pairs)
+    series = []
+    start, n = 0, len(task.pairs)
     while start < n:
         end = start
         while end + 1 < n and task.groups[end + 1] == task.groups[start]:
             end += 1
-        x = Reference(ws, min_col=4, min_row=first + start, max_row=first + end)
-        y = Reference(ws, min_col=6, min_row=first + start, max_row=first + end)
-        s = Series(y, x, title=task.groups[start] or "distances")
-        s.marker.symbol = "circle"
-        s.graphicalProperties.line.noFill = True
-        chart.series.append(s)
+        series.append(ChartSeries(task.groups[start] or "distances",
+                                  Reference(ws, min_col=4, min_row=first + start, max_row=first + end),
+                                  Reference(ws, min_col=6, min_row=first + start, max_row=first + end)))
         start = end + 1
-    chart.height, chart.width = 9, 16
-    if len(groups) <= 12:
-        ws.add_chart(chart, "T2")
+    if len(series) <= 12:
+        book.scatter(ws, "T2", "Expanded uncertainty K u(d) against d (Forbes 2025 Figures 6/7)",
+                     "d / mm", "U / µm", series)
 
 
 def _write_mpe(book: Book, task: Task) -> None:
@@ -317,21 +308,13 @@ def _write_mpe(book: Book, task: Task) -> None:
         book.formula(ws, r, 11, f"={key}/MAX(1,C_max)" if scaled else f"={key}", fmt="0.0000")
         r += 1
     ws.freeze_panes = "A2"
-    from openpyxl.chart import Reference, ScatterChart, Series
+    from openpyxl.chart import Reference
 
-    chart = ScatterChart()
-    chart.title = "MPE and K u(d) with components (Forbes 2025 Figures 4/5)"
-    chart.x_axis.title = "d / mm"
-    chart.y_axis.title = "µm"
     x = Reference(ws, min_col=1, min_row=first, max_row=first + n - 1)
-    for c in range(2, 8):
-        y = Reference(ws, min_col=c, min_row=1, max_row=first + n - 1)
-        s = Series(y, x, title_from_data=True)
-        s.marker.symbol = "none"
-        s.smooth = False
-        chart.series.append(s)
-    chart.height, chart.width = 10, 18
-    ws.add_chart(chart, "M4")
+    book.scatter(ws, "M4", "MPE and K u(d) with components (Forbes 2025 Figures 4/5)", "d / mm", "µm",
+                 [ChartSeries(None, x, Reference(ws, min_col=c, min_row=1, max_row=first + n - 1),
+                              markers=False, title_from_data=True) for c in range(2, 8)],
+                 width=18, height=10)
 
 
 # -- plots -------------------------------------------------------------------------------------
