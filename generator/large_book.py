@@ -74,15 +74,9 @@ def write_large_book(task, results: dict, path: Path) -> None:
     blocks = bl.pair_blocks(task.cloud, task.params, task.pairs, GP_FACTORS)
     book = Book(KIND, task.name, f"Point-cloud uncertainty of distances — {task.name} ({m} points)")
     _instructions(book, task)
-    extra = [("K", task.K, "1", "coverage factor for U = K u", 0.0)]
-    if task.mpe is not None:
-        mp = task.mpe
-        extra = [("A_um", mp.A_um, "µm", "MPE: E = A + d/B (A)", 0.0),
-                 ("B_mm", mp.B_mm, "mm/µm", "MPE: E = A + d/B (B)", 0.0),
-                 ("K", mp.K, "1", "coverage factor K of eq. (6) and (36); U = K u", 0.0),
-                 ("P_mm", mp.P_mm, "mm", "longest probe length P in eq. (33)", 0.0),
-                 ("L_max_mm", mp.L_max_mm, "mm", "largest distance of the MPE check", 0.0)]
-    _, probe_rows = write_inputs(book, task.params, task.cloud, extra)
+    from .pointcloud_job import extra_inputs
+
+    _, probe_rows = write_inputs(book, task.params, task.cloud, extra_inputs(task))
     X, _N, U = _write_points(book, task.cloud, probe_rows)
     refs = _Refs(task, probe_rows)
     gp_cols = _write_gp_blocks(book, task, blocks)

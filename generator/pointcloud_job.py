@@ -148,6 +148,18 @@ def compute(task: Task) -> dict:
 
 # -- workbook ----------------------------------------------------------------------------------
 
+def extra_inputs(task: Task) -> list[tuple]:
+    """The named inputs beside the hyper-parameters: (key, value, unit, meaning, lower bound)."""
+    if task.mpe is None:
+        return [("K", task.K, "1", "coverage factor for U = K u", 0.0)]
+    m = task.mpe
+    return [("A_um", m.A_um, "µm", "MPE: E = A + d/B (A)", 0.0),
+            ("B_mm", m.B_mm, "mm/µm", "MPE: E = A + d/B (B)", 0.0),
+            ("K", m.K, "1", "coverage factor K of eq. (6) and (36); U = K u", 0.0),
+            ("P_mm", m.P_mm, "mm", "longest probe length P in eq. (33)", 0.0),
+            ("L_max_mm", m.L_max_mm, "mm", "largest distance of the MPE check", 0.0)]
+
+
 def write_book(task: Task, results: dict, path: Path) -> None:
     if task.cloud.m > NATIVE_MAX_POINTS:
         # beyond the native V_X sheets: GP blocks as values + Excel add-in formulas
@@ -157,15 +169,7 @@ def write_book(task: Task, results: dict, path: Path) -> None:
         return
     book = Book(KIND, task.name, f"Point-cloud uncertainty of distances — {task.name}")
     _instructions(book, task)
-    extra = [("K", task.K, "1", "coverage factor for U = K u and for C(d)", 0.0)]
-    if task.mpe is not None:
-        m = task.mpe
-        extra = [("A_um", m.A_um, "µm", "MPE: E = A + d/B (A)", 0.0),
-                 ("B_mm", m.B_mm, "mm/µm", "MPE: E = A + d/B (B)", 0.0),
-                 ("K", m.K, "1", "coverage factor K of eq. (6) and (36); U = K u", 0.0),
-                 ("P_mm", m.P_mm, "mm", "longest probe length P in eq. (33)", 0.0),
-                 ("L_max_mm", m.L_max_mm, "mm", "largest distance of the MPE check", 0.0)]
-    layout = write_point_cloud_model(book, task.cloud, task.params, extra)
+    layout = write_point_cloud_model(book, task.cloud, task.params, extra_inputs(task))
     budget = _write_budget(book, task, layout)
     if task.mpe is not None:
         _write_mpe(book, task)
