@@ -22,7 +22,7 @@ from xlfuncs.errors import ModelError
 
 from . import __version__
 from .errors import InputError
-from .taskfile import check_keys, number, table, task_kind_and_name
+from .taskfile import check_keys, number, table, task_kind_and_name, text_list
 from .xlref import check_name
 
 KIND = "budget"
@@ -236,11 +236,7 @@ def load(path: Path, doc: dict) -> Task:
     check_keys(path, doc, "task file", {"task", "mpe", "points", "datum_system", "characteristics"})
     task_tbl = table(path, doc, "task")
     check_keys(path, task_tbl, "task", {"kind", "name", "notes"})
-    notes = task_tbl.get("notes", [])
-    if isinstance(notes, str):
-        notes = [notes]
-    if not isinstance(notes, list) or not all(isinstance(x, str) for x in notes):
-        raise _err(path, "[task] notes", "must be text or a list of texts")
+    notes = text_list(path, task_tbl, "task", "notes")
     m = table(path, doc, "mpe")
     check_keys(path, m, "mpe", {"A_um", "B_mm", "b", "k"})
     mpe = bd.MPE(number(path, m, "mpe", "A_um", lo=0.0), number(path, m, "mpe", "B_mm", positive=True),

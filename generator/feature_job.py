@@ -32,7 +32,7 @@ from xlfuncs.errors import ModelError
 
 from . import __version__
 from .errors import InputError
-from .taskfile import (check_keys, number, read_parameters, read_point_cloud, read_probes,
+from .taskfile import (check_keys, number, read_parameters, read_point_cloud, read_probes, text_list,
                        string, table, task_kind_and_name, vector3)
 
 KIND = "feature"
@@ -194,11 +194,7 @@ def load(path: Path, doc: dict) -> Task:
                                         "parameters", "probes"})
     t = table(path, doc, "task")
     check_keys(path, t, "task", {"kind", "name", "notes"})
-    notes = t.get("notes", [])
-    if isinstance(notes, str):
-        notes = [notes]
-    if not isinstance(notes, list) or not all(isinstance(n, str) for n in notes):
-        raise InputError("must be text or a list of texts", file=path, where="[task] notes")
+    notes = text_list(path, t, "task", "notes")
 
     f = table(path, doc, "feature")
     check_keys(path, f, "feature", {"type", "circle_plane", "axis_hint", "reference_mm",

@@ -30,16 +30,14 @@ from copy import copy
 from pathlib import Path
 
 import numpy as np
-from openpyxl.styles import Protection
-from openpyxl.worksheet.datavalidation import DataValidation
 
 from xlfuncs import blocked as bl
 from xlfuncs import pointcloud as pc
 
 from . import __version__
-from .book import BOX, INPUT_FILL, INPUT_FONT, NUMBER_FORMAT, VALUE_FILL, Book, Formula
+from .book import VALUE_FILL, Book
 from .errors import InputError
-from .vx_sheets import NATIVE_MAX_POINTS, write_inputs
+from .vx_sheets import NATIVE_MAX_POINTS, write_inputs, write_points
 from .xlref import Block, block, cell
 
 GP_FACTORS = ("ET", "ER", "P")
@@ -60,7 +58,7 @@ C = {name: k + 1 for k, name in enumerate(BUDGET_COLUMNS)}
 
 def write_large_book(task, results: dict, path: Path) -> None:
     """Write the workbook of a ``pointcloud`` task with more than NATIVE_MAX_POINTS points."""
-    from .pointcloud_job import KIND, RESULT_COLUMNS, _write_mpe
+    from .pointcloud_job import KIND, RESULT_COLUMNS, _write_mpe, extra_inputs, results_rows
 
     m, n = task.cloud.m, len(task.pairs)
     if m > MAX_BOOK_POINTS:
@@ -74,22 +72,15 @@ def write_large_book(task, results: dict, path: Path) -> None:
     blocks = bl.pair_blocks(task.cloud, task.params, task.pairs, GP_FACTORS)
     book = Book(KIND, task.name, f"Point-cloud uncertainty of distances — {task.name} ({m} points)")
     _instructions(book, task)
-    from .pointcloud_job import extra_inputs
-
     _, probe_rows = write_inputs(book, task.params, task.cloud, extra_inputs(task))
-    X, _N, U = _write_points(book, task.cloud, probe_rows)
+    X, _N, U = write_points(book, task.cloud, probe_rows)
     refs = _Refs(task, probe_rows)
     gp_cols = _write_gp_blocks(book, task, blocks)
     first = _write_budget(book, task, X, U, probe_rows, gp_cols)
     _write_live(book, task, refs)
     if task.mpe is not None:
         _write_mpe(book, task)
-    rows = []
-    for q, (i, j) in enumerate(task.pairs):
-        r = first + q
-        rows.append([task.cloud.labels[i], task.cloud.labels[j]] +
-                    [Formula(f"={cell(r, c, 'Budget')}") for c in range(4, 13)])
-    book.results(RESULT_COLUMNS, rows)
+    book.results(RESULT_COLUMNS, results_rows(task, first))
     write_xlwings_conf(book)
     book.save(path)
 
@@ -194,49 +185,6 @@ def _finite(v: float, where: str) -> float:
     if not np.isfinite(v):
         raise InputError(f"{where}: the core produced {v!r}")
     return v
-
-
-def _write_points(book: Book, cloud, probe_rows: dict) -> tuple[Block, Block, Block]:
-    """The Points sheet in the layout of :func:`generator.vx_sheets.write_points` (id, x, y, z,
-    nx, ny, nz, probe, p, u = x - p), written for many points: input cells styled from one
-    template and validated by one rule over the whole block (per-cell validation is quadratic
-    in openpyxl)."""
-    ws = book.sheet("Points")
-    cols = ["id", "x_mm", "y_mm", "z_mm", "nx", "ny", "nz", "probe", "px_mm", "py_mm", "pz_mm",
-            "ux_mm", "uy_mm", "uz_mm"]
-    notes = [None] * 8 + ["probe offset p_k(i) (from Inputs)"] * 3 + \
-            ["machine (ram) position x_i - p_k(i), Forbes 2025 section 5.3"] * 3
-    book.header(ws, 1, 1, cols, notes)
-    m = cloud.m
-    inp = _template(book, number_format=NUMBER_FORMAT, fill=INPUT_FILL, font=INPUT_FONT, border=BOX,
-                    protection=Protection(locked=False))
-    plain = _template(book, number_format=NUMBER_FORMAT)
-    general = _template(book, number_format="General")
-    for i in range(m):
-        r = i + 2
-        k = int(cloud.probe_index[i])
-        book.text(ws, r, 1, cloud.labels[i])
-        for c in range(3):
-            for col, v in ((2 + c, cloud.X_mm[i, c]), (5 + c, cloud.N[i, c])):
-                x = ws.cell(row=r, column=col)
-                x.value = _finite(v, f"Points!{cell(r, col, absolute=False)}")
-                x._style = copy(inp)
-        book.text(ws, r, 8, cloud.probes[k].id)
-        for c in range(3):
-            x = ws.cell(row=r, column=9 + c)
-            x.value = f"={cell(probe_rows[k], 2 + c, 'Inputs')}"
-            x._style = copy(general)
-            x = ws.cell(row=r, column=12 + c)
-            x.value = f"={cell(r, 2 + c)}-{cell(r, 9 + c)}"
-            x._style = copy(plain)
-    dv = DataValidation(type="decimal", operator="between", formula1="-1E+307", formula2="1E+307",
-                        sqref=f"B2:G{m + 1}")
-    dv.error = "Enter a number."
-    dv.errorTitle = "cmmwb input"
-    dv.showErrorMessage = True
-    ws.add_data_validation(dv)
-    ws.freeze_panes = "B2"
-    return Block("Points", 2, 2, m, 3), Block("Points", 2, 5, m, 3), Block("Points", 2, 12, m, 3)
 
 
 def _write_gp_blocks(book: Book, task, blocks: dict) -> dict:

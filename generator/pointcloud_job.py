@@ -19,7 +19,7 @@ from xlfuncs.errors import ModelError
 from . import __version__
 from .book import Book, ChartSeries, Formula
 from .errors import InputError
-from .taskfile import check_keys, number, read_point_cloud, string, table, task_kind_and_name
+from .taskfile import check_keys, number, read_point_cloud, string, table, task_kind_and_name, text_list
 from .vx_sheets import NATIVE_MAX_POINTS, point_block, write_point_cloud_model
 from .xlref import Block, block, cell
 
@@ -60,11 +60,7 @@ def load(path: Path, doc: dict) -> Task:
     check_keys(path, doc, "task file", {"task", "mpe", "parameters", "probes", "points", "distances"})
     check_keys(path, table(path, doc, "task"), "task", {"kind", "name", "notes", "K"})
     cloud, params, pts = read_point_cloud(path, doc)
-    notes = doc["task"].get("notes", [])
-    if isinstance(notes, str):
-        notes = [notes]
-    if not isinstance(notes, list) or not all(isinstance(n, str) for n in notes):
-        raise InputError("must be text or a list of texts", file=path, where="[task] notes")
+    notes = text_list(path, doc["task"], "task", "notes")
     mpe = None
     K = number(path, doc["task"], "task", "K", 2.0, positive=True)
     if "mpe" in doc:
@@ -173,13 +169,16 @@ def write_book(task: Task, results: dict, path: Path) -> None:
     budget = _write_budget(book, task, layout)
     if task.mpe is not None:
         _write_mpe(book, task)
-    rows = []
-    for q, (i, j) in enumerate(task.pairs):
-        r = budget + q
-        rows.append([task.cloud.labels[i], task.cloud.labels[j]] +
-                    [Formula(f"={cell(r, c, 'Budget')}") for c in range(4, 13)])
-    book.results(RESULT_COLUMNS, rows)
+    book.results(RESULT_COLUMNS, results_rows(task, budget))
     book.save(path)
+
+
+def results_rows(task: Task, first: int) -> list[list]:
+    """The contract's Results rows: from, to, then references to Budget columns D..L
+    (d, u, U, u_R ... u_P) of the distance in row ``first + q``."""
+    labels = task.cloud.labels
+    return [[labels[i], labels[j]] + [Formula(f"={cell(first + q, c, 'Budget')}") for c in range(4, 13)]
+            for q, (i, j) in enumerate(task.pairs)]
 
 
 def _instructions(book: Book, task: Task) -> None:

@@ -98,6 +98,16 @@ def number(path: Path, tbl: dict, section: str, key: str, default: float | None 
     return value
 
 
+def text_list(path: Path, tbl: dict, section: str, key: str) -> list[str]:
+    """A text or a list of texts (e.g. ``[task] notes``); absent gives []."""
+    value = tbl.get(key, [])
+    if isinstance(value, str):
+        value = [value]
+    if not isinstance(value, list) or not all(isinstance(v, str) for v in value):
+        raise InputError("must be text or a list of texts", file=path, where=f"[{section}] {key}")
+    return list(value)
+
+
 def vector3(path: Path, tbl: dict, section: str, key: str) -> tuple[float, float, float]:
     value = tbl.get(key)
     where = f"{section} {key}"
