@@ -53,7 +53,7 @@ _SINGLE_REF = re.compile(r"^=?(?:(?:'((?:[^']|'')+)'|([A-Za-z_][A-Za-z0-9_.]*))!
 _HEADER_TEXT = re.compile(rb"<t[^>]*>(.*?)</t>", re.S)
 
 
-# -- what the Results sheet holds, per kind (the contract of shared/spec/cli.md) ----------------
+# -- what the Results sheet holds, per kind (the contract of docs/cli.md) ----------------
 
 def results_table(kind: str, results: dict) -> list[dict[str, Any]]:
     """The rows of the ``Results`` sheet as the JSON gives them, keyed by column name."""

@@ -10,6 +10,7 @@ import argparse
 import json
 import os
 import sys
+import textwrap
 import time
 from pathlib import Path
 
@@ -30,8 +31,11 @@ EXAMPLES_DIR = Path(__file__).parent / "examples"
 def cmd_build(args) -> int:
     results, files = build_task(Path(args.task), Path(args.out), plots=not args.no_plots,
                                 force=args.force, cache=args.cache)
+    print(f"[{results['kind']}] {results['name']}")
+    for line in job(results["kind"]).summary(results):
+        print(f"    {line}")
     for f in files:
-        print(f)
+        print(f"    -> {f}")
     return 0
 
 
@@ -41,16 +45,29 @@ def cmd_new(args) -> int:
     out = Path(args.out)
     if out.exists() and not args.force:
         raise InputError("exists already (use --force to overwrite)", file=out)
-    write_text(out, job(args.kind).NEW_TASK)
-    print(out)
-    for fname, content in getattr(job(args.kind), "NEW_TASK_FILES", {}).items():
+    text, extras = new_task(args.kind, out.stem)
+    for fname, content in extras.items():
         extra = out.parent / fname
         if extra.exists():
             print(f"{extra} exists already: kept as it is")
             continue
         write_text(extra, content)
         print(extra)
+    write_text(out, text)  # after its points table: a task never names a file that is not there
+    print(out)
     return 0
+
+
+def new_task(kind: str, stem: str) -> tuple[str, dict[str, str]]:
+    """The starter task of ``kind`` for a task file named ``stem``.toml, and the files it needs
+    beside it, named after the task (``points.csv`` -> ``<stem>_points.csv``)."""
+    mod = job(kind)
+    text, extras = mod.NEW_TASK, {}
+    for fname, content in getattr(mod, "NEW_TASK_FILES", {}).items():
+        mine = f"{stem}_{fname}"
+        text = text.replace(f'file = "{fname}"', f'file = "{mine}"')
+        extras[mine] = content
+    return text, extras
 
 
 def cmd_demo(args) -> int:
@@ -111,39 +128,75 @@ def cmd_recalc(args) -> int:
     return 0
 
 
-def parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="cmmwb", description=(
-        "Task-specific uncertainty of CMM measurements as live spreadsheet workbooks "
-        "(Forbes 2025, Wojtyla/Plowucha 2023, Forbes 2022)."))
-    p.add_argument("--version", action="version", version=f"cmmwb {__version__}")
-    sub = p.add_subparsers(dest="command", required=True)
+def _examples(*lines: str) -> str:
+    return "examples:\n" + "\n".join(f"  {line}" for line in lines)
 
-    s = sub.add_parser("demo", help="build every worked example of the three papers")
-    s.add_argument("--out", default="cmmwb-demo", help="output folder (default: cmmwb-demo)")
+
+def add_command(sub, name: str, help: str, description: str, examples: tuple[str, ...]):
+    """A subcommand whose --help shows its description and a few examples verbatim."""
+    return sub.add_parser(name, help=help, description=textwrap.fill(description, 79),
+                          epilog=_examples(*examples), formatter_class=argparse.RawDescriptionHelpFormatter)
+
+
+def parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="cmmwb", formatter_class=argparse.RawDescriptionHelpFormatter,
+        description=textwrap.fill("Task-specific uncertainty of CMM measurements as live spreadsheet "
+                                  "workbooks (Forbes 2025, Wojtyla/Plowucha 2023, Forbes 2022).", 79),
+        epilog=_examples("cmmwb demo --out cmmwb-demo",
+                         "cmmwb new pointcloud --out gauge.toml && cmmwb build gauge.toml --out gauge",
+                         "cmmwb COMMAND --help") +
+        "\n\nExit status: 0 success, 2 bad input (one message naming the file and line, key, sheet "
+        "or cell),\n1 an internal error. Task files, JSON and workbooks: docs/cli.md.")
+    p.add_argument("--version", action="version", version=f"cmmwb {__version__}")
+    sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    s = add_command(sub, "demo", "build every worked example of the three papers",
+                    "Builds the worked examples of the three papers (workbooks, JSON, PNG plots) and the "
+                    "mismatch-locator demonstrations into one folder, and prints the headline results.",
+                    ("cmmwb demo", "cmmwb demo --out /tmp/demo"))
+    s.add_argument("--out", default="cmmwb-demo", metavar="DIR", help="output folder (default: cmmwb-demo)")
     s.set_defaults(func=cmd_demo)
 
-    s = sub.add_parser("new", help="write a commented task file to start from")
-    s.add_argument("kind", choices=KINDS)
-    s.add_argument("--out", required=True, help="task file to write")
-    s.add_argument("--force", action="store_true", help="overwrite an existing file")
+    s = add_command(sub, "new", "write a commented task file to start from",
+                    "Writes a commented task file of the given kind that builds as it is; a point-cloud "
+                    "task comes with its points table TASK_points.csv beside it.",
+                    ("cmmwb new pointcloud --out gauge.toml   # also writes gauge_points.csv",
+                     "cmmwb new budget --out knuckle.toml", "cmmwb new feature --out bore.toml"))
+    s.add_argument("kind", choices=KINDS, help="task kind: " + ", ".join(KINDS))
+    s.add_argument("--out", required=True, metavar="TASK.toml", help="task file to write")
+    s.add_argument("--force", action="store_true",
+                   help="overwrite an existing task file (default: refuse); an existing points table is kept")
     s.set_defaults(func=cmd_new)
 
-    s = sub.add_parser("build", help="task file -> workbook + JSON (+ plots)")
-    s.add_argument("task")
-    s.add_argument("--out", required=True, help="output folder")
-    s.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
+    s = add_command(sub, "build", "task file -> workbook + JSON (+ plots)",
+                    "Computes the task with the Python core and writes DIR/<name>.xlsx (native formulas), "
+                    "DIR/<name>.json and PNG plots, all or nothing; prints the headline results.",
+                    ("cmmwb build gauge.toml --out gauge",
+                     "cmmwb build gauge.toml --out gauge --force      # after editing the workbook",
+                     "cmmwb build bore.toml --out bore --no-plots --cache none"))
+    s.add_argument("task", metavar="TASK.toml", help="the task file (see cmmwb new)")
+    s.add_argument("--out", required=True, metavar="DIR", help="output folder (created if missing)")
+    s.add_argument("--no-plots", action="store_true", help="skip the PNG plots (default: write them)")
     s.add_argument("--force", action="store_true",
-                   help="replace outputs that were edited since cmmwb wrote them (keeps NAME.bak backups)")
+                   help="replace outputs that were edited since cmmwb wrote them, keeping NAME.bak backups "
+                        "(default: refuse)")
     s.add_argument("--cache", choices=("results", "all", "none"), default="results",
                    help="cached values for programs that do not calculate: the Results sheet from the "
-                        "JSON (default), every formula cell as the `formulas` engine computes it (slow "
-                        "for big workbooks), or none")
+                        "JSON (default: results), every formula cell as the `formulas` engine computes it "
+                        "(all; slow for big workbooks), or none")
     s.set_defaults(func=cmd_build)
 
-    s = sub.add_parser("recalc", help="recompute a workbook headlessly and print its Results")
-    s.add_argument("book")
-    s.add_argument("--engine", choices=("formulas", "libreoffice"), default="formulas")
-    s.add_argument("--json", action="store_true", help="print the Results rows as JSON")
+    s = add_command(sub, "recalc", "recompute a workbook headlessly and print its Results",
+                    "Recomputes every formula of a workbook with the chosen engine (a forced full "
+                    "recalculation) and prints the Results sheet as a table or JSON.",
+                    ("cmmwb recalc gauge/my_pointcloud.xlsx",
+                     "cmmwb recalc gauge/my_pointcloud.xlsx --engine libreoffice --json"))
+    s.add_argument("book", metavar="BOOK.xlsx", help="the workbook (written by cmmwb build, possibly edited)")
+    s.add_argument("--engine", choices=("formulas", "libreoffice"), default="formulas",
+                   help="formulas: the pure-Python engine, in process (default: formulas); libreoffice: "
+                        "a real headless LibreOffice (soffice must be installed)")
+    s.add_argument("--json", action="store_true", help="print the Results rows as JSON (default: a table)")
     s.set_defaults(func=cmd_recalc)
 
     for extra in ("read_cli", "diagnose_cli"):

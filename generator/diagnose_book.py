@@ -1,4 +1,4 @@
-"""The diagnosis workbook and plots (``cmmwb diagnose``, ``shared/spec/recordings.md`` section 3).
+"""The diagnosis workbook and plots (``cmmwb diagnose``, ``docs/recordings.md`` section 3).
 
 Sheets: Instructions, Inputs (alpha, the simulation's parameters, probes, initial alignment of
 point records), Records (the recordings as editable inputs, residuals, standardized residuals, the
@@ -80,7 +80,7 @@ def _instructions(book: Book, diag: Diagnosis, native: bool, source: str) -> Non
         f"Recordings ({prep.rec.n} {prep.design.kind} records{', ' + source if source else ''}) compared "
         "with the simulation of the task: the residuals, their chi-square against the simulation's "
         "covariance (Forbes 2025 eq. 28, propagated to the records), the candidate effects the core "
-        "tested (shared/spec/recordings.md section 4) and the refit with the chosen ones.",
+        "tested (docs/recordings.md section 4) and the refit with the chosen ones.",
         "The refit is live: the normal equations of generalized least squares, b = (X' C^-1 X)^-1 X' "
         "C^-1 r, are native MMULT/MINVERSE formulas over the chosen sensitivity columns, and those "
         "columns are formulas of the record cells (probe offsets, normals, temperatures, times).")

@@ -1,4 +1,4 @@
-"""``cmmwb diagnose`` and ``cmmwb simulate`` (``shared/spec/recordings.md``), and the
+"""``cmmwb diagnose`` and ``cmmwb simulate`` (``docs/recordings.md``), and the
 concealed-effect demonstration of ``cmmwb demo``.
 
 ``cmmwb diagnose RECORDINGS.csv --task TASK.toml --out DIR`` (or ``--sigma-um S``) writes
@@ -35,37 +35,57 @@ MPE1 = dict(sigma_R_um=0.20, sigma_S_ppm=0.7, sigma_Sa_ppm=0.7, sigma_Q_ppm=0.7,
 
 
 def register(sub) -> None:
-    s = sub.add_parser("diagnose", help="compare recordings with the simulation: where, why, what to add",
-                       description="Mismatch locator (shared/spec/recordings.md): chi-square of the "
-                                   "recordings against the simulation's covariance, location of the "
-                                   "mismatch, the candidate effects that explain it, and the refit.")
-    s.add_argument("recordings", help="recordings CSV (length records: measured_mm; point records: x_nom)")
-    s.add_argument("--task", help="task file whose [parameters] and [[probes]] define the simulation")
-    s.add_argument("--sigma-um", type=float, help="shorthand for a task with only sigma_R_um = S")
-    s.add_argument("--out", required=True, help="output folder")
-    s.add_argument("--alpha", type=float, default=0.01, help="significance level (default 0.01)")
-    s.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
-    s.add_argument("--no-workbook", action="store_true", help="skip the workbook")
+    from .cli import add_command
+
+    s = add_command(sub, "diagnose", "compare recordings with the simulation: where, why, what to add",
+                    "Mismatch locator (docs/recordings.md): chi-square of the recordings against the "
+                    "simulation's covariance, location of the mismatch, the candidate effects that explain "
+                    "it, and the refit. Writes DIR/diagnosis.json, a workbook whose refit uses native "
+                    "formulas, and residual plots before and after.",
+                    ("cmmwb diagnose stepgauge.csv --task machine.toml --out diag",
+                     "cmmwb diagnose plate.csv --sigma-um 0.3 --out diag --alpha 0.001",
+                     "cmmwb simulate --layout stepgauge --effect scale_x=2 --out rec.csv && "
+                     "cmmwb diagnose rec.csv --sigma-um 0.2 --out d"))
+    s.add_argument("recordings", metavar="RECORDINGS.csv",
+                   help="recordings CSV (length records: a measured_mm column; point records: x_nom)")
+    s.add_argument("--task", metavar="TASK.toml",
+                   help="task file whose [parameters] and [[probes]] define the simulation")
+    s.add_argument("--sigma-um", type=float, metavar="S",
+                   help="instead of --task: a simulation with only repeatability sigma_R_um = S (µm)")
+    s.add_argument("--out", required=True, metavar="DIR", help="output folder (created if missing)")
+    s.add_argument("--alpha", type=float, default=0.01, help="significance level (default: 0.01)")
+    s.add_argument("--no-plots", action="store_true", help="skip the PNG plots (default: write them)")
+    s.add_argument("--no-workbook", action="store_true", help="skip the workbook (default: write it)")
     s.add_argument("--force", action="store_true",
-                   help="replace outputs edited since cmmwb wrote them (a backup is kept)")
+                   help="replace outputs edited since cmmwb wrote them, keeping a backup (default: refuse)")
     s.set_defaults(func=cmd_diagnose)
 
-    s = sub.add_parser("simulate", help="write recordings of a realistic layout with planted effects",
-                       description="Recordings measured by a CMM drawn from the task's Forbes 2025 model "
-                                   "(or Table 3 MPE1 without --task), with planted effects of "
-                                   "shared/spec/recordings.md section 4.")
-    s.add_argument("--layout", required=True, choices=sm.LAYOUTS)
-    s.add_argument("--task", help="task file: [parameters] and [[probes]] of the simulated CMM")
-    s.add_argument("--sigma-um", type=float, help="shorthand for a task with only sigma_R_um = S")
+    s = add_command(sub, "simulate", "write recordings of a realistic layout with planted effects",
+                    "Recordings measured by a CMM drawn from the task's Forbes 2025 model (or Table 3 "
+                    "MPE1 without --task), with planted effects named as in docs/recordings.md section 4.",
+                    ("cmmwb simulate --layout iso10360 --out rec.csv",
+                     "cmmwb simulate --layout stepgauge --effect squareness_xy=4.1 --seed 7 --out rec.csv",
+                     "cmmwb simulate --layout ballplate --effect thermal_expansion=1.5 "
+                     "--temperature-C 20,23 --out rec.csv"))
+    s.add_argument("--layout", required=True, choices=sm.LAYOUTS,
+                   help="what is measured: " + ", ".join(sm.LAYOUTS))
+    s.add_argument("--task", metavar="TASK.toml",
+                   help="task file: [parameters] and [[probes]] of the simulated CMM (default: Forbes 2025 "
+                        "Table 3 MPE1)")
+    s.add_argument("--sigma-um", type=float, metavar="S",
+                   help="instead of --task: a CMM with only repeatability sigma_R_um = S (µm)")
     s.add_argument("--effect", action="append", default=[], metavar="NAME=VALUE",
-                   help="planted effect in the unit of spec section 4, e.g. squareness_xy=4.1, "
-                        "probe_qualification=P2:0.5,0,0, offset_drift=0.3,0,0 (repeatable)")
-    s.add_argument("--seed", type=int, default=1, help="random seed (default 1)")
-    s.add_argument("--temperature-C", default=None,
-                   help="artefact temperature: T or T0,T1 (a ramp over the session); default: no column")
-    s.add_argument("--hours", type=float, default=None, help="length of the session (time_s column)")
-    s.add_argument("--repeats", type=int, default=None, help="repetitions (iso10360, stepgauge)")
-    s.add_argument("--out", required=True, help="recordings CSV to write")
+                   help="planted effect in the unit of docs/recordings.md section 4, e.g. squareness_xy=4.1, "
+                        "probe_qualification=P2:0.5,0,0, offset_drift=0.3,0,0 (repeatable; default: none)")
+    s.add_argument("--seed", type=int, default=1, help="random seed (default: 1)")
+    s.add_argument("--temperature-C", default=None, metavar="T|T0,T1",
+                   help="artefact temperature: T or T0,T1 (a ramp over the session) in °C "
+                        "(default: no temperature column)")
+    s.add_argument("--hours", type=float, default=None,
+                   help="length of the session in hours (adds time_s; default: no time column)")
+    s.add_argument("--repeats", type=int, default=None,
+                   help="repetitions (iso10360, stepgauge; default: the layout's own)")
+    s.add_argument("--out", required=True, metavar="REC.csv", help="recordings CSV to write")
     s.set_defaults(func=cmd_simulate)
 
 

@@ -206,15 +206,18 @@ def _write_fit(book: Book, f, task: Task) -> dict:
         refs[name] = cell(r, 2, "Fit")
         r += 1
     r += 1
-    for label, value in (("element", _label(f)), ("points m", str(f.m)),
-                         ("residuals per point k", str(f.k)),
-                         ("iterations", str(f.iterations)),
-                         ("rms residual (mm)", f"{f.rms_mm:.3e}"),
+    for label, value in (("element", _label(f)), ("points m", f.m),
+                         ("residuals per point k", f.k),
+                         ("iterations", f.iterations),
+                         ("rms residual (mm)", f.rms_mm),
                          ("circle plane", f.circle_plane or "")):
         if label == "circle plane" and not f.circle_plane:
             continue
         book.text(ws, r, 1, label)
-        book.text(ws, r, 2, value)
+        if isinstance(value, str):
+            book.text(ws, r, 2, value)
+        else:  # numbers as numbers: the rms of an exact fit is rounding noise, not text to compare
+            book.number(ws, r, 2, value, fmt="0" if isinstance(value, int) else "0.000E+00", computed=True)
         r += 1
     ws.column_dimensions["A"].width = 28
     for c in "BCD":

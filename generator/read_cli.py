@@ -15,10 +15,19 @@ from .errors import InputError
 
 
 def register(sub) -> None:
-    s = sub.add_parser("read", help="workbook (filled in, Excel or LibreOffice) -> task file")
-    s.add_argument("book", help="the .xlsx workbook (written by cmmwb build, possibly edited)")
-    s.add_argument("--out", required=True, help="task file to write (TOML)")
-    s.add_argument("--force", action="store_true", help="overwrite existing files")
+    from .cli import add_command
+
+    s = add_command(sub, "read", "workbook (filled in, Excel or LibreOffice) -> task file",
+                    "Reads the input cells of a workbook written by cmmwb build (and filled in or edited "
+                    "in Excel or LibreOffice) back into a task file, so that cmmwb build regenerates the "
+                    "workbook for the new task. Point-cloud and feature points go to TASK_points.csv "
+                    "beside the task file. Nothing is written unless the whole workbook reads.",
+                    ("cmmwb read filled_in.xlsx --out gauge2.toml && cmmwb build gauge2.toml --out gauge2",
+                     "cmmwb read workbook_templates/pointcloud_template.xlsx --out mine.toml --force"))
+    s.add_argument("book", metavar="BOOK.xlsx",
+                   help="the .xlsx workbook (written by cmmwb build, possibly edited; not .xlsm)")
+    s.add_argument("--out", required=True, metavar="TASK.toml", help="task file to write (TOML)")
+    s.add_argument("--force", action="store_true", help="overwrite existing files (default: refuse)")
     s.set_defaults(func=cmd_read)
 
 
@@ -46,9 +55,10 @@ def read_to_files(book: Path, out: Path, *, force: bool = False) -> list[Path]:
     try:
         for path, text in targets.items():
             fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+            staged.append((tmp, path))
             with os.fdopen(fd, "w", encoding="utf-8", newline="\n") as fh:
                 fh.write(text)
-            staged.append((tmp, path))
+            os.chmod(tmp, 0o644)  # as every other output (generator.atomic)
         # the points table first: a task file never refers to a table that is not there
         for tmp, path in sorted(staged, key=lambda t: t[1] == out):
             os.replace(tmp, path)

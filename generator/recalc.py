@@ -2,7 +2,7 @@
 
 * ``formulas``: the pure-Python engine, in process.
 * ``libreoffice``: a real LibreOffice (``soffice --headless``) with a private profile that forces a
-  full recalculation on load (``OOXMLRecalcMode`` = 0, see ``shared/design.md``), converting to a
+  full recalculation on load (``OOXMLRecalcMode`` = 0, see ``docs/engines.md``), converting to a
   fresh ``.xlsx`` whose cached values are then read with openpyxl.
 
 Both return ``{sheet name: {cell coordinate: value}}`` for every cell that holds a value.

@@ -1,7 +1,7 @@
 """Formula-text helpers: cell and block addresses, sheet quoting, array formulas, defined names.
 
 Every workbook writer builds its formulas with these few functions instead of pasting strings,
-so that the rules of ``shared/design.md`` hold everywhere:
+so that the rules of ``docs/engines.md`` hold everywhere:
 
 * static addresses (no OFFSET/INDEX), absolute by default;
 * array arithmetic only inside array formulas (LibreOffice gives #VALUE! otherwise);

@@ -1,4 +1,4 @@
-"""The mismatch locator's numerical core (shared/spec/recordings.md sections 2-6): the record
+"""The mismatch locator's numerical core (docs/recordings.md sections 2-6): the record
 covariance from V_X, the chi-square tail, the candidate sensitivities, aliasing, the search."""
 
 import math

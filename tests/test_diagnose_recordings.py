@@ -1,4 +1,4 @@
-"""Recordings (shared/spec/recordings.md section 1): what is read, and bad input that gets one
+"""Recordings (docs/recordings.md section 1): what is read, and bad input that gets one
 clear message naming the file, line and column, exit status 2 and nothing in the output folder."""
 
 import subprocess

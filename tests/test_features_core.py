@@ -390,11 +390,15 @@ def test_points_on_one_circle_do_not_determine_a_cylinder():
         features.fit("cylinder", s.X_mm, normals=s.N)
 
 
-def test_a_cylinder_fitted_to_flat_points_does_not_converge():
+def test_a_cylinder_fitted_to_flat_points_is_refused_with_a_named_error():
+    """Flat points determine no cylinder: the radius runs away.  Whether Gauss-Newton first meets a
+    rank-deficient Jacobian or runs out of iterations depends on rounding (the BLAS kernel of the
+    CPU); either way the answer is a named error, never a fitted cylinder."""
     rng = np.random.default_rng(5)
     X = np.column_stack([rng.uniform(-20, 20, 30), rng.uniform(-20, 20, 30),
                          rng.normal(scale=1e-4, size=30)])
-    with pytest.raises(ConvergenceError, match="cylinder fit did not converge"):
+    with pytest.raises((ConvergenceError, DegenerateGeometryError),
+                       match=r"cylinder fit (did not converge|: the points do not determine)"):
         features.fit("cylinder", X, axis_hint=[1, 0, 0])
 
 

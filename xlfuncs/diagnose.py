@@ -1,5 +1,5 @@
 """Mismatch locator: do the recordings agree with the simulation, where not, and which physics
-was left out (``shared/spec/recordings.md`` sections 2-6).
+was left out (``docs/recordings.md`` sections 2-6).
 
 The simulation predicts ``measured = reference`` (length records) or ``measured = nominal`` after
 a rigid alignment (point records), with the covariance C of the records built from the Forbes 2025

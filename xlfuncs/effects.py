@@ -1,4 +1,4 @@
-"""Candidate effects of the mismatch locator (``shared/spec/recordings.md`` section 4).
+"""Candidate effects of the mismatch locator (``docs/recordings.md`` section 4).
 
 Every candidate is an explicit sensitivity of the records to a few parameters, derived from the
 physics of the effect: a displacement field delta(x) of the indicated point per unit parameter,

@@ -550,7 +550,11 @@ def fit(element: str, X_mm, *, weights=None, normals=None, axis_hint=None,
             continue
         d, _, _ = local_model(kind, (Xw - o) @ Rm, sh)
         ss = float(((d * ww[:, None]) ** 2).sum())
-        if best is None or ss < best[0] * (1 - 1e-9):
+        # A later start wins only by more than rounding: sums of squares within the noise floor
+        # of the Gauss-Newton stopping rule (1e-12 * scale per residual) are equal fits, and the
+        # first start is kept, so the choice does not depend on the CPU's BLAS kernel.
+        noise = (1e-12 * scale) ** 2 * d.size
+        if best is None or ss < best[0] * (1 - 1e-9) - noise:
             best = (ss, o, Rm, sh, its)
     if best is None:
         raise first_err

@@ -1,4 +1,4 @@
-"""Recordings of a CMM (``shared/spec/recordings.md`` section 1): reading, validating, writing.
+"""Recordings of a CMM (``docs/recordings.md`` section 1): reading, validating, writing.
 
 Two kinds of file, told apart by the header:
 

@@ -12,7 +12,7 @@ each other):
 * ER  three rotation processes alpha, delta = alpha x p                          eqs. (22)-(25)
 * P   per probe: radius error e_P0 + process over the normals, along n          eqs. (26)-(27)
 
-The planted effects follow the definitions of ``shared/spec/recordings.md`` section 4, written
+The planted effects follow the definitions of ``docs/recordings.md`` section 4, written
 here independently of :mod:`xlfuncs.effects` (the angular motions with exact rotation matrices,
 lengths recomputed from the disturbed points).
 
