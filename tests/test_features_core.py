@@ -398,7 +398,7 @@ def test_a_cylinder_fitted_to_flat_points_is_refused_with_a_named_error():
     X = np.column_stack([rng.uniform(-20, 20, 30), rng.uniform(-20, 20, 30),
                          rng.normal(scale=1e-4, size=30)])
     with pytest.raises((ConvergenceError, DegenerateGeometryError),
-                       match=r"cylinder fit (did not converge|: the points do not determine)"):
+                       match=r"cylinder fit( did not converge|: the points do not determine)"):
         features.fit("cylinder", X, axis_hint=[1, 0, 0])
 
 

@@ -53,16 +53,21 @@ def test_templates_are_current_with_the_generator():
 def test_the_content_comparison_sees_a_changed_number_and_ignores_rounding(tmp_path):
     """A change in the 10th digit is a difference; one in the 16th (another summation order) is not."""
     src = templates.TEMPLATE_DIR / "examples" / "stepgauge_I_MPE1.xlsx"
+    wb = openpyxl.load_workbook(src)
+    base = tmp_path / "base.xlsx"                      # saved by openpyxl too: no cached values in either
+    wb.save(base)
+    ws = wb["Inputs"]
+    cell = max((c for r in ws.iter_rows() for c in r                 # the sheet's largest number: the
+                if isinstance(c.value, (int, float)) and not isinstance(c.value, bool)),  # abs floor is
+               key=lambda c: abs(c.value))                           # 1e-9 x the sheet's scale
+    value = float(cell.value)
     for factor, differs in ((1 + 1e-8, True), (1 + 4e-16, False)):
-        wb = openpyxl.load_workbook(src)
-        ws = wb["Points"]
-        cell = next(c for r in ws.iter_rows(min_row=2) for c in r
-                    if isinstance(c.value, float) and c.value != 0)
-        cell.value *= factor
+        cell.value = value * factor
         edited = tmp_path / f"edited_{differs}.xlsx"
         wb.save(edited)
-        found = templates.differences(src, edited)
-        assert any(f"Points!{cell.coordinate}" in d for d in found) == differs, found
+        found = templates.differences(base, edited)
+        assert any(f"Inputs!{cell.coordinate}" in d for d in found) == differs, found
+        assert all(d.startswith(f"Inputs!{cell.coordinate}:") for d in found), found
 
 
 @pytest.mark.parametrize("name", sorted(SOURCES))
