@@ -22,7 +22,7 @@ from xlfuncs import diagnose as dg
 from xlfuncs import pointcloud as pc
 from xlfuncs import simulate as sm
 from xlfuncs.errors import ModelError
-from xlfuncs.recordings import RecordingsError, read_recordings, write_recordings
+from xlfuncs.recordings import RecordingsError, parse_recordings, read_recordings, write_recordings
 
 from . import __version__
 from .atomic import write_text
@@ -100,8 +100,11 @@ def load_model(task: str | None, sigma_um: float | None, *, default_mpe1: bool =
 
 
 def _read(path: Path):
+    from .guarded import read_text
+
+    text = read_text(path, "recordings")   # a regular file within its size cap, UTF-8
     try:
-        return read_recordings(path)
+        return parse_recordings(text)
     except RecordingsError as e:
         raise InputError(e.message, file=path, where=e.where) from None
 

@@ -24,6 +24,7 @@ from typing import Sequence
 import numpy as np
 
 from .errors import ModelError
+from .limits import coordinate_problem
 
 NORMAL_TOL = 1e-3           # spec section 1: a normal must be unit length within 1e-3
 OFFSET_TOL_MM = 1e-6        # one probe id, one offset (within 1 nm)
@@ -121,6 +122,13 @@ class PointRecords(Recordings):
 # ---------------------------------------------------------------------------------------------
 # reading
 # ---------------------------------------------------------------------------------------------
+
+#: columns holding coordinates or lengths in mm: within the plausible machine range
+#: (:data:`xlfuncs.limits.MAX_COORDINATE_MM`), where float64 keeps 1 nm
+COORDINATE_COLUMNS = frozenset({"x1", "y1", "z1", "x2", "y2", "z2", "x_nom", "y_nom", "z_nom", "x", "y", "z",
+                                "reference_mm", "measured_mm", "p1x", "p1y", "p1z", "p2x", "p2y", "p2z",
+                                "px", "py", "pz"})
+
 
 def _number(text: str, line: int, column: str) -> float:
     t = text.strip()
@@ -223,6 +231,10 @@ def parse_recordings(text: str) -> LengthRecords | PointRecords:
         where.append(offset)
         for c in numeric:
             values[c].append(_number(row[seen[c]], offset, c))
+            if c in COORDINATE_COLUMNS:
+                problem = coordinate_problem(values[c][-1])
+                if problem is not None:
+                    raise RecordingsError(problem, offset, c)
         for c in text_cols:
             v = row[seen[c]].strip()
             if c != "group" and not v:
