@@ -74,6 +74,12 @@ def _recalc_formulas(path: Path) -> Values:
     names = _sheet_map(path)
     model = formulas.ExcelModel().loads(str(path)).finish()
     sol = model.calculate()
+    unsolved = [str(k) for k in getattr(model, "cells", {}) if k not in sol]
+    if unsolved:   # without circular=True the engine leaves the cells of a cycle out: never blanks
+        m = _KEY.match(unsolved[0])
+        where = f"{names.get(m.group('sheet').upper(), m.group('sheet'))}!{m.group('ref')}" if m else unsolved[0]
+        raise RecalcError(f"a circular reference: {len(unsolved)} formula cell(s) depend on themselves, "
+                          f"e.g. {where}; cmmwb's workbooks have none (was a formula edited?)")
     out: Values = {s: {} for s in names.values()}
     for key, rng in sol.items():
         m = _KEY.match(str(key))
