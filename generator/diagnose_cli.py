@@ -22,7 +22,8 @@ from xlfuncs import diagnose as dg
 from xlfuncs import pointcloud as pc
 from xlfuncs import simulate as sm
 from xlfuncs.errors import ModelError
-from xlfuncs.recordings import RecordingsError, parse_recordings, read_recordings, write_recordings
+from xlfuncs.memory import ResourceError, check_diagnose_fits
+from xlfuncs.recordings import RecordingsError, parse_recordings, write_recordings
 
 from . import __version__
 from .atomic import write_text
@@ -120,6 +121,10 @@ def run_diagnose(rec_path: Path, model: dg.Model, out_dir: Path, *, alpha: float
     if not (0.0 < alpha < 1.0):
         raise InputError(f"--alpha must be between 0 and 1, got {alpha!r}")
     rec = _read(rec_path) if rec is None else rec
+    try:
+        check_diagnose_fits(rec.kind, rec.n, 2 if getattr(rec, "planar", False) else 3)
+    except ResourceError as e:
+        raise InputError(str(e), file=rec_path) from None
     try:
         diag = dg.diagnose(rec, model, alpha)
     except RecordingsError as e:
