@@ -198,6 +198,24 @@ class Staging:
         return bak
 
 
+def load_task(task_path: Path):
+    """Read and validate a task file and its tables: (kind, job module, TOML document, task).
+    Every problem is an :class:`InputError` (exit status 2)."""
+    task_path = Path(task_path)
+    doc = read_toml(task_path)
+    kind, _ = task_kind_and_name(task_path, doc)
+    mod = job(kind)
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            task = mod.load(task_path, doc)
+    except ModelError as e:
+        raise InputError(str(e), file=task_path) from None
+    except csv.Error as e:  # a malformed points table that the CSV module itself rejects
+        raise InputError(f"malformed points table ({e})", file=task_path, where="[points]") from None
+    return kind, mod, doc, task
+
+
 def build_task(task_path: Path, out_dir: Path, *, plots: bool = True, force: bool = False,
                cache: str = "results") -> tuple[dict, list[Path]]:
     """Build one task into ``out_dir``: workbook, JSON and plots, all or nothing.
@@ -205,18 +223,13 @@ def build_task(task_path: Path, out_dir: Path, *, plots: bool = True, force: boo
     ``force``: replace outputs someone edited (keeping backups); ``cache``: which formula cells
     get cached values for programs that do not calculate (see :mod:`generator.cache`)."""
     task_path = Path(task_path)
-    doc = read_toml(task_path)
-    kind, _ = task_kind_and_name(task_path, doc)
-    mod = job(kind)
+    kind, mod, doc, task = load_task(task_path)
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)   # numpy's; a non-finite result is caught below
-            task = mod.load(task_path, doc)
             results = mod.compute(task)
     except ModelError as e:
         raise InputError(str(e), file=task_path) from None
-    except csv.Error as e:  # a malformed points table that the CSV module itself rejects
-        raise InputError(f"malformed points table ({e})", file=task_path, where="[points]") from None
 
     bad = non_finite(results)
     if bad is not None:
