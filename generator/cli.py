@@ -186,7 +186,7 @@ def _run(args) -> int:
         where = f"{e.filename}: " if getattr(e, "filename", None) else ""
         reason = e.strerror or str(e)
         hint = {28: " (the disk is full)", 30: " (a read-only file system)", 13: " (permission denied)",
-                122: " (disk quota exceeded)"}.get(e.errno or 0, "")
+                122: " (disk quota exceeded)", 27: " (over the file-size limit)"}.get(e.errno or 0, "")
         return _fail(f"{where}cannot write or read: {reason}{hint}; the previous output is unchanged")
     except MemoryError:
         return _fail("not enough memory for this task (see docs/input_limits.md for the sizes that fit)")

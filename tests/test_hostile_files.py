@@ -181,6 +181,24 @@ def test_a_full_or_read_only_disk_is_one_message_and_the_old_output_stays(tmp_pa
     assert {p.name: p.read_bytes() for p in (tmp_path / "out").iterdir()} == before
 
 
+def test_a_real_write_failure_in_a_process_is_one_line_and_the_old_output_stays(tmp_path, capsys):
+    """The process may write files of 20 kB at most (RLIMIT_FSIZE: writes fail like on a full
+    disk): one line, exit 2, no ZipFile.__del__ traceback, the previous outputs unchanged."""
+    import resource
+
+    code0, _, err0 = _build(tmp_path, capsys, POINTCLOUD_TASK, POINTCLOUD_CSV, "--no-plots")
+    assert code0 == 0, err0
+    before = {p.name: p.read_bytes() for p in (tmp_path / "out").iterdir()}
+    (tmp_path / "small.toml").write_text(POINTCLOUD_TASK.replace("sigma_R_um = 0.2", "sigma_R_um = 0.3"))
+    r = subprocess.run([sys.executable, "-m", "generator", "build", str(tmp_path / "small.toml"), "--out",
+                        str(tmp_path / "out"), "--no-plots"], capture_output=True, text=True, timeout=120,
+                       preexec_fn=lambda: resource.setrlimit(resource.RLIMIT_FSIZE, (20_000, 20_000)))
+    assert r.returncode == 2, r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1 and "Traceback" not in r.stderr, r.stderr
+    assert "File too large" in r.stderr and "previous output is unchanged" in r.stderr
+    assert {p.name: p.read_bytes() for p in (tmp_path / "out").iterdir()} == before
+
+
 def test_recalc_into_a_closed_pipe_ends_quietly(tmp_path):
     """`cmmwb recalc book.xlsx | head -1`: no BrokenPipeError traceback."""
     book = tmp_path / "r.xlsx"
