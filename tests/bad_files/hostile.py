@@ -518,3 +518,26 @@ def six_hundred_thousand_shared_strings(tmp):
         b'<sst xmlns="http://schemas.openxmlformats.org/spreadsheetml/2006/main" count="1" uniqueCount="1">'
         + b"".join(b"<si><t>s%d</t></si>" % k for k in range(600_000)) + b"</sst>")
     return read(book(tmp, p), tmp), "hostile.xlsx", ["more than 500,000 shared strings"]
+
+
+# -- generated geometry far outside the machine -------------------------------------------------
+
+EXAMPLES = HERE.parents[1] / "generator" / "examples"
+
+
+@case
+def feature_sampling_radius_of_1e13_mm(tmp):
+    toml = (EXAMPLES / "feature_cylinder_bore.toml").read_text().replace("r0_mm = 25.0", "r0_mm = 1e13")
+    (tmp / "bore.toml").write_text(toml)
+    return ["build", str(tmp / "bore.toml"), "--out", str(tmp / "out")], "bore.toml", [
+        "[sampling]", "e+12 mm from the origin", "machine range"]
+
+
+@case
+def budget_point_at_1e14_mm(tmp):
+    toml = (EXAMPLES / "knuckle.toml").read_text()
+    toml2 = re.sub(r"(?m)^(\w+) = \[([-\d.]+),", lambda m: f"{m.group(1)} = [1e14,", toml, count=1)
+    assert toml2 != toml
+    (tmp / "knuckle.toml").write_text(toml2)
+    return ["build", str(tmp / "knuckle.toml"), "--out", str(tmp / "out")], "knuckle.toml", [
+        "[points]", "machine range"]
