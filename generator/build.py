@@ -107,6 +107,18 @@ class Staging:
         self.made_dirs: list[Path] = []     # folders this run created, outermost first
 
     def __enter__(self) -> Path:
+        try:
+            with _signals_held():        # a Ctrl-C now is delivered once the state is known
+                self._make_folders()
+        except BaseException:
+            if getattr(self, "tmp", None) is not None:
+                shutil.rmtree(self.tmp, ignore_errors=True)
+            self._remove_made_dirs()
+            raise
+        return self.tmp
+
+    def _make_folders(self) -> None:
+        self.tmp = None
         missing = []
         d = self.out_dir
         while not d.exists() and d != d.parent:
@@ -119,29 +131,26 @@ class Staging:
             except FileExistsError:
                 pass                        # another run made it meanwhile: not ours to remove
             except OSError as e:
-                self._remove_made_dirs()
                 raise InputError(f"cannot create the output folder: {e.strerror}", file=self.out_dir) from None
         if not self.out_dir.is_dir():
             raise InputError("exists and is not a folder", file=self.out_dir)
         try:
             self.tmp = Path(tempfile.mkdtemp(prefix=".cmmwb-", dir=self.out_dir))
         except OSError as e:
-            self._remove_made_dirs()
             raise InputError(f"cannot write into the output folder: {e.strerror}", file=self.out_dir) from None
-        return self.tmp
 
     def __exit__(self, exc_type, exc, tb) -> None:
-        ok = False
-        try:
-            if exc_type is None:
-                with _signals_held():
+        with _signals_held():            # commit or clean up completely, then deliver a Ctrl-C
+            ok = False
+            try:
+                if exc_type is None:
                     with _locked(self.out_dir):
                         self._commit()
                         ok = True
-        finally:
-            shutil.rmtree(self.tmp, ignore_errors=True)
-            if not ok:
-                self._remove_made_dirs()
+            finally:
+                shutil.rmtree(self.tmp, ignore_errors=True)
+                if not ok:
+                    self._remove_made_dirs()
 
     def _remove_made_dirs(self) -> None:
         """Remove the folders this run created, innermost first, only while they are empty."""

@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import signal
 import sys
 import time
 from pathlib import Path
@@ -161,10 +162,35 @@ def main(argv: list[str] | None = None) -> int:
     args = parser().parse_args(argv)
     previous_hook = sys.unraisablehook
     sys.unraisablehook = _quiet_unraisable
+    previous_int = _catch_sigint()
     try:
         return _run(args)
     finally:
         sys.unraisablehook = previous_hook
+        if previous_int is not None:
+            signal.signal(signal.SIGINT, previous_int)
+
+
+_interrupted = False
+
+
+def _on_sigint(signum, frame):
+    global _interrupted
+    _interrupted = True
+    raise KeyboardInterrupt
+
+
+def _catch_sigint():
+    """Ctrl-C raises KeyboardInterrupt as usual, and is remembered: a library that turns the
+    interruption into another exception (matplotlib does) still ends as 'interrupted', 130."""
+    global _interrupted
+    _interrupted = False
+    try:
+        if signal.getsignal(signal.SIGINT) is signal.default_int_handler:
+            return signal.signal(signal.SIGINT, _on_sigint)
+    except ValueError:           # not the main thread
+        pass
+    return None
 
 
 def _run(args) -> int:
@@ -193,6 +219,9 @@ def _run(args) -> int:
     except RecursionError:
         return _fail("the input is nested too deeply to process")
     except Exception as e:  # a bug: say so plainly
+        if _interrupted:
+            print("cmmwb: interrupted", file=sys.stderr)
+            return 130
         if os.environ.get("CMMWB_DEBUG"):
             raise
         print(f"cmmwb: internal error ({type(e).__name__}: {e}); rerun with CMMWB_DEBUG=1 for a "
