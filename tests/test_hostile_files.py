@@ -258,3 +258,17 @@ def test_the_memory_estimate_for_200000_length_records_is_refused_on_this_machin
     assert diagnose_bytes("length", 200_000) > 298 * 2**30       # the one matrix of the report, and more
     with pytest.raises(ResourceError, match="records fit"):
         check_diagnose_fits("length", 200_000, available=64 * 2**30)
+
+
+def test_an_external_hyperlink_is_not_refused(tmp_path):
+    """Hyperlinks open nothing by themselves: a workbook with one (to any address) passes."""
+    from generator.safe_xlsx import check
+    from hostile import book, parts
+
+    p = parts()
+    p["xl/worksheets/_rels/sheet1.xml.rels"] = (
+        b'<Relationships xmlns="http://schemas.openxmlformats.org/package/2006/relationships">'
+        b'<Relationship Id="rId9" Type="http://schemas.openxmlformats.org/officeDocument/2006/relationships/'
+        b'hyperlink" Target="https://example.org/connections/externalLink" TargetMode="External"/>'
+        b'</Relationships>')
+    check(book(tmp_path, p))
