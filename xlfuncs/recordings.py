@@ -17,6 +17,8 @@ from __future__ import annotations
 import csv
 import io
 import math
+import os
+import stat
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Sequence
@@ -145,9 +147,17 @@ def read_recordings(path: str | Path) -> LengthRecords | PointRecords:
     """Read and validate a recordings CSV (spec section 1); raises :class:`RecordingsError`."""
     path = Path(path)
     try:
-        if path.stat().st_size > MAX_BYTES:
+        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK)   # a FIFO must not block the open
+        with os.fdopen(fd, "rb") as fh:
+            st = os.fstat(fh.fileno())
+            if not stat.S_ISREG(st.st_mode):
+                raise RecordingsError("not a regular file (a FIFO, a device or a folder): refused")
+            if st.st_size > MAX_BYTES:
+                raise RecordingsError(f"larger than {MAX_BYTES // 2**20} MiB")
+            os.set_blocking(fd, True)
+            raw = fh.read(MAX_BYTES + 1)
+        if len(raw) > MAX_BYTES:
             raise RecordingsError(f"larger than {MAX_BYTES // 2**20} MiB")
-        raw = path.read_bytes()
     except OSError as e:
         raise RecordingsError(f"cannot read the recordings: {e.strerror}") from None
     try:
