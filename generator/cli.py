@@ -97,6 +97,9 @@ def cmd_recalc(args) -> int:
     if "Results" not in values:
         raise InputError("no sheet named 'Results'", file=path, where="sheet Results")
     rows = results_rows(values)
+    errors = [(k, v) for r in rows for k, v in r.items() if isinstance(v, str) and v.startswith("#")]
+    if errors and args.engine == "libreoffice":
+        _refuse_circular_references(path)   # LibreOffice shows a cycle only as an error value
     if args.json:
         print(json.dumps(rows, indent=1, ensure_ascii=False, default=str))
         return 0
@@ -106,12 +109,29 @@ def cmd_recalc(args) -> int:
         for r in rows:
             print("\t".join(f"{v:.6g}" if isinstance(v, float) else "" if v is None else str(v)
                             for v in r.values()))
-    errors = [(k, v) for r in rows for k, v in r.items() if isinstance(v, str) and v.startswith("#")]
     if errors:
         print(f"cmmwb: {len(errors)} Results cells evaluate to errors, e.g. {errors[0][0]} = {errors[0][1]}",
               file=sys.stderr)
         return 1
     return 0
+
+
+def _refuse_circular_references(path: Path) -> None:
+    """A circular reference is a clear error (exit 2); looked for with the ``formulas`` engine
+    when LibreOffice gave error values and the workbook is small enough for that engine."""
+    from .recalc import RecalcError, check_no_cycles
+    from .safe_xlsx import MAX_FORMULAS_ENGINE_CELLS, check
+
+    try:
+        check(path, max_cells=MAX_FORMULAS_ENGINE_CELLS)
+    except InputError:
+        return
+    try:
+        check_no_cycles(path)
+    except RecalcError as e:
+        raise InputError(str(e), file=path) from None
+    except Exception:  # the other engine cannot read it: the error values speak for themselves
+        return
 
 
 def parser() -> argparse.ArgumentParser:

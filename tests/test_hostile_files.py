@@ -226,6 +226,26 @@ def test_recalc_into_a_closed_pipe_ends_quietly(tmp_path):
 
 # -- circular references, memory --------------------------------------------------------------------
 
+def _circular_book(tmp_path) -> Path:
+    book = tmp_path / "circ.xlsx"
+    wb = openpyxl.Workbook()
+    ws = wb.active
+    ws.title = "Results"
+    ws.append(["name", "u_um"])
+    ws.append(["d", "=C2+1"])
+    ws["C2"] = "=B2*2"
+    wb.save(book)
+    return book
+
+
+@pytest.mark.libreoffice
+def test_a_circular_reference_in_recalc_with_libreoffice_is_an_error(tmp_path, capsys):
+    book = _circular_book(tmp_path)
+    code, out, err = run_cli(capsys, "recalc", str(book), "--engine", "libreoffice")
+    assert code == 2 and out == "", err
+    assert "circ.xlsx" in err and "circular reference" in err and "Results!B2" in err
+
+
 def test_a_circular_reference_in_recalc_is_an_error_not_blanks(tmp_path, capsys):
     book = tmp_path / "circ.xlsx"
     wb = openpyxl.Workbook()
