@@ -19,6 +19,7 @@ from pathlib import Path
 
 from xlfuncs import budget as bd
 from xlfuncs.errors import ModelError
+from xlfuncs.limits import coordinate_problem
 
 from . import __version__
 from .errors import InputError
@@ -125,6 +126,9 @@ def _read_points(path: Path, doc: dict) -> dict[str, tuple[float, float, float]]
             raise _err(path, where, f"must be three numbers [x_mm, y_mm, z_mm], got {value!r}")
         if not all(math.isfinite(float(v)) for v in value):
             raise _err(path, where, f"must be three finite numbers, got {value!r}")
+        for v in value:
+            if coordinate_problem(float(v)) is not None:
+                raise _err(path, where, coordinate_problem(float(v)))
         for ax in "xyz":
             try:
                 check_name(f"{name}_{ax}_mm")

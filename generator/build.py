@@ -9,10 +9,13 @@ import json
 import math
 import os
 import shutil
+import signal
 import sys
 import tempfile
+import threading
 import time
 import warnings
+from contextlib import contextmanager
 from pathlib import Path
 
 from openpyxl.utils.exceptions import IllegalCharacterError
@@ -39,6 +42,46 @@ def non_finite(obj, where: str = "results"):
     return None
 
 
+@contextmanager
+def _locked(folder: Path):
+    """An exclusive lock on ``folder`` (flock on the folder itself: no lock file is left behind)."""
+    try:
+        import fcntl
+    except ImportError:          # not POSIX: no lock (the staging folders still keep runs apart)
+        yield
+        return
+    fd = os.open(folder, os.O_RDONLY)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX)
+        yield
+    finally:
+        os.close(fd)             # releases the lock
+
+
+@contextmanager
+def _signals_held():
+    """Hold back Ctrl-C (SIGINT) and SIGTERM while the block runs, then deliver them."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    pending: list[int] = []
+    old = {}
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        try:
+            old[sig] = signal.signal(sig, lambda s, _f: pending.append(s))
+        except (ValueError, OSError):
+            pass
+    try:
+        yield
+    finally:
+        for sig, handler in old.items():
+            signal.signal(sig, handler)
+        if pending:
+            if signal.SIGINT in pending:
+                raise KeyboardInterrupt
+            signal.raise_signal(pending[0])
+
+
 class Staging:
     """A private folder inside DIR; its files move into DIR only when the whole run succeeded.
 
@@ -46,6 +89,12 @@ class Staging:
     the workbook), are never overwritten: the run fails with a message, unless ``force``, in which
     case each is first renamed to a backup (``NAME.bak``, or ``NAME.<time>.bak`` when that exists).
     What cmmwb wrote is recorded (SHA-256 per file) in ``DIR/.cmmwb-manifest.json``.
+
+    A run only ever removes what it created itself: its own staging folder and, when it fails,
+    the folders it created, and only if they are empty (another run may have committed files into
+    them meanwhile).  Commits into one DIR are serialised by a lock on DIR (``flock``), and Ctrl-C
+    during a commit is held back until the commit is complete, so an interrupted run leaves DIR
+    either as it was or with the complete new outputs, never half of them.
     """
 
     MANIFEST = ".cmmwb-manifest.json"
@@ -55,25 +104,61 @@ class Staging:
         self.created = not self.out_dir.exists()
         self.force = force
         self.backups: list[Path] = []
+        self.made_dirs: list[Path] = []     # folders this run created, outermost first
 
     def __enter__(self) -> Path:
         try:
-            self.out_dir.mkdir(parents=True, exist_ok=True)
-        except OSError as e:
-            raise InputError(f"cannot create the output folder: {e.strerror}", file=self.out_dir) from None
-        self.tmp = Path(tempfile.mkdtemp(prefix=".cmmwb-", dir=self.out_dir))
+            with _signals_held():        # a Ctrl-C now is delivered once the state is known
+                self._make_folders()
+        except BaseException:
+            if getattr(self, "tmp", None) is not None:
+                shutil.rmtree(self.tmp, ignore_errors=True)
+            self._remove_made_dirs()
+            raise
         return self.tmp
 
-    def __exit__(self, exc_type, exc, tb) -> None:
-        ok = False
+    def _make_folders(self) -> None:
+        self.tmp = None
+        missing = []
+        d = self.out_dir
+        while not d.exists() and d != d.parent:
+            missing.append(d)
+            d = d.parent
+        for d in reversed(missing):
+            try:
+                d.mkdir()
+                self.made_dirs.append(d)
+            except FileExistsError:
+                pass                        # another run made it meanwhile: not ours to remove
+            except OSError as e:
+                raise InputError(f"cannot create the output folder: {e.strerror}", file=self.out_dir) from None
+        if not self.out_dir.is_dir():
+            raise InputError("exists and is not a folder", file=self.out_dir)
         try:
-            if exc_type is None:
-                self._commit()
-            ok = exc_type is None
-        finally:
-            shutil.rmtree(self.tmp, ignore_errors=True)
-            if not ok and self.created:
-                shutil.rmtree(self.out_dir, ignore_errors=True)
+            self.tmp = Path(tempfile.mkdtemp(prefix=".cmmwb-", dir=self.out_dir))
+        except OSError as e:
+            raise InputError(f"cannot write into the output folder: {e.strerror}", file=self.out_dir) from None
+
+    def __exit__(self, exc_type, exc, tb) -> None:
+        with _signals_held():            # commit or clean up completely, then deliver a Ctrl-C
+            ok = False
+            try:
+                if exc_type is None:
+                    with _locked(self.out_dir):
+                        self._commit()
+                        ok = True
+            finally:
+                shutil.rmtree(self.tmp, ignore_errors=True)
+                if not ok:
+                    self._remove_made_dirs()
+
+    def _remove_made_dirs(self) -> None:
+        """Remove the folders this run created, innermost first, only while they are empty."""
+        for d in reversed(self.made_dirs):
+            try:
+                d.rmdir()
+            except OSError:
+                break                        # not empty: someone else's files are in it
 
     def _commit(self) -> None:
         manifest = self._manifest()
@@ -122,6 +207,24 @@ class Staging:
         return bak
 
 
+def load_task(task_path: Path):
+    """Read and validate a task file and its tables: (kind, job module, TOML document, task).
+    Every problem is an :class:`InputError` (exit status 2)."""
+    task_path = Path(task_path)
+    doc = read_toml(task_path)
+    kind, _ = task_kind_and_name(task_path, doc)
+    mod = job(kind)
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            task = mod.load(task_path, doc)
+    except ModelError as e:
+        raise InputError(str(e), file=task_path) from None
+    except csv.Error as e:  # a malformed points table that the CSV module itself rejects
+        raise InputError(f"malformed points table ({e})", file=task_path, where="[points]") from None
+    return kind, mod, doc, task
+
+
 def build_task(task_path: Path, out_dir: Path, *, plots: bool = True, force: bool = False,
                cache: str = "results") -> tuple[dict, list[Path]]:
     """Build one task into ``out_dir``: workbook, JSON and plots, all or nothing.
@@ -129,18 +232,13 @@ def build_task(task_path: Path, out_dir: Path, *, plots: bool = True, force: boo
     ``force``: replace outputs someone edited (keeping backups); ``cache``: which formula cells
     get cached values for programs that do not calculate (see :mod:`generator.cache`)."""
     task_path = Path(task_path)
-    doc = read_toml(task_path)
-    kind, _ = task_kind_and_name(task_path, doc)
-    mod = job(kind)
+    kind, mod, doc, task = load_task(task_path)
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)   # numpy's; a non-finite result is caught below
-            task = mod.load(task_path, doc)
             results = mod.compute(task)
     except ModelError as e:
         raise InputError(str(e), file=task_path) from None
-    except csv.Error as e:  # a malformed points table that the CSV module itself rejects
-        raise InputError(f"malformed points table ({e})", file=task_path, where="[points]") from None
 
     bad = non_finite(results)
     if bad is not None:

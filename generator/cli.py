@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import signal
 import sys
 import textwrap
 import time
@@ -98,12 +99,14 @@ def cmd_demo(args) -> int:
 def cmd_recalc(args) -> int:
     from .recalc import RecalcError, recalculate, results_rows
 
-    from .safe_xlsx import check
+    from .safe_xlsx import MAX_CELLS, MAX_FORMULAS_ENGINE_CELLS, check
 
     path = Path(args.book)
     if not path.exists():
         raise InputError("no such file", file=path)
-    check(path)  # an untrusted file: size, zip bomb, entities, macros
+    # an untrusted file, checked before either engine sees it: regular file, size, zip bomb,
+    # entities in any part, macros, external links, DDE, queries, cell and string counts
+    check(path, max_cells=MAX_FORMULAS_ENGINE_CELLS if args.engine == "formulas" else MAX_CELLS)
     try:
         values = recalculate(path, args.engine)
     except RecalcError as e:
@@ -111,6 +114,9 @@ def cmd_recalc(args) -> int:
     if "Results" not in values:
         raise InputError("no sheet named 'Results'", file=path, where="sheet Results")
     rows = results_rows(values)
+    errors = [(k, v) for r in rows for k, v in r.items() if isinstance(v, str) and v.startswith("#")]
+    if errors and args.engine == "libreoffice":
+        _refuse_circular_references(path)   # LibreOffice shows a cycle only as an error value
     if args.json:
         print(json.dumps(rows, indent=1, ensure_ascii=False, default=str))
         return 0
@@ -120,12 +126,29 @@ def cmd_recalc(args) -> int:
         for r in rows:
             print("\t".join(f"{v:.6g}" if isinstance(v, float) else "" if v is None else str(v)
                             for v in r.values()))
-    errors = [(k, v) for r in rows for k, v in r.items() if isinstance(v, str) and v.startswith("#")]
     if errors:
         print(f"cmmwb: {len(errors)} Results cells evaluate to errors, e.g. {errors[0][0]} = {errors[0][1]}",
               file=sys.stderr)
         return 1
     return 0
+
+
+def _refuse_circular_references(path: Path) -> None:
+    """A circular reference is a clear error (exit 2); looked for with the ``formulas`` engine
+    when LibreOffice gave error values and the workbook is small enough for that engine."""
+    from .recalc import RecalcError, check_no_cycles
+    from .safe_xlsx import MAX_FORMULAS_ENGINE_CELLS, check
+
+    try:
+        check(path, max_cells=MAX_FORMULAS_ENGINE_CELLS)
+    except InputError:
+        return
+    try:
+        check_no_cycles(path)
+    except RecalcError as e:
+        raise InputError(str(e), file=path) from None
+    except Exception:  # the other engine cannot read it: the error values speak for themselves
+        return
 
 
 def _examples(*lines: str) -> str:
@@ -210,20 +233,96 @@ def parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     args = parser().parse_args(argv)
+    previous_hook = sys.unraisablehook
+    sys.unraisablehook = _quiet_unraisable
+    previous_int = _catch_sigint()
+    try:
+        return _run(args)
+    finally:
+        sys.unraisablehook = previous_hook
+        if previous_int is not None:
+            signal.signal(signal.SIGINT, previous_int)
+
+
+_interrupted = False
+
+
+def _on_sigint(signum, frame):
+    global _interrupted
+    _interrupted = True
+    raise KeyboardInterrupt
+
+
+def _catch_sigint():
+    """Ctrl-C raises KeyboardInterrupt as usual, and is remembered: a library that turns the
+    interruption into another exception (matplotlib does) still ends as 'interrupted', 130."""
+    global _interrupted
+    _interrupted = False
+    try:
+        if signal.getsignal(signal.SIGINT) is signal.default_int_handler:
+            return signal.signal(signal.SIGINT, _on_sigint)
+    except ValueError:           # not the main thread
+        pass
+    return None
+
+
+def _run(args) -> int:
+    """Run a command; every failure a user can cause is one line on stderr and exit status 2
+    (130 for Ctrl-C; a closed output pipe ends quietly), never a traceback."""
     try:
         return args.func(args)
     except InputError as e:
-        print(f"cmmwb: error: {e}", file=sys.stderr)
-        return 2
+        return _fail(str(e))
     except ModelError as e:
-        print(f"cmmwb: error: {e}", file=sys.stderr)
-        return 2
+        return _fail(str(e))
     except KeyboardInterrupt:
         print("cmmwb: interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:
+        _silence_stdout()        # `cmmwb recalc book.xlsx | head`: the reader left; nothing to say
+        return 0
+    except OSError as e:         # disk full, read-only folder, permission denied, ...
+        where = f"{e.filename}: " if getattr(e, "filename", None) else ""
+        reason = e.strerror or str(e)
+        hint = {28: " (the disk is full)", 30: " (a read-only file system)", 13: " (permission denied)",
+                122: " (disk quota exceeded)", 27: " (over the file-size limit)"}.get(e.errno or 0, "")
+        return _fail(f"{where}cannot write or read: {reason}{hint}; the previous output is unchanged")
+    except MemoryError:
+        return _fail("not enough memory for this task (see docs/input_limits.md for the sizes that fit)")
+    except RecursionError:
+        return _fail("the input is nested too deeply to process")
     except Exception as e:  # a bug: say so plainly
+        if _interrupted:
+            print("cmmwb: interrupted", file=sys.stderr)
+            return 130
         if os.environ.get("CMMWB_DEBUG"):
             raise
         print(f"cmmwb: internal error ({type(e).__name__}: {e}); rerun with CMMWB_DEBUG=1 for a "
               "traceback and please report it", file=sys.stderr)
         return 1
+
+
+def _fail(message: str) -> int:
+    try:
+        print(f"cmmwb: error: {message}", file=sys.stderr)
+    except (OSError, ValueError):
+        pass
+    return 2
+
+
+def _silence_stdout() -> None:
+    """After a broken pipe, point stdout at /dev/null so that flushing at exit raises nothing."""
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        os.close(devnull)
+    except (OSError, ValueError, AttributeError):
+        pass
+
+
+def _quiet_unraisable(unraisable) -> None:
+    """An OSError in a destructor (``ZipFile.__del__`` after a full disk) has already been reported
+    as a message; it must not print a traceback too."""
+    if isinstance(unraisable.exc_value, OSError):
+        return
+    sys.__unraisablehook__(unraisable)

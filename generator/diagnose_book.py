@@ -731,12 +731,9 @@ def _chart(book: Book, diag: Diagnosis, obs: dict) -> None:
 # -- PNG plots -----------------------------------------------------------------------------------
 
 def _plt():
-    import matplotlib
+    from .plots import pyplot   # headless, '$' in record ids and groups taken literally
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
+    return pyplot()
 
 
 def revealing_quantities(diag: Diagnosis) -> list[tuple[str, np.ndarray, bool]]:

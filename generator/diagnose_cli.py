@@ -22,7 +22,8 @@ from xlfuncs import diagnose as dg
 from xlfuncs import pointcloud as pc
 from xlfuncs import simulate as sm
 from xlfuncs.errors import ModelError
-from xlfuncs.recordings import RecordingsError, read_recordings, write_recordings
+from xlfuncs.memory import ResourceError, check_diagnose_fits
+from xlfuncs.recordings import RecordingsError, parse_recordings, write_recordings
 
 from . import __version__
 from .atomic import write_text
@@ -120,8 +121,11 @@ def load_model(task: str | None, sigma_um: float | None, *, default_mpe1: bool =
 
 
 def _read(path: Path):
+    from .guarded import read_text
+
+    text = read_text(path, "recordings")   # a regular file within its size cap, UTF-8
     try:
-        return read_recordings(path)
+        return parse_recordings(text)
     except RecordingsError as e:
         raise InputError(e.message, file=path, where=e.where) from None
 
@@ -137,6 +141,10 @@ def run_diagnose(rec_path: Path, model: dg.Model, out_dir: Path, *, alpha: float
     if not (0.0 < alpha < 1.0):
         raise InputError(f"--alpha must be between 0 and 1, got {alpha!r}")
     rec = _read(rec_path) if rec is None else rec
+    try:
+        check_diagnose_fits(rec.kind, rec.n, 2 if getattr(rec, "planar", False) else 3)
+    except ResourceError as e:
+        raise InputError(str(e), file=rec_path) from None
     try:
         diag = dg.diagnose(rec, model, alpha)
     except RecordingsError as e:

@@ -29,6 +29,7 @@ from xlfuncs.distributed import get_backend
 from xlfuncs import partial as pa
 from xlfuncs import pointcloud as pc
 from xlfuncs.errors import ModelError
+from xlfuncs.limits import MAX_COORDINATE_MM, coordinate_problem
 
 from . import __version__
 from .errors import InputError
@@ -231,6 +232,11 @@ def load(path: Path, doc: dict) -> Task:
         probes = read_probes(path, doc)
         sampling, cloud = _read_sampling(path, doc, element, circle_plane, params, probes)
         source = "[sampling]"
+        far = float(np.max(np.abs(cloud.X_mm))) if cloud.m else 0.0
+        if coordinate_problem(far) is not None:   # sizes so large that float64 loses the nanometre
+            raise InputError(f"the sampled points reach {far:g} mm from the origin, outside the plausible "
+                             f"machine range +-{MAX_COORDINATE_MM:g} mm (float64 would lose the nanometre)",
+                             file=path, where="[sampling]")
 
     weights = np.ones(cloud.m)
     if "weights" in f:

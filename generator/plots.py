@@ -19,6 +19,9 @@ def _plt():
     import matplotlib
 
     matplotlib.use("Agg")
+    # names and groups come from the user's files: a '$' in them is a dollar sign, not mathtext
+    # (matplotlib would otherwise parse "$a$b" as a formula and fail on an odd number of '$')
+    matplotlib.rcParams["text.parse_math"] = False
     import matplotlib.pyplot as plt
 
     return plt

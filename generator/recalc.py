@@ -74,6 +74,7 @@ def _recalc_formulas(path: Path) -> Values:
     names = _sheet_map(path)
     model = formulas.ExcelModel().loads(str(path)).finish()
     sol = model.calculate()
+    _refuse_cycles(model, sol, names)
     out: Values = {s: {} for s in names.values()}
     for key, rng in sol.items():
         m = _KEY.match(str(key))
@@ -101,6 +102,27 @@ def _recalc_formulas(path: Path) -> Values:
                     v = str(v)
                 out[sheet][f"{get_column_letter(c0 + dc)}{r0 + dr}"] = v
     return out
+
+
+def _refuse_cycles(model, sol, names: dict[str, str]) -> None:
+    """Without ``circular=True`` the ``formulas`` engine leaves the cells of a cycle out of its
+    solution: they would print as blanks.  A circular reference is an error instead."""
+    unsolved = [str(k) for k in getattr(model, "cells", {}) if k not in sol]
+    if unsolved:
+        m = _KEY.match(unsolved[0])
+        where = f"{names.get(m.group('sheet').upper(), m.group('sheet'))}!{m.group('ref')}" if m else unsolved[0]
+        raise RecalcError(f"a circular reference: {len(unsolved)} formula cell(s) depend on themselves, "
+                          f"e.g. {where}; cmmwb's workbooks have none (was a formula edited?)")
+
+
+def check_no_cycles(path: str | Path) -> None:
+    """Raise :class:`RecalcError` if the workbook has a circular reference (found with the
+    ``formulas`` engine; LibreOffice reports one only as an error value, Err:522 / #VALUE!)."""
+    import formulas
+
+    path = Path(path)
+    model = formulas.ExcelModel().loads(str(path)).finish()
+    _refuse_cycles(model, model.calculate(), _sheet_map(path))
 
 
 def _recalc_libreoffice(path: Path, timeout_s: float) -> Values:

@@ -16,33 +16,99 @@ from pathlib import Path
 import numpy as np
 
 from xlfuncs.errors import ModelError
+from xlfuncs.limits import coordinate_problem
 from xlfuncs.pointcloud import Parameters, PointCloud, Probe
 
 from .errors import InputError
+from .guarded import MAX_BYTES, read_text
 
 KINDS = ("pointcloud", "budget", "feature")
-MAX_TASK_BYTES = 16 * 1024 * 1024
-MAX_CSV_BYTES = 256 * 1024 * 1024
+MAX_TASK_BYTES = MAX_BYTES["task"]
+MAX_CSV_BYTES = MAX_BYTES["points"]
 NORMAL_TOL = 1e-3
 
 
+MAX_DEPTH = 16           # tables and arrays nested deeper than this are refused
+MAX_INT = 2**63 - 1      # TOML integers are 64-bit (TOML 1.0, "Integer")
+
+
 def read_toml(path: Path) -> dict:
-    """Parse a task file; syntax errors name the line (tomllib reports line and column)."""
+    """Parse a task file; syntax errors name the line (tomllib reports line and column).
+
+    Read through :func:`generator.guarded.read_text` (a regular file of at most 16 MiB, UTF-8; a
+    byte-order mark is accepted).  Integers beyond 64 bits and nesting deeper than
+    :data:`MAX_DEPTH` are refused with the key that holds them."""
     path = Path(path)
+    text = read_text(path, "task")
     try:
-        raw = path.read_bytes()
-    except OSError as e:
-        raise InputError(f"cannot read the task file: {e.strerror}", file=path) from None
-    if len(raw) > MAX_TASK_BYTES:
-        raise InputError(f"task file larger than {MAX_TASK_BYTES // 2**20} MiB", file=path)
-    try:
-        text = raw.decode("utf-8")
-    except UnicodeDecodeError as e:
-        raise InputError(f"not UTF-8 text (byte {e.start})", file=path) from None
-    try:
-        return tomllib.loads(text)
+        doc = tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:
         raise InputError(f"malformed TOML: {e}", file=path) from None
+    except RecursionError:
+        raise InputError(f"malformed TOML: arrays or tables nested too deeply (at most {MAX_DEPTH} levels)",
+                         file=path) from None
+    except ValueError as e:   # an integer of more than 4300 digits (Python's own limit)
+        raise InputError(f"malformed TOML: an integer too large ({str(e).split(':')[0]})", file=path) from None
+    _check_structure(path, doc, "", 0)
+    return doc
+
+
+def _check_structure(path: Path, value, where: str, depth: int) -> None:
+    """Refuse integers beyond 64 bits and nesting deeper than MAX_DEPTH, naming the key."""
+    if depth > MAX_DEPTH:
+        raise InputError(f"nested deeper than {MAX_DEPTH} levels of arrays or tables", file=path,
+                         where=where or None)
+    if isinstance(value, bool):
+        return
+    if isinstance(value, int):
+        if abs(value) > MAX_INT:
+            raise InputError(f"an integer of {len(str(abs(value)))} digits: larger than TOML's 64-bit "
+                             "integers (write it as a float, e.g. 1e30)", file=path, where=where or None)
+        return
+    if isinstance(value, dict):
+        for k, v in value.items():
+            _check_structure(path, v, f"{where}.{k}" if where else str(k), depth + 1)
+    elif isinstance(value, list):
+        for i, v in enumerate(value):
+            _check_structure(path, v, f"{where}[{i}]", depth + 1)
+
+
+#: characters that must not reach a file name: control characters (C0, DEL, C1) and the
+#: bidirectional embedding/override/isolate marks (the "U+202E" file-name spoof)
+_BIDI = {chr(c) for c in (*range(0x202A, 0x202F), *range(0x2066, 0x206A), 0x200E, 0x200F, 0x061C)}
+_RESERVED = {"CON", "PRN", "AUX", "NUL", *(f"COM{k}" for k in range(1, 10)), *(f"LPT{k}" for k in range(1, 10)),
+             "COM\u00b9", "COM\u00b2", "COM\u00b3", "LPT\u00b9", "LPT\u00b2", "LPT\u00b3"}
+MAX_NAME_CHARS = 100
+MAX_NAME_BYTES = 180     # UTF-8 bytes: leaves room for suffixes such as _distances.png within 255
+
+
+def file_name_problem(name: str) -> str | None:
+    """Why ``name`` cannot become a file name (on Linux, macOS and Windows), or None."""
+    if not name:
+        return "is empty"
+    if "\x00" in name:
+        return "holds a NUL character (0x00)"
+    ctrl = next((ch for ch in name if ord(ch) < 32 or 127 <= ord(ch) < 160), None)
+    if ctrl is not None:
+        return f"holds a control character ({ord(ctrl):#04x})"
+    bidi = next((ch for ch in name if ch in _BIDI), None)
+    if bidi is not None:
+        return (f"holds the bidirectional-text control U+{ord(bidi):04X}, which can disguise a file name "
+                "(e.g. make 'exe.xlsx' look like 'xlsx.exe')")
+    bad = next((ch for ch in name if ch in '/\\:*?"<>|'), None)
+    if bad is not None:
+        return f"holds {bad!r}, which a file name cannot hold"
+    if name.startswith("."):
+        return "starts with '.' (a hidden file)"
+    if name != name.strip() or name.endswith("."):
+        return "starts or ends with a space, or ends with '.' (Windows drops those)"
+    if name.split(".")[0].strip().upper() in _RESERVED:
+        return f"is a reserved device name on Windows ({name.split('.')[0].upper()})"
+    if len(name) > MAX_NAME_CHARS:
+        return f"is longer than {MAX_NAME_CHARS} characters ({len(name)})"
+    if len(name.encode("utf-8")) > MAX_NAME_BYTES:
+        return f"is longer than {MAX_NAME_BYTES} bytes in UTF-8 ({len(name.encode('utf-8'))})"
+    return None
 
 
 def task_kind_and_name(path: Path, doc: dict) -> tuple[str, str]:
@@ -52,8 +118,10 @@ def task_kind_and_name(path: Path, doc: dict) -> tuple[str, str]:
         raise InputError(f"unknown kind {kind!r}; expected one of {', '.join(KINDS)}", file=path,
                          where="[task] kind")
     name = string(path, task, "task", "name")
-    if not name or any(ch in name for ch in '/\\:*?"<>|') or name.startswith(".") or len(name) > 100:
-        raise InputError(f"{name!r} is not usable as a file name", file=path, where="[task] name")
+    problem = file_name_problem(name)
+    if problem is not None:
+        raise InputError(f"{name[:60]!r} is not usable as a file name: it {problem}", file=path,
+                         where="[task] name")
     return kind, name
 
 
@@ -117,6 +185,8 @@ def vector3(path: Path, tbl: dict, section: str, key: str) -> tuple[float, float
     for v in value:
         if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(float(v)):
             raise InputError(f"must be three finite numbers, got {value!r}", file=path, where=where)
+        if key.endswith("_mm") and coordinate_problem(float(v)) is not None:
+            raise InputError(coordinate_problem(float(v)), file=path, where=where)
         out.append(float(v))
     return tuple(out)  # type: ignore[return-value]
 
@@ -249,6 +319,10 @@ class _PointRows:
             raise InputError(f"point id {label!r} also {self.seen[label]}", file=self.path, where=where("id"))
         self.seen[label] = origin
         vals = [self.number(v, where(c)) for v, c in zip(raw_values, ("x", "y", "z", "nx", "ny", "nz"))]
+        for v, c in zip(vals[:3], "xyz"):
+            problem = coordinate_problem(v)
+            if problem is not None:
+                raise InputError(problem, file=self.path, where=where(c))
         n = np.array(vals[3:])
         if abs(np.linalg.norm(n) - 1.0) > NORMAL_TOL:
             raise InputError(f"normal ({vals[3]:g}, {vals[4]:g}, {vals[5]:g}) is not a unit vector "
@@ -282,14 +356,7 @@ def read_points_csv(path: Path, probes: tuple[Probe, ...]) -> PointTable:
     """``id,x,y,z,nx,ny,nz,probe`` (mm; n = outward unit normal).  Lines starting with ``#``
     before the header are comments.  ``probe`` may be omitted when the task has one probe."""
     path = Path(path)
-    try:
-        if path.stat().st_size > MAX_CSV_BYTES:
-            raise InputError(f"larger than {MAX_CSV_BYTES // 2**20} MiB", file=path)
-        text = path.read_text(encoding="utf-8-sig")
-    except OSError as e:
-        raise InputError(f"cannot read the point file: {e.strerror}", file=path) from None
-    except UnicodeDecodeError as e:
-        raise InputError(f"not UTF-8 text (byte {e.start})", file=path) from None
+    text = read_text(path, "points")
     lines = text.splitlines()
     start = 0
     while start < len(lines) and (lines[start].lstrip().startswith("#") or not lines[start].strip()):
@@ -299,11 +366,16 @@ def read_points_csv(path: Path, probes: tuple[Probe, ...]) -> PointTable:
     reader = csv.reader(io.StringIO("\n".join(lines[start:])))
     header = [h.strip() for h in next(reader)]
     colmap: dict[str, int] = {}
+    for k, h in enumerate(header):
+        if h in header[:k]:
+            raise InputError(f"column {h!r} appears twice in the header", file=path, where=f"line {start + 1}")
     for key, aliases in POINT_COLUMNS.items():
-        for a in aliases:
-            if a in header:
-                colmap[key] = header.index(a)
-                break
+        given = [a for a in aliases if a in header]
+        if len(given) > 1:
+            raise InputError(f"columns {' and '.join(map(repr, given))} both give {key}: keep one",
+                             file=path, where=f"line {start + 1}")
+        if given:
+            colmap[key] = header.index(given[0])
     for key in ("id", "x", "y", "z", "nx", "ny", "nz"):
         if key not in colmap:
             raise InputError(f"missing column {POINT_COLUMNS[key][0]!r} (header: {','.join(header)})",
@@ -312,8 +384,9 @@ def read_points_csv(path: Path, probes: tuple[Probe, ...]) -> PointTable:
     for offset, row in _csv_rows(reader, path, start):
         if not row or all(not c.strip() for c in row):
             continue
-        if len(row) < len(header):
-            raise InputError(f"{len(row)} fields, the header has {len(header)}", file=path,
+        if len(row) != len(header):
+            hint = " (a decimal comma in a comma-separated file?)" if len(row) > len(header) else ""
+            raise InputError(f"{len(row)} fields, the header has {len(header)}{hint}", file=path,
                              where=f"line {offset}")
 
         def where(column, offset=offset):

@@ -17,6 +17,8 @@ from __future__ import annotations
 import csv
 import io
 import math
+import os
+import stat
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Sequence
@@ -24,6 +26,7 @@ from typing import Sequence
 import numpy as np
 
 from .errors import ModelError
+from .limits import coordinate_problem
 
 NORMAL_TOL = 1e-3           # spec section 1: a normal must be unit length within 1e-3
 OFFSET_TOL_MM = 1e-6        # one probe id, one offset (within 1 nm)
@@ -122,6 +125,13 @@ class PointRecords(Recordings):
 # reading
 # ---------------------------------------------------------------------------------------------
 
+#: columns holding coordinates or lengths in mm: within the plausible machine range
+#: (:data:`xlfuncs.limits.MAX_COORDINATE_MM`), where float64 keeps 1 nm
+COORDINATE_COLUMNS = frozenset({"x1", "y1", "z1", "x2", "y2", "z2", "x_nom", "y_nom", "z_nom", "x", "y", "z",
+                                "reference_mm", "measured_mm", "p1x", "p1y", "p1z", "p2x", "p2y", "p2z",
+                                "px", "py", "pz"})
+
+
 def _number(text: str, line: int, column: str) -> float:
     t = text.strip()
     try:
@@ -137,9 +147,17 @@ def read_recordings(path: str | Path) -> LengthRecords | PointRecords:
     """Read and validate a recordings CSV (spec section 1); raises :class:`RecordingsError`."""
     path = Path(path)
     try:
-        if path.stat().st_size > MAX_BYTES:
+        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK)   # a FIFO must not block the open
+        with os.fdopen(fd, "rb") as fh:
+            st = os.fstat(fh.fileno())
+            if not stat.S_ISREG(st.st_mode):
+                raise RecordingsError("not a regular file (a FIFO, a device or a folder): refused")
+            if st.st_size > MAX_BYTES:
+                raise RecordingsError(f"larger than {MAX_BYTES // 2**20} MiB")
+            os.set_blocking(fd, True)
+            raw = fh.read(MAX_BYTES + 1)
+        if len(raw) > MAX_BYTES:
             raise RecordingsError(f"larger than {MAX_BYTES // 2**20} MiB")
-        raw = path.read_bytes()
     except OSError as e:
         raise RecordingsError(f"cannot read the recordings: {e.strerror}") from None
     try:
@@ -223,6 +241,10 @@ def parse_recordings(text: str) -> LengthRecords | PointRecords:
         where.append(offset)
         for c in numeric:
             values[c].append(_number(row[seen[c]], offset, c))
+            if c in COORDINATE_COLUMNS:
+                problem = coordinate_problem(values[c][-1])
+                if problem is not None:
+                    raise RecordingsError(problem, offset, c)
         for c in text_cols:
             v = row[seen[c]].strip()
             if c != "group" and not v:

@@ -1,0 +1,78 @@
+"""Memory needs estimated before large allocations, refused with a message saying what fits.
+
+The dense parts of the mismatch locator (:mod:`xlfuncs.diagnose`) hold the covariance of the
+records as n x n matrices: for length records C = G V_X G^T per factor (R, PQ, S, ET, ER, P),
+their sum and its Cholesky factor; for point records V_X of the measured points (3n x 3n, Forbes
+2025 eq. 28) and C restricted to the compared coordinates.  :func:`diagnose_bytes` is the
+estimate of that peak; when the algorithm changes (structured operators instead of dense
+matrices), change this function with it, and the guard in the CLI follows.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+
+from .errors import ModelError
+
+#: n x n matrices alive at the peak of a length-record diagnosis (6 factors, sum, factor, spare)
+LENGTH_MATRICES = 10
+#: (dims n) x (dims n) matrices alive at the peak of a point-record diagnosis, besides V_X
+POINT_MATRICES = 6
+
+
+class ResourceError(ModelError):
+    """The computation would need more memory than this machine has."""
+
+
+def diagnose_bytes(kind: str, n_records: int, dims: int = 3) -> int:
+    """Estimated peak memory (bytes) of :func:`xlfuncs.diagnose.diagnose` on ``n_records``."""
+    n = int(n_records)
+    if kind == "length":
+        return 8 * LENGTH_MATRICES * n * n
+    return 8 * ((3 * n) ** 2 + POINT_MATRICES * (dims * n) ** 2)
+
+
+def available_bytes() -> int:
+    """Memory this process may still use: MemAvailable, or the address-space limit if lower."""
+    avail = None
+    try:
+        with open("/proc/meminfo", encoding="ascii") as fh:
+            for line in fh:
+                if line.startswith("MemAvailable:"):
+                    avail = int(line.split()[1]) * 1024
+                    break
+    except (OSError, ValueError):
+        pass
+    if avail is None:
+        try:
+            avail = os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+        except (ValueError, OSError, AttributeError):
+            avail = 8 * 2**30
+    try:
+        import resource
+
+        soft, _ = resource.getrlimit(resource.RLIMIT_AS)
+        if soft not in (resource.RLIM_INFINITY, -1) and soft > 0:
+            avail = min(avail, soft)
+    except (ImportError, ValueError, OSError):
+        pass
+    return int(avail)
+
+
+def _gib(b: float) -> str:
+    return f"{b / 2**30:,.1f} GiB" if b >= 2**30 else f"{b / 2**20:,.0f} MiB"
+
+
+def check_diagnose_fits(kind: str, n_records: int, dims: int = 3, available: int | None = None) -> None:
+    """Raise :class:`ResourceError` when :func:`diagnose_bytes` exceeds what is available, saying
+    how many records would fit."""
+    need = diagnose_bytes(kind, n_records, dims)
+    have = available_bytes() if available is None else available
+    if need <= have:
+        return
+    per_n2 = diagnose_bytes(kind, 1, dims)          # the estimate is a multiple of n^2
+    fits = max(int(math.isqrt(max(have, 0) // per_n2)), 0)
+    raise ResourceError(f"diagnosing {n_records:,} {kind} records needs about {_gib(need)} of memory, "
+                        f"{_gib(have)} are available: at most about {fits:,} records fit; split the "
+                        "recordings into smaller files (e.g. by group) and diagnose each")
