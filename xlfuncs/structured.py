@@ -1,0 +1,272 @@
+"""The covariance of point records as a structured operator, C = D + U U^T, never n x n.
+
+For point records the mismatch locator (:mod:`xlfuncs.diagnose`) needs C = V_X of the measured
+points (Forbes 2025 eq. 28, restricted to x, y for 2-D data).  Its factors are
+
+====  ===================================================================  =====================
+R     D = sigma_R^2 I                                                      eq. (8), diagonal
+PQ    per probe q, dims columns  sigma_PQ,k(i) [k(i) = q] e_a               eq. (9)
+S     7 columns  G(x_i - p_k(i)) V_B^1/2                                   eqs. (11)-(14)
+ET    sigma_ET l_i (x) I: dims r_ET columns                                eq. (21)
+ER    sigma_ER l_i (x) G_k(i): 3 r_ER columns                              eqs. (24)-(25)
+P     per probe: sigma_P0 n_i (1 column), sigma_P l_i (x) n_i (r_P)        eqs. (26)-(27)
+====  ===================================================================  =====================
+
+with l_i the rows of the controlled Nyström factors of :mod:`xlfuncs.lowrank` (kernel
+K ~ L L^T, residual R_K positive semidefinite with ||R_K||_2 <= trace(R_K)).  U (n x k) is
+generated in row blocks of points and never stored.  One pass accumulates the small core
+``I + U^T D^-1 U`` (Woodbury) and ``U^T D^-1 B`` for the columns B the diagnosis needs (residual,
+alignment, every candidate effect); from these the Gram matrix ``Gamma = B^T C^-1 B`` and a second
+pass ``P = C^-1 B``.  The :class:`GramWhitener` then maps any M in the span of B to coordinates
+whose inner products are ``a^T C^-1 b``, so every statistic of the diagnosis (GLS, chi-square,
+candidate likelihood ratios, aliasing) is computed exactly as with the dense W = L^-1, to
+rounding and to the stated approximation bound of the GP factors:
+
+    ||C - C_lowrank||_2 <= eps_C = sum_f s_f trace(R_K,f) max_i |w_i|^2
+
+and, first order, ``|chi2 - chi2_lowrank| <= chi2 * eps_C / sigma_R^2`` (C >= sigma_R^2 I).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.linalg import cho_factor, cho_solve
+
+from . import lowrank as lr
+from . import pointcloud as pc
+from .blocked import _G_S, _skew
+from .errors import ModelError
+
+#: points per block of the passes over U
+BLOCK_POINTS = 4096
+
+
+@dataclass
+class StructuredCovariance:
+    """C = sigma_R^2 I + U U^T for the point records of ``cloud`` (µm²), ``dims`` coordinates."""
+
+    cloud: pc.PointCloud
+    params: pc.Parameters
+    dims: int
+    pivot_tol: float = lr.PIVOT_TOL
+    ranks: dict = field(default_factory=dict)
+    eps_C: float = 0.0
+
+    def __post_init__(self):
+        p = self.params
+        if p.sigma_R_um <= 0:
+            raise ModelError("the structured record covariance needs sigma_R_um > 0")
+        self.d = p.sigma_R_um ** 2
+        cloud = self.cloud
+        self.pa = pc.probe_arrays(cloud, p)
+        self.U_ram = cloud.ram_mm
+        self.GR = None
+        eps = np.finfo(float).eps
+        self.facs = {}
+        terms = []
+        if p.sigma_ET_um > 0:
+            terms.append(("ET", self.U_ram, 1 / p.lambda_ET_mm ** 2, p.sigma_ET_um ** 2, 1.0, None))
+        if p.sigma_ER_urad > 0:
+            off = cloud.offsets_mm
+            w2 = float(np.max(np.sum(off ** 2, axis=1)))      # ||G_k||_2^2 <= |p_k|^2
+            terms.append(("ER", self.U_ram, 1 / p.lambda_ER_mm ** 2, (p.sigma_ER_urad * pc.MILLI) ** 2, w2, None))
+        k = cloud.probe_index
+        sp, lam = self.pa["sigma_P_um"], self.pa["lambda_P"]
+        for q in range(len(cloud.probes)):
+            idx = np.flatnonzero(k == q)
+            if idx.size and sp[idx[0]] > 0:
+                terms.append((f"P{q}", cloud.N[idx], 1 / lam[idx[0]] ** 2, sp[idx[0]] ** 2, 1.0, idx))
+        for name, Z, il2, s, w2, idx in terms:
+            m = Z.shape[0]
+            step = max(1, -(-m // lr.POOL_SIZE))
+            pool = np.arange(0, m, step)
+            for _ in range(lr.MAX_ROUNDS):
+                fac = lr.KernelFactor.at(Z, lr.pivots(Z, il2, tol=self.pivot_tol, pool=pool), il2)
+                dmax, tr, worst = 0.0, 0.0, []
+                for i0 in range(0, m, BLOCK_POINTS):
+                    L = fac.rows(Z[i0:i0 + BLOCK_POINTS])
+                    dres = 1.0 - np.einsum("rb,rb->b", L, L)
+                    tr += float(np.sum(np.clip(dres, 0, None)))
+                    bad = np.flatnonzero(dres > lr.CHECK_FACTOR * self.pivot_tol)
+                    worst.extend((i0 + bad).tolist())
+                if not worst:
+                    break
+                pool = np.union1d(pool, np.asarray(worst[:lr.POOL_SIZE // 4]))
+            tr += m * (fac.rank + 2) * eps
+            self.facs[name] = (fac, idx)
+            self.ranks[name] = fac.rank
+            self.eps_C += s * tr * w2
+        # column layout
+        nP = len(cloud.probes)
+        dims = self.dims
+        self.k = nP * dims + 7
+        for name, (fac, _idx) in self.facs.items():
+            self.k += fac.rank * (dims if name == "ET" else 3 if name == "ER" else 1)
+        self.k += nP                                         # P radius columns
+        self.n = cloud.m * dims
+
+    # -- U in row blocks ---------------------------------------------------------------------
+    def U_rows(self, i0: int, i1: int) -> np.ndarray:
+        """Rows of U for points i0 .. i1-1 (observations dims*i0 .. dims*i1-1): (b dims) x k."""
+        p, cloud, dims = self.params, self.cloud, self.dims
+        b = i1 - i0
+        sl = slice(i0, i1)
+        kp = cloud.probe_index[sl]
+        nP = len(cloud.probes)
+        parts = []
+        # PQ
+        s = self.pa["sigma_PQ_um"][sl]
+        pq = np.zeros((b, dims, nP, dims))
+        for a in range(dims):
+            pq[np.arange(b), a, kp, a] = s
+        parts.append(pq.reshape(b, dims, -1))
+        # S
+        parts.append(_G_S(self.U_ram[sl])[:, :dims, :] * np.sqrt(pc.V_S_diag_um_per_mm2(p)))
+        if "ET" in self.facs:
+            L = self.facs["ET"][0].rows(self.U_ram[sl]).T * p.sigma_ET_um       # b x r
+            et = np.einsum("il,ab->ialb", L, np.eye(dims))
+            parts.append(et.reshape(b, dims, -1))
+        if "ER" in self.facs:
+            L = self.facs["ER"][0].rows(self.U_ram[sl]).T * (p.sigma_ER_urad * pc.MILLI)
+            GR = _skew(cloud.offsets_mm[sl])[:, :dims, :]                         # b x dims x 3
+            parts.append(np.einsum("il,iac->ialc", L, GR).reshape(b, dims, -1))
+        N = cloud.N[sl][:, :dims]
+        s0 = self.pa["sigma_P0_um"][sl]
+        rad = np.zeros((b, dims, nP))
+        rad[np.arange(b), :, kp] = (s0[:, None] * N)
+        parts.append(rad)
+        sp = self.pa["sigma_P_um"][sl]
+        for q in range(nP):
+            name = f"P{q}"
+            if name not in self.facs:
+                continue
+            fac, _idx = self.facs[name]
+            blk = np.zeros((b, dims, fac.rank))
+            here = np.flatnonzero(kp == q)
+            if here.size:
+                L = fac.rows(cloud.N[i0 + here]).T * sp[here][:, None]          # h x r
+                blk[here] = np.einsum("il,ia->ial", L, N[here])
+            parts.append(blk)
+        U = np.concatenate(parts, axis=2)
+        assert U.shape[2] == self.k
+        return U.reshape(b * dims, self.k)
+
+    def blocks(self):
+        m = self.cloud.m
+        for i0 in range(0, m, BLOCK_POINTS):
+            i1 = min(i0 + BLOCK_POINTS, m)
+            yield i0, i1, self.U_rows(i0, i1)
+
+    # -- what the diagnosis needs ------------------------------------------------------------
+    def diagonal(self) -> np.ndarray:
+        out = np.empty(self.n)
+        for i0, i1, U in self.blocks():
+            out[self.dims * i0:self.dims * i1] = self.d + np.einsum("ik,ik->i", U, U)
+        return out
+
+    def point_blocks(self) -> np.ndarray:
+        """The dims x dims diagonal blocks of C, one per point."""
+        dims = self.dims
+        out = np.empty((self.cloud.m, dims, dims))
+        for i0, i1, U in self.blocks():
+            U3 = U.reshape(i1 - i0, dims, self.k)
+            out[i0:i1] = np.einsum("iak,ibk->iab", U3, U3) + self.d * np.eye(dims)
+        return out
+
+    def whitener(self, B: np.ndarray, group_rows: dict | None = None) -> "GramWhitener":
+        """The whitener on the span of the columns of B (n x c); ``group_rows``: {key: observation
+        indices} whose Woodbury Grams are accumulated in the same pass (for group chi-squares)."""
+        n, c = B.shape
+        d = self.d
+        UtU = np.zeros((self.k, self.k))
+        UtB = np.zeros((self.k, c))
+        gram = {}
+        owner = None
+        if group_rows:
+            keys = list(group_rows)
+            owner = {}
+            for g in keys:
+                gram[g] = [np.zeros((self.k, self.k)), np.zeros((self.k, c)), group_rows[g]]
+            for by in {g[0] for g in keys}:
+                lab = np.full(n, -1)
+                for j, g in enumerate(keys):
+                    if g[0] == by:
+                        lab[group_rows[g]] = j
+                owner[by] = lab
+        for i0, i1, U in self.blocks():
+            rows = slice(self.dims * i0, self.dims * i1)
+            UtU += U.T @ U
+            UtB += U.T @ B[rows]
+            if owner:
+                for by, lab in owner.items():
+                    lb = lab[rows]
+                    for j in np.unique(lb[lb >= 0]):
+                        g = keys[j]
+                        sel = np.flatnonzero(lb == j)
+                        Ug = U[sel]
+                        gram[g][0] += Ug.T @ Ug
+                        gram[g][1] += Ug.T @ B[rows][sel]
+        UtU /= d
+        UtB /= d
+        cap = cho_factor(np.eye(self.k) + UtU, lower=True)
+        Z = cho_solve(cap, UtB)                                  # (I + U^T D^-1 U)^-1 U^T D^-1 B
+        Gamma = B.T @ B / d - UtB.T @ Z
+        P = B / d
+        for i0, i1, U in self.blocks():
+            rows = slice(self.dims * i0, self.dims * i1)
+            P[rows] -= (U @ Z) / d
+        groups = {g: (a / d, b_ / d, idx) for g, (a, b_, idx) in gram.items()}
+        return GramWhitener(0.5 * (Gamma + Gamma.T), P, n, B, d, groups)
+
+    def chi2_bound(self) -> float:
+        """First-order relative bound of chi-square from the low-rank GP factors, eps_C/sigma_R^2."""
+        return self.eps_C / self.d
+
+
+class GramWhitener:
+    """W with (W a)^T (W b) = a^T C^-1 b for a, b in the span of the columns B it was built on
+    (:meth:`StructuredCovariance.whitener`): coordinates Lambda^-1/2 V^T S P^T M, with
+    S Gamma S = V Lambda V^T (S: column scaling), P = C^-1 B."""
+
+    mode = "structured"
+    L = None
+
+    def __init__(self, Gamma, P, n, B, d, groups):
+        g = np.sqrt(np.clip(np.diag(Gamma), 0, None))
+        s = np.where(g > 0, 1.0 / np.where(g > 0, g, 1.0), 0.0)
+        lam, V = np.linalg.eigh(Gamma * np.outer(s, s))
+        keep = lam > 1e-15 * max(lam.max(), 1e-300)
+        self._T = (V[:, keep] / np.sqrt(lam[keep])).T * s        # c' x c
+        self.P = P
+        self.rank = n
+        self.B = B
+        self.d = d
+        self.groups = groups
+
+    def __call__(self, M: np.ndarray) -> np.ndarray:
+        M = np.asarray(M, dtype=float)
+        return self._T @ (self.P.T @ M)
+
+    def group_chi2(self, key, e_coef: np.ndarray, cov0: np.ndarray, A_coef: np.ndarray) -> float:
+        """e_g^T (C_gg - A_g cov0 A_g^T)^-1 e_g for the group ``key``, with e = B e_coef and
+        A = B A_coef (generalized Woodbury; the group is a strict subset of the records)."""
+        UtU, UtB, idx = self.groups[key]
+        Bg = self.B[idx]
+        e = Bg @ e_coef
+        k = UtU.shape[0]
+        Ag = Bg @ A_coef
+        p0 = Ag.shape[1]
+        Ut_e = UtB @ e_coef                                   # U_g^T D^-1 e_g
+        Ut_A = UtB @ A_coef
+        # M_g = D + [U, A] diag(I, -cov0) [U, A]^T
+        core = np.zeros((k + p0, k + p0))
+        core[:k, :k] = np.eye(k) + UtU
+        if p0:
+            core[:k, k:] = Ut_A
+            core[k:, :k] = Ut_A.T
+            core[k:, k:] = Ag.T @ Ag / self.d - np.linalg.inv(cov0)
+        rhs = np.concatenate([Ut_e, Ag.T @ e / self.d]) if p0 else Ut_e
+        sol = np.linalg.solve(core, rhs)
+        return float(e @ e / self.d - rhs @ sol)
