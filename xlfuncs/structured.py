@@ -106,6 +106,102 @@ class StructuredCovariance:
             self.k += fac.rank * (dims if name == "ET" else 3 if name == "ER" else 1)
         self.k += nP                                         # P radius columns
         self.n = cloud.m * dims
+        # column offsets of the layout of U_rows
+        self.off_S = nP * dims
+        self.off_ET = self.off_S + 7
+        self.off_ER = self.off_ET + (self.facs["ET"][0].rank * dims if "ET" in self.facs else 0)
+        self.off_rad = self.off_ER + (self.facs["ER"][0].rank * 3 if "ER" in self.facs else 0)
+        self.off_P = {}
+        o = self.off_rad + nP
+        for q in range(nP):
+            if f"P{q}" in self.facs:
+                self.off_P[q] = o
+                o += self.facs[f"P{q}"][0].rank
+        assert o == self.k
+
+    def expansion(self, q: int, a: int, width: int) -> np.ndarray:
+        """E with V_full = V_compact E for the rows of probe q, coordinate a (see
+        :meth:`compact` with ``er_compact``): identity but for the ER block, I_r (x) G_q[a]."""
+        if "ER" not in self.facs:
+            return np.eye(width)
+        r = self.facs["ER"][0].rank
+        off = 1 + 7 + (self.facs["ET"][0].rank if "ET" in self.facs else 0)
+        offsets = np.array([pr.offset_mm for pr in self.cloud.probes], dtype=float).reshape(-1, 3)
+        GRa = _skew(offsets[q])[0][a]
+        rest = width - off - 3 * r
+        E = np.zeros((width - 2 * r, width))
+        E[:off, :off] = np.eye(off)
+        E[off:off + r, off:off + 3 * r] = np.kron(np.eye(r), GRa[None, :])
+        E[off + r:, off + 3 * r:] = np.eye(rest)
+        return E
+
+    def _expand(self, VV, VB, q, a, width):
+        """E^T VV E and E^T VB for :meth:`expansion` in O(width^2) (the ER block is
+        M (x) g g^T, g = G_q[a])."""
+        if "ER" not in self.facs:
+            return VV, VB
+        r = self.facs["ER"][0].rank
+        off = 1 + 7 + (self.facs["ET"][0].rank if "ET" in self.facs else 0)
+        offsets = np.array([pr.offset_mm for pr in self.cloud.probes], dtype=float).reshape(-1, 3)
+        g = _skew(offsets[q])[0][a]
+        c_er = np.arange(off, off + r)
+        c_ot = np.concatenate([np.arange(off), np.arange(off + r, VV.shape[0])])
+        f_er = np.arange(off, off + 3 * r)
+        f_ot = np.concatenate([np.arange(off), np.arange(off + 3 * r, width)])
+        F = np.empty((width, width))
+        F[np.ix_(f_ot, f_ot)] = VV[np.ix_(c_ot, c_ot)]
+        X = np.kron(VV[np.ix_(c_ot, c_er)], g[None, :])
+        F[np.ix_(f_ot, f_er)] = X
+        F[np.ix_(f_er, f_ot)] = X.T
+        F[np.ix_(f_er, f_er)] = np.kron(VV[np.ix_(c_er, c_er)], np.outer(g, g))
+        FB = np.empty((width, VB.shape[1]))
+        FB[f_ot] = VB[c_ot]
+        FB[f_er] = np.kron(VB[c_er], g[:, None])
+        return F, FB
+
+    def compact(self, i0: int, i1: int, er_compact: bool = False):
+        """The rows of U for points i0 .. i1-1 grouped by (probe q, coordinate a), without the
+        columns that are zero there: ``(rows, columns, V)`` with U[rows][:, columns] = V and
+        U[rows] zero elsewhere (rows local to the block: dims*(i - i0) + a)."""
+        p, cloud, dims = self.params, self.cloud, self.dims
+        sl = slice(i0, i1)
+        kp = cloud.probe_index[sl]
+        S = _G_S(self.U_ram[sl]) * np.sqrt(pc.V_S_diag_um_per_mm2(p))       # b x 3 x 7
+        LET = LER = None
+        if "ET" in self.facs:
+            LET = self.facs["ET"][0].rows(self.U_ram[sl]).T * p.sigma_ET_um
+            cET = np.arange(LET.shape[1]) * dims
+        if "ER" in self.facs:
+            LER = self.facs["ER"][0].rows(self.U_ram[sl]).T * (p.sigma_ER_urad * pc.MILLI)
+        N = cloud.N[sl]
+        sPQ, s0, sp = (self.pa[n][sl] for n in ("sigma_PQ_um", "sigma_P0_um", "sigma_P_um"))
+        offsets = np.array([pr.offset_mm for pr in cloud.probes], dtype=float).reshape(-1, 3)
+        for q in range(len(cloud.probes)):
+            here = np.flatnonzero(kp == q)
+            if not here.size:
+                continue
+            GR = _skew(offsets[q])[0]
+            LP = None
+            if q in self.off_P:
+                LP = self.facs[f"P{q}"][0].rows(N[here]).T * sp[here][:, None]
+            for a in range(dims):
+                parts = [sPQ[here][:, None], S[here, a, :]]
+                cols = [np.array([q * dims + a]), self.off_S + np.arange(7)]
+                if LET is not None:
+                    parts.append(LET[here])
+                    cols.append(self.off_ET + cET + a)
+                if LER is not None and er_compact:
+                    parts.append(LER[here])
+                    cols.append(self.off_ER + np.arange(3 * LER.shape[1]))
+                elif LER is not None:
+                    parts.append((LER[here][:, :, None] * GR[a][None, None, :]).reshape(len(here), -1))
+                    cols.append(self.off_ER + np.arange(3 * LER.shape[1]))
+                parts.append((s0[here] * N[here, a])[:, None])
+                cols.append(np.array([self.off_rad + q]))
+                if LP is not None:
+                    parts.append(LP * N[here, a][:, None])
+                    cols.append(self.off_P[q] + np.arange(LP.shape[1]))
+                yield here * dims + a, np.concatenate(cols), np.concatenate(parts, axis=1)
 
     # -- U in row blocks ---------------------------------------------------------------------
     def U_rows(self, i0: int, i1: int) -> np.ndarray:
@@ -160,19 +256,33 @@ class StructuredCovariance:
             yield i0, i1, self.U_rows(i0, i1)
 
     # -- what the diagnosis needs ------------------------------------------------------------
+    def compact_blocks(self, er_compact: bool = False):
+        m = self.cloud.m
+        for i0 in range(0, m, BLOCK_POINTS):
+            i1 = min(i0 + BLOCK_POINTS, m)
+            yield i0, i1, list(self.compact(i0, i1, er_compact))
+
     def diagonal(self) -> np.ndarray:
         out = np.empty(self.n)
-        for i0, i1, U in self.blocks():
-            out[self.dims * i0:self.dims * i1] = self.d + np.einsum("ik,ik->i", U, U)
+        for i0, i1, parts in self.compact_blocks():
+            o = out[self.dims * i0:self.dims * i1]
+            for sel, _nz, V in parts:
+                o[sel] = self.d + np.einsum("ik,ik->i", V, V)
         return out
 
     def point_blocks(self) -> np.ndarray:
         """The dims x dims diagonal blocks of C, one per point."""
         dims = self.dims
-        out = np.empty((self.cloud.m, dims, dims))
-        for i0, i1, U in self.blocks():
-            U3 = U.reshape(i1 - i0, dims, self.k)
-            out[i0:i1] = np.einsum("iak,ibk->iab", U3, U3) + self.d * np.eye(dims)
+        out = np.zeros((self.cloud.m, dims, dims))
+        for i0, i1, parts in self.compact_blocks():
+            for j, (sel_a, nz_a, Va) in enumerate(parts):
+                a = sel_a[0] % dims
+                pts = i0 + sel_a // dims
+                for sel_b, nz_b, Vb in parts[j - a:j - a + dims]:
+                    b = sel_b[0] % dims
+                    _, ia, ib = np.intersect1d(nz_a, nz_b, assume_unique=True, return_indices=True)
+                    out[pts, a, b] = np.einsum("ij,ij->i", Va[:, ia], Vb[:, ib])
+        out += self.d * np.eye(dims)
         return out
 
     def whitener(self, B: np.ndarray, group_rows: dict | None = None) -> "GramWhitener":
@@ -189,40 +299,72 @@ class StructuredCovariance:
             owner = {}
             for g in keys:
                 gram[g] = [np.zeros((self.k, self.k)), np.zeros((self.k, c)), group_rows[g]]
-            for by in {g[0] for g in keys}:
+            for by in dict.fromkeys(g[0] for g in keys):
                 lab = np.full(n, -1)
                 for j, g in enumerate(keys):
                     if g[0] == by:
                         lab[group_rows[g]] = j
                 owner[by] = lab
-        for i0, i1, U in self.blocks():
+        # one pass: Grams of the finest partition (cell = the record's label in every grouping,
+        # probe q, coordinate a) in the compact columns; groups and the whole are sums of cells
+        cell = np.zeros(n, dtype=int)
+        if owner:
+            _, cell = np.unique(np.stack(list(owner.values())), axis=1, return_inverse=True)
+            cell = cell.reshape(-1)
+        acc: dict = {}
+        for i0, i1, parts in self.compact_blocks(er_compact=True):
             rows = slice(self.dims * i0, self.dims * i1)
-            UtU += U.T @ U
-            UtB += U.T @ B[rows]
+            Bb, cb = B[rows], cell[rows]
+            for sel, nz, V in parts:
+                q, a = int(self.cloud.probe_index[i0 + sel[0] // self.dims]), int(sel[0] % self.dims)
+                Bs, lb = Bb[sel], cb[sel]
+                for j in np.unique(lb):
+                    s2 = np.flatnonzero(lb == j)
+                    V2 = V[s2] if s2.size < len(sel) else V
+                    _acc(acc, (int(j), q, a), V2, Bs[s2], nz)
+        sums: dict = {}
+        first_obs = {}
+        if owner:
+            u, idx = np.unique(cell, return_index=True)
+            first_obs = dict(zip(u.tolist(), idx.tolist()))
+        for (j, q, a), (VV, VB, nz) in acc.items():
+            targets = [None]
             if owner:
-                for by, lab in owner.items():
-                    lb = lab[rows]
-                    for j in np.unique(lb[lb >= 0]):
-                        g = keys[j]
-                        sel = np.flatnonzero(lb == j)
-                        Ug = U[sel]
-                        gram[g][0] += Ug.T @ Ug
-                        gram[g][1] += Ug.T @ B[rows][sel]
+                obs = first_obs[j]
+                targets += [keys[lab[obs]] for lab in owner.values() if lab[obs] >= 0]
+            for t in targets:
+                _acc(sums, (t, q, a), None, None, nz, VV, VB)
+        for (g, q, a), (VV, VB, nz) in sums.items():
+            full_VV, full_VB = self._expand(VV, VB, q, a, len(nz))
+            tgt = (UtU, UtB) if g is None else gram[g][:2]
+            tgt[0][np.ix_(nz, nz)] += full_VV
+            tgt[1][nz] += full_VB
         UtU /= d
         UtB /= d
         cap = cho_factor(np.eye(self.k) + UtU, lower=True)
         Z = cho_solve(cap, UtB)                                  # (I + U^T D^-1 U)^-1 U^T D^-1 B
         Gamma = B.T @ B / d - UtB.T @ Z
         P = B / d
-        for i0, i1, U in self.blocks():
-            rows = slice(self.dims * i0, self.dims * i1)
-            P[rows] -= (U @ Z) / d
+        for i0, i1, parts in self.compact_blocks():
+            Pr = P[self.dims * i0:self.dims * i1]
+            for sel, nz, V in parts:
+                Pr[sel] -= (V @ Z[nz]) / d
         groups = {g: (a / d, b_ / d, idx) for g, (a, b_, idx) in gram.items()}
         return GramWhitener(0.5 * (Gamma + Gamma.T), P, n, B, d, groups)
 
     def chi2_bound(self) -> float:
         """First-order relative bound of chi-square from the low-rank GP factors, eps_C/sigma_R^2."""
         return self.eps_C / self.d
+
+
+def _acc(acc, key, V, B, nz, VV=None, VB=None):
+    if VV is None:
+        VV, VB = V.T @ V, V.T @ B
+    if key in acc:
+        acc[key][0] += VV
+        acc[key][1] += VB
+    else:
+        acc[key] = [VV.copy(), VB.copy(), nz]
 
 
 class GramWhitener:
