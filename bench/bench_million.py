@@ -8,6 +8,9 @@ Parts (default: all):
              rigorous error bound) beside the exact blocked path (O(m^2), up to m = 50,000);
 * ``verify`` the low-rank V_A against the exact one at m = 20,000 and 50,000, every factor:
              max |V_low - V_exact| / max |V_exact| and the stated bound;
+* ``diagnose`` the mismatch locator on point records of a dense scan (four spheres, planted scale
+             and probe-radius errors): dense path where it fits (memory need printed first), the
+             structured path (:mod:`xlfuncs.structured`) up to 200,000 records;
 * ``pairs``  all-pairs distance uncertainties (eqs. 29-30) up to the m where the output itself
              (8 arrays of m(m-1)/2 doubles) is the limit: the memory need is printed before each
              run, and a run that would not fit in LIMIT_GB is skipped with the largest m that would.
@@ -211,9 +214,69 @@ def part_pairs(res: dict, lines: list) -> None:
         print(row, flush=True)
         lines.append(row)
     curve_ms = [c for c in curve if c[0] >= 2000]
-    e = exponent([c[0] * 5 for c in curve_ms], [c[1] for c in curve_ms])  # all points count
+    e = exponent([c[0] * 5 for c in curve_ms], [c[1] for c in curve_ms])  # (x5: the fit uses m >= 10^4)
     res.setdefault("exponents", {})["all_pairs"] = e
     lines += [f"| fitted exponent t ~ m^k (m >= 2,000) | k = {e:.2f} | | | | | |", ""]
+
+
+DIAG = """
+import time, resource, json, sys
+import numpy as np
+from xlfuncs import diagnose as dg, simulate as sm, pointcloud as pc
+MPE1 = pc.Parameters(sigma_R_um=0.20, sigma_S_ppm=0.7, sigma_Sa_ppm=0.7, sigma_Q_ppm=0.7, sigma_PQ_um=0.20,
+                     sigma_ET_um=0.2, lambda_ET_mm=200.0, sigma_ER_urad=4.0, lambda_ER_mm=400.0,
+                     sigma_P0_um=0.10, sigma_P_um=0.10, lambda_P=0.5)
+PAIR = (pc.Probe("P1", (0.0, 20.0, -30.0)), pc.Probe("P2", (0.0, -20.0, -30.0)))
+n = {n}
+rec = sm.simulate(sm.scan(PAIR, points=n), MPE1, {{"scale": 30.0, "probe_radius": 8.0}}, seed=3)
+model = dg.Model(MPE1, PAIR, True)
+t = time.perf_counter()
+ds = dg.diagnose(rec, model, structured={structured})
+seconds = time.perf_counter() - t
+extra = {{"chosen": ds.chosen, "chi2_before": ds.chi2_before, "chi2_after": ds.chi2_after,
+          "beta": [float(b) for b in ds.beta[-2:]], "u": [float(u) for u in np.sqrt(np.diag(ds.cov_beta))[-2:]]}}
+if {structured}:
+    extra["rank"] = ds.prep.C.ranks; extra["chi2_bound"] = ds.prep.C.chi2_bound()
+"""
+
+
+def dense_diag_bytes(n_points: int, dims: int = 3) -> float:
+    """The dense path holds the 3m x 3m V_X, C, its Cholesky factor and inverse: ~4 (n dims)^2 doubles."""
+    return 4 * 8.0 * (n_points * dims) ** 2
+
+
+def part_diagnose(res: dict, lines: list) -> None:
+    limit = LIMIT_GB * 2**30
+    lines += ["## diagnose on point records (scan of four spheres, planted scale 30 ppm and probe radius 8 µm)", "",
+              "| path | records | time / s | peak MB | load | chosen | estimates scale ppm, radius µm (u) | ranks ET, ER, P | chi2 rel. bound |",
+              "|---|---|---|---|---|---|---|---|---|"]
+    for structured, ns in ((False, (1_000, 2_000, 200_000)), (True, (1_000, 2_000, 20_000, 200_000))):
+        curve = []
+        for n in ns:
+            if not structured:
+                need = dense_diag_bytes(n)
+                print(f"dense diagnose of {n:,} point records needs about {need / 2**30:.1f} GB", flush=True)
+                if need > limit:
+                    nmax = int(math.sqrt(limit / 32) / 3)
+                    row = (f"| dense | {n:,} | not run: needs about {need / 2**30:.0f} GB, more than {LIMIT_GB:g} GB; "
+                           f"the largest that fits is about {nmax:,} records | | | | | | |")
+                    print(row, flush=True)
+                    lines.append(row)
+                    continue
+            r = run(DIAG.format(n=n, structured=structured))
+            curve.append((n, r["seconds"]))
+            est = ", ".join(f"{b:.2f} ({u:.2f})" for b, u in zip(r["beta"], r["u"]))
+            rank = ", ".join(str(v) for v in r["rank"].values()) if "rank" in r else "dense"
+            bound = f"{r['chi2_bound']:.1e}" if "chi2_bound" in r else "exact"
+            row = (f"| {'structured' if structured else 'dense'} | {n:,} | {r['seconds']:.1f} | {r['peak_MB']:.0f} | "
+                   f"{r['load']:.1f} | {' + '.join(r['chosen'])} | {est} | {rank} | {bound} |")
+            print(row, flush=True)
+            lines.append(row)
+            res.setdefault("diagnose", []).append({"structured": structured, "n": n, **r})
+        if structured:
+            e = exponent(*zip(*curve))
+            lines.append(f"| structured | fitted exponent t ~ n^k (n >= 10^4) | k = {e:.2f} | | | | | | |")
+    lines.append("")
 
 
 def main(parts) -> None:
@@ -222,7 +285,7 @@ def main(parts) -> None:
              "other jobs (each measurement a fresh process; peak = ru_maxrss; load = 1-minute load "
              "average after the run, 2.0 = both cores busy).", ""]
     for p in parts:
-        {"va": part_va, "verify": part_verify, "pairs": part_pairs}[p](res, lines)
+        {"va": part_va, "verify": part_verify, "pairs": part_pairs, "diagnose": part_diagnose}[p](res, lines)
     out = ROOT / "bench" / "results"
     tag = "_".join(parts)
     (out / f"million_{tag}.md").write_text("\n".join(lines) + "\n")
@@ -230,4 +293,4 @@ def main(parts) -> None:
 
 
 if __name__ == "__main__":
-    main(sys.argv[1:] or ["va", "verify", "pairs"])
+    main(sys.argv[1:] or ["va", "verify", "pairs", "diagnose"])

@@ -107,3 +107,24 @@ def test_an_unknown_method_is_a_model_error():
     f = ft.fit("sphere", cloud.X_mm, normals=cloud.N)
     with pytest.raises(ModelError, match="unknown V_A method"):
         bl.propagate_cloud(f, cloud, PARAMS, method="fast")
+
+
+def test_the_feature_job_reports_the_approximation_and_exact_is_one_setting_away(tmp_path, monkeypatch):
+    """Above LOWRANK_MIN_POINTS (lowered here) the feature results carry "approximation";
+    CMMWB_VA_METHOD=exact gives the exact numbers, which agree to the stated bound."""
+    from generator import feature_job
+    from generator.cli import build_task
+    from test_large_feature_workbook import write_bore_task
+
+    monkeypatch.setattr(feature_job, "DENSE_MAX_POINTS", 50)
+    monkeypatch.setattr(feature_job, "LOWRANK_MIN_POINTS", 100)
+    (tmp_path / "a").mkdir()
+    (tmp_path / "b").mkdir()
+    low, _ = build_task(write_bore_task(tmp_path / "a"), tmp_path / "a" / "out", plots=False)
+    monkeypatch.setenv("CMMWB_VA_METHOD", "exact")
+    ex, _ = build_task(write_bore_task(tmp_path / "b"), tmp_path / "b" / "out", plots=False)
+    a = low["feature"]["approximation"]
+    assert a["method"] == "nystrom-pivoted-cholesky" and max(a["relative_error_bound"].values()) <= 1e-6
+    assert "approximation" not in ex["feature"]
+    for n, u in ex["feature"]["u"].items():
+        assert abs(low["feature"]["u"][n] - u) <= 1e-6 * u, n

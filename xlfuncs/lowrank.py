@@ -191,6 +191,35 @@ class Approximation:
                         "relative_error_bound = max_pq of that bound / ||V_A,f||_2"}
 
 
+def initial_pool(m: int) -> np.ndarray:
+    """The points the pivots are first chosen from: all, or a fixed pseudo-random sample of
+    POOL_SIZE (seeded: the same every run; a stride could alias with interleaved probes)."""
+    if m <= POOL_SIZE:
+        return np.arange(m)
+    return np.sort(np.random.default_rng(20251).choice(m, POOL_SIZE, replace=False))
+
+
+def controlled_factor(Z: np.ndarray, inv_lam2: float, tol: float = PIVOT_TOL,
+                      block: int = 4096) -> tuple[KernelFactor, float]:
+    """The Nyström factor of the unit SE kernel on Z and the trace of its residual over all
+    points (with the rounding allowance), re-choosing the pivots with the worst points added
+    while any residual diagonal exceeds CHECK_FACTOR * tol."""
+    eps = np.finfo(float).eps
+    m = Z.shape[0]
+    pool = initial_pool(m)
+    for rnd in range(MAX_ROUNDS):
+        fac = KernelFactor.at(Z, pivots(Z, inv_lam2, tol=tol, pool=pool), inv_lam2)
+        d = np.empty(m)
+        for i0 in range(0, m, block):
+            L = fac.rows(Z[i0:i0 + block])
+            d[i0:i0 + block] = 1.0 - np.einsum("rb,rb->b", L, L)
+        bad = np.flatnonzero(d > CHECK_FACTOR * tol)
+        if not bad.size or rnd + 1 == MAX_ROUNDS:
+            break
+        pool = np.union1d(pool, bad[np.argsort(-d[bad], kind="stable")[:POOL_SIZE // 4]])
+    return fac, float(np.sum(np.clip(d, 0.0, None))) + m * (fac.rank + 2) * eps
+
+
 #: a point whose residual diagonal exceeds this (after the pivots were chosen on the pool)
 #: joins the pool and the pivots are chosen again
 CHECK_FACTOR = 100.0
@@ -207,9 +236,7 @@ def gp_terms_V_A(problems, nA: int, approx: Approximation, *, backend=None, prog
     terms = [(Z, name, scale, inv_lam2, W) for Z, ts in problems for name, scale, inv_lam2, W in ts]
     pools, facs = [], []
     for Z, _n, _s, inv_lam2, _W in terms:
-        m = Z.shape[0]
-        step = max(1, -(-m // POOL_SIZE))
-        pools.append(np.arange(0, m, step))
+        pools.append(initial_pool(Z.shape[0]))
         facs.append(None)
     todo = list(range(len(terms)))
     results: dict[int, tuple] = {}

@@ -285,9 +285,7 @@ def _gp(points: np.ndarray, sigma: float, lam: float, rng, size: int = 1) -> np.
     if m > GP_DENSE_MAX:   # a draw from the Nystrom factor K ~ L L^T of xlfuncs.lowrank
         from . import lowrank as lr
 
-        il2 = 1.0 / lam**2
-        step = max(1, -(-m // lr.POOL_SIZE))
-        fac = lr.KernelFactor.at(points, lr.pivots(points, il2, pool=np.arange(0, m, step)), il2)
+        fac, _trace = lr.controlled_factor(points, 1.0 / lam**2)
         z = rng.standard_normal((fac.rank, size))
         return sigma * np.concatenate([fac.rows(points[i0:i0 + 8192]).T @ z
                                        for i0 in range(0, m, 8192)])

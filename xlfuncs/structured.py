@@ -63,7 +63,6 @@ class StructuredCovariance:
         self.pa = pc.probe_arrays(cloud, p)
         self.U_ram = cloud.ram_mm
         self.GR = None
-        eps = np.finfo(float).eps
         self.facs = {}
         terms = []
         if p.sigma_ET_um > 0:
@@ -79,22 +78,7 @@ class StructuredCovariance:
             if idx.size and sp[idx[0]] > 0:
                 terms.append((f"P{q}", cloud.N[idx], 1 / lam[idx[0]] ** 2, sp[idx[0]] ** 2, 1.0, idx))
         for name, Z, il2, s, w2, idx in terms:
-            m = Z.shape[0]
-            step = max(1, -(-m // lr.POOL_SIZE))
-            pool = np.arange(0, m, step)
-            for _ in range(lr.MAX_ROUNDS):
-                fac = lr.KernelFactor.at(Z, lr.pivots(Z, il2, tol=self.pivot_tol, pool=pool), il2)
-                dmax, tr, worst = 0.0, 0.0, []
-                for i0 in range(0, m, BLOCK_POINTS):
-                    L = fac.rows(Z[i0:i0 + BLOCK_POINTS])
-                    dres = 1.0 - np.einsum("rb,rb->b", L, L)
-                    tr += float(np.sum(np.clip(dres, 0, None)))
-                    bad = np.flatnonzero(dres > lr.CHECK_FACTOR * self.pivot_tol)
-                    worst.extend((i0 + bad).tolist())
-                if not worst:
-                    break
-                pool = np.union1d(pool, np.asarray(worst[:lr.POOL_SIZE // 4]))
-            tr += m * (fac.rank + 2) * eps
+            fac, tr = lr.controlled_factor(Z, il2, self.pivot_tol)
             self.facs[name] = (fac, idx)
             self.ranks[name] = fac.rank
             self.eps_C += s * tr * w2
