@@ -27,7 +27,9 @@ A scanning probe delivers thousands of points per feature; the dense V_X of eq. 
   ====  =============================================  ===============================  ===========
 
   with G_i the three columns of G_A|X of point i and u_i = x_i - p_k(i) the ram position.
-  Memory grows linearly in m (the blocks have a fixed number of kernel entries);
+  Memory grows linearly in m (the blocks have a fixed number of kernel entries), time as m^2;
+  ``method="lowrank"`` replaces each kernel by the controlled Nyström factor of
+  :mod:`xlfuncs.lowrank` (time linear in m, error bound reported);
 * the covariance of length records of the mismatch locator, C = G V_X G^T with g = [-n; n]
   (:func:`record_covariance`): every entry involves four kernel values at the records' end
   points, computed directly in row blocks of records, so memory is that of C.
