@@ -23,7 +23,7 @@ so every entry obeys ``|Delta_pq| <= s_f trace(R) sqrt(M_pp M_qq)`` and
 ``||Delta||_2 <= s_f trace(R) ||M||_2``.  :class:`Approximation` carries these bounds; the
 exact O(m^2) path stays available (``method="exact"``).
 
-The pivots are chosen on a deterministic sub-sample of the points (every k-th point); if the
+The pivots are chosen on a seeded pseudo-random sub-sample of the points; if the
 pass over all points finds a residual diagonal above the tolerance there, the offending points
 join the pool and the pivots are chosen again, so the result does not depend on the sub-sample
 beyond the stated bound.  Blocks are accumulated in a fixed order on any backend
