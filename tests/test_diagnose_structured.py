@@ -11,6 +11,7 @@ from xlfuncs import diagnose as dg
 from xlfuncs import pointcloud as pc
 from xlfuncs import simulate as sm
 
+from conftest import ENGINES
 from test_diagnose_core import MPE1, PAIR
 
 REL = 1e-8
@@ -93,3 +94,28 @@ def test_large_point_records_choose_the_structured_path_by_themselves():
     assert not isinstance(prep.C, np.ndarray)
     small = dg.prepare(sm.simulate(sm.scan(PAIR, points=300), MPE1, {}, seed=1), dg.Model(MPE1, PAIR, True))
     assert isinstance(small.C, np.ndarray)
+
+
+@pytest.mark.parametrize("engine", ENGINES)
+def test_the_workbook_of_a_structured_diagnosis_agrees_with_its_json(tmp_path, monkeypatch, engine):
+    """The whitened GLS sheet holds the structured whitener's coordinates (fewer than n) and the
+    rank of C as a number; both engines reproduce chi-square, dof and estimates of the JSON."""
+    from conftest import close, recalc
+    from generator import diagnose_book
+    from generator.diagnose_cli import run_diagnose
+    from generator.recalc import results_rows
+    from test_diagnose_book import expected_rows
+    from xlfuncs.recordings import write_recordings
+
+    monkeypatch.setattr(dg, "STRUCTURED_MIN_OBS", 0)
+    monkeypatch.setattr(diagnose_book, "NATIVE_MAX_OBS", 20)
+    rec = sm.simulate(sm.scan(PAIR, points=200), MPE1, {"scale": 10.0, "probe_radius": 3.0}, seed=3)
+    write_recordings(rec, tmp_path / "rec.csv")
+    result, _ = run_diagnose(tmp_path / "rec.csv", dg.Model(MPE1, PAIR, True), tmp_path / "out", plots=False)
+    assert "approximation" in result and result["dof_before"] == 3 * 200 - 6
+    rows = {r["quantity"]: r for r in results_rows(recalc(tmp_path / "out" / "diagnosis.xlsx", engine))}
+    exp, unc = expected_rows(result)
+    for q, v in exp.items():
+        assert close(rows[q]["value"], v), f"{engine}: {q} {rows[q]['value']!r} != {v!r}"
+        if q in unc:
+            assert close(rows[q]["u"], unc[q]), f"{engine}: u({q})"

@@ -187,6 +187,11 @@ class StructuredCovariance:
                     cols.append(self.off_P[q] + np.arange(LP.shape[1]))
                 yield here * dims + a, np.concatenate(cols), np.concatenate(parts, axis=1)
 
+    @property
+    def shape(self) -> tuple[int, int]:
+        """(n, n): the size of the matrix it stands for (never formed)."""
+        return (self.n, self.n)
+
     # -- U in row blocks ---------------------------------------------------------------------
     def U_rows(self, i0: int, i1: int) -> np.ndarray:
         """Rows of U for points i0 .. i1-1 (observations dims*i0 .. dims*i1-1): (b dims) x k."""
