@@ -482,10 +482,16 @@ def _gls(book: Book, diag: Diagnosis, obs: dict, native: bool) -> dict:
         c0 = 3 + p
     else:
         ww = book.sheet("Whitened")
-        k = diag.whitener.rank
+        yw = diag.whitener(prep.r_um)
+        # the structured covariance (xlfuncs.structured) gives coordinates with the same inner
+        # products a' C^-1 b, fewer than n of them: the rank of C is then a cell of its own
+        k = diag.whitener.rank if diag.whitener.mode != "structured" else len(yw)
         book.text(ww, 1, 1, f"W r and W X with W C W' = I ({diag.whitener.mode}; computed by the core, "
                             f"C is {n} x {n})")
-        yw = diag.whitener(prep.r_um)
+        if diag.whitener.mode == "structured":
+            book.text(ww, 1, p + 3, "rank of C")
+            book.number(ww, 1, p + 4, diag.whitener.rank, fmt="0", computed=True)
+            out["rank_ref"] = cell(1, p + 4, "Whitened")
         Xw = diag.whitener(diag.X_sel) if p else np.zeros((k, 0))
         book.header(ww, 2, 1, ["Wr"] + [f"W {l}" for _, l in diag.sel_labels])
         for i in range(k):
@@ -618,6 +624,7 @@ def _fill_after(book: Book, diag: Diagnosis, obs: dict, gls: dict) -> None:
         stat("dof_after", f"=COUNT({e_after.ref})-{p}", "minus every fitted parameter", fmt="0")
     else:
         yw = gls["yw"].ref
+        count = gls.get("rank_ref") or f"COUNT({yw})"
         if p:
             Xw = gls["Xw"]
             if p0:
@@ -625,13 +632,13 @@ def _fill_after(book: Book, diag: Diagnosis, obs: dict, gls: dict) -> None:
                      "|W r - W A b0|^2", array=True)
             else:
                 stat("chi2_before", f"=SUMSQ({yw})", "|W r|^2")
-            stat("dof_before", f"=COUNT({yw})-{p0}", "rank of C minus alignment parameters", fmt="0")
+            stat("dof_before", f"={count}-{p0}", "rank of C minus alignment parameters", fmt="0")
             stat("chi2_after", f"=SUMSQ({yw}-MMULT({Xw.ref},{gls['b'].ref}))", "|W r - W X b|^2", array=True)
         else:
             stat("chi2_before", f"=SUMSQ({yw})", "|W r|^2")
-            stat("dof_before", f"=COUNT({yw})", "rank of C", fmt="0")
+            stat("dof_before", f"={count}", "rank of C", fmt="0")
             stat("chi2_after", f"=SUMSQ({yw})", "no effect chosen")
-        stat("dof_after", f"=COUNT({yw})-{p}", "minus every fitted parameter", fmt="0")
+        stat("dof_after", f"={count}-{p}", "minus every fitted parameter", fmt="0")
     stat("p_before", f"=CHIDIST({stats['chi2_before']},{stats['dof_before']})",
          "chi-square tail probability", fmt="0.000E+00")
     book.text(wg, row, c0, "mismatch")

@@ -390,6 +390,24 @@ def _safe_rows(path, plan: Planning):
 #: up to this many points V_A = G V_X G^T uses the dense V_X (what the workbook shows); beyond,
 #: the blocked evaluation that never forms V_X (equal to 1e-10, tests/test_blocked.py)
 DENSE_MAX_POINTS = 300
+#: beyond this many points the GP factors (ET, ER, P) of V_A go through the controlled low-rank
+#: factor of xlfuncs.lowrank (time linear in m; results carry "approximation" with its error
+#: bound); CMMWB_VA_METHOD=exact forces the exact O(m^2) blocked sum, =lowrank the factor at
+#: any size
+LOWRANK_MIN_POINTS = 100_000
+VA_METHOD_ENV = "CMMWB_VA_METHOD"
+
+
+def va_method(m: int) -> str:
+    """"exact" or "lowrank" for V_A of m points (see LOWRANK_MIN_POINTS)."""
+    import os
+
+    choice = os.environ.get(VA_METHOD_ENV, "").strip().lower()
+    if choice in ("exact", "lowrank"):
+        return choice
+    if choice not in ("", "auto"):
+        raise InputError(f"{VA_METHOD_ENV} must be exact, lowrank or auto, got {choice!r}")
+    return "lowrank" if m > LOWRANK_MIN_POINTS else "exact"
 
 
 def propagation_method(m: int) -> str:
@@ -398,6 +416,9 @@ def propagation_method(m: int) -> str:
     if m <= DENSE_MAX_POINTS:
         return ("xlfuncs.features.propagate of the dense V_X of xlfuncs.pointcloud.V_X_components "
                 f"({3 * m} x {3 * m})")
+    if va_method(m) == "lowrank":
+        return ("xlfuncs.blocked.propagate_cloud with the low-rank GP factors of xlfuncs.lowrank "
+                "(error bound in the results' approximation)")
     return "xlfuncs.blocked.propagate_cloud (G V_X G^T in row blocks, V_X never formed)"
 
 
@@ -416,7 +437,8 @@ def fitted(task: Task):
                 task._unc = ft.propagate(f, pc.V_X_components(task.cloud, task.params))
             else:  # V_X would not fit in memory: G V_X G^T in row blocks (xlfuncs.blocked)
                 task._unc = bl.propagate_cloud(f, task.cloud, task.params, backend=get_backend(),
-                                               progress=bl.ProgressBar(f"V_A of {task.cloud.m} points"))
+                                               progress=bl.ProgressBar(f"V_A of {task.cloud.m} points"),
+                                               method=va_method(task.cloud.m))
         except ModelError as e:
             raise InputError(str(e), file=task.path, where="[parameters]") from None
         task._fit = f
@@ -456,6 +478,8 @@ def compute(task: Task) -> dict:
         "fit": {"m": f.m, "iterations": f.iterations, "rms_residual_mm": f.rms_mm,
                 "source": task.source},
     }
+    if unc.approximation is not None:
+        feature["approximation"] = unc.approximation.as_dict()
     out = {"name": task.name, "kind": KIND, "version": __version__, "feature": feature}
     if task.sampling is not None:
         out["sampling"] = {k: (list(v) if isinstance(v, tuple) else v)

@@ -45,6 +45,18 @@ def test_fitted_feature_V_A_on_a_dask_cluster_equals_the_local_path(cluster):
         assert np.array_equal(remote.V_local[fac], local.V_local[fac]), fac
 
 
+def test_low_rank_V_A_on_a_dask_cluster_equals_the_local_path(cluster):
+    cloud = sphere_cloud(3000)
+    f = ft.fit("sphere", cloud.X_mm, normals=cloud.N)
+    with DaskBackend(cluster.scheduler_address) as backend:
+        remote = bl.propagate_cloud(f, cloud, PARAMS, backend=backend, method="lowrank")
+    local = bl.propagate_cloud(f, cloud, PARAMS, method="lowrank")
+    assert remote.approximation.rank == local.approximation.rank
+    for fac in (*pc.FACTORS, "total"):
+        scale = np.max(np.abs(local.V_local[fac]))
+        assert np.max(np.abs(remote.V_local[fac] - local.V_local[fac])) <= 1e-12 * scale, fac
+
+
 def test_record_covariance_on_a_dask_cluster_equals_the_local_path(cluster):
     cloud = random_cloud(60)
     I, J = np.arange(0, 30), np.arange(30, 60)

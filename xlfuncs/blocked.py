@@ -27,7 +27,9 @@ A scanning probe delivers thousands of points per feature; the dense V_X of eq. 
   ====  =============================================  ===============================  ===========
 
   with G_i the three columns of G_A|X of point i and u_i = x_i - p_k(i) the ram position.
-  Memory grows linearly in m (the blocks have a fixed number of kernel entries);
+  Memory grows linearly in m (the blocks have a fixed number of kernel entries), time as m^2;
+  ``method="lowrank"`` replaces each kernel by the controlled Nyström factor of
+  :mod:`xlfuncs.lowrank` (time linear in m, error bound reported);
 * the covariance of length records of the mismatch locator, C = G V_X G^T with g = [-n; n]
   (:func:`record_covariance`): every entry involves four kernel values at the records' end
   points, computed directly in row blocks of records, so memory is that of C.
@@ -448,14 +450,22 @@ def _kernel_items(problems, block: int) -> tuple[list, list]:
 
 def V_A_components(G: np.ndarray, cloud: pc.PointCloud, params: pc.Parameters, *,
                    factors: Sequence[str] = FACTORS, block: int = BLOCK_ENTRIES,
-                   backend=None, progress=None) -> dict[str, np.ndarray]:
+                   backend=None, progress=None, method: str = "exact",
+                   pivot_tol: float | None = None, approximation=None) -> dict[str, np.ndarray]:
     """V_A,f = G V_X,f G^T for every factor f of eq. (28) without forming V_X.
 
     ``G`` is n_A x 3m with interleaved columns x1, y1, z1, x2, ... (as
     :func:`xlfuncs.features.G_A_X`); the result has the units of G V_X G^T (V_X in µm²) and
     equals ``G @ V_X_components(cloud, params)[f] @ G.T`` to rounding.  Time O(m^2 n_A) for the
     GP factors, memory O(m n_A + block).  ``block``: kernel entries per task.
+
+    ``method="lowrank"``: the GP factors ET, ER, P through the controlled Nyström factor of
+    :mod:`xlfuncs.lowrank` (time O(m r^2), r pivots per kernel; R, PQ, S stay exact); pass an
+    :class:`xlfuncs.lowrank.Approximation` as ``approximation`` to receive the ranks and the
+    rigorous error bounds (it is filled in).
     """
+    if method not in ("exact", "lowrank"):
+        raise ModelError(f"unknown V_A method {method!r}; known: exact, lowrank")
     G = np.asarray(G, dtype=float)
     m = cloud.m
     if G.ndim != 2 or G.shape[1] != 3 * m:
@@ -518,27 +528,49 @@ def V_A_components(G: np.ndarray, cloud: pc.PointCloud, params: pc.Parameters, *
                                  [("P", sp[idx[0]] ** 2, 1.0 / lam[idx[0]] ** 2,
                                    np.ascontiguousarray(gP[idx][:, :, None]))]))
         out["P"] = V
-    items, weights = _kernel_items(problems, block)
-    for part in _run(_kernel_rows, items, {"problems": problems}, backend, progress, weights):
-        for name, M in part.items():
+    if method == "lowrank":
+        from . import lowrank as lr
+
+        approx = approximation if approximation is not None else lr.Approximation()
+        if pivot_tol is not None:
+            approx.pivot_tol = pivot_tol
+        for name, M in lr.gp_terms_V_A(problems, nA, approx, backend=backend,
+                                        progress=progress).items():
             out[name] = out.get(name, 0.0) + M
+    else:
+        items, weights = _kernel_items(problems, block)
+        for part in _run(_kernel_rows, items, {"problems": problems}, backend, progress, weights):
+            for name, M in part.items():
+                out[name] = out.get(name, 0.0) + M
     for f in factors:
         out.setdefault(f, np.zeros((nA, nA)))
         out[f] = 0.5 * (out[f] + out[f].T)
+    if method == "lowrank":
+        approx.finish({f: out[f] for f in factors})
     return {f: out[f] for f in factors}
 
 
 def propagate_cloud(fit, cloud: pc.PointCloud, params: pc.Parameters, *, G: np.ndarray | None = None,
-                    backend=None, progress=None, block: int = BLOCK_ENTRIES):
+                    backend=None, progress=None, block: int = BLOCK_ENTRIES, method: str = "exact",
+                    pivot_tol: float | None = None):
     """:func:`xlfuncs.features.propagate` for the point-cloud model without forming V_X: the same
     :class:`~xlfuncs.features.FeatureUncertainty` (V_A per factor in the parameters' units,
-    local and reported, and ``"total"``), in memory linear in m."""
+    local and reported, and ``"total"``), in memory linear in m.
+
+    ``method="lowrank"``: the GP factors through :mod:`xlfuncs.lowrank` (time linear in m); the
+    result's ``approximation`` then holds the ranks and error bounds (``None`` when exact)."""
     from . import features as ft
 
     G = ft.G_A_X(fit) if G is None else np.asarray(G, dtype=float)
     if cloud.m != fit.m:
         raise ModelError(f"the fit has {fit.m} points, the point cloud {cloud.m}")
-    comps = V_A_components(G, cloud, params, block=block, backend=backend, progress=progress)
+    approx = None
+    if method == "lowrank":
+        from .lowrank import Approximation
+
+        approx = Approximation()
+    comps = V_A_components(G, cloud, params, block=block, backend=backend, progress=progress,
+                           method=method, pivot_tol=pivot_tol, approximation=approx)
     V_local, V = {}, {}
     total = np.zeros((fit.n, fit.n))
     for f in FACTORS:
@@ -548,7 +580,8 @@ def propagate_cloud(fit, cloud: pc.PointCloud, params: pc.Parameters, *, G: np.n
         total = total + Va
     V_local["total"] = total
     V["total"] = fit.T @ total @ fit.T.T
-    return ft.FeatureUncertainty(fit=fit, G=G, V_local=V_local, V=V, factors=FACTORS)
+    return ft.FeatureUncertainty(fit=fit, G=G, V_local=V_local, V=V, factors=FACTORS,
+                                 approximation=approx)
 
 
 # ---------------------------------------------------------------------------------------------

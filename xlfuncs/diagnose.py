@@ -254,7 +254,15 @@ def kabsch(X_nom: np.ndarray, X: np.ndarray, planar: bool) -> tuple[np.ndarray, 
     return R, t
 
 
-def prepare(rec: LengthRecords | PointRecords, model: Model) -> Prepared:
+#: point records with more observations than this use the structured covariance
+#: (:mod:`xlfuncs.structured`, C = D + U U^T never formed) unless asked otherwise
+STRUCTURED_MIN_OBS = 6000
+
+
+def prepare(rec: LengthRecords | PointRecords, model: Model, structured: bool | None = None) -> Prepared:
+    """The linear model of the records.  ``structured``: for point records, the covariance as the
+    operator of :mod:`xlfuncs.structured` (True), dense (False), or dense up to
+    ``STRUCTURED_MIN_OBS`` observations (None)."""
     ids_per_end, probe_ids, probes, offsets_given = resolve_probes(rec, model)
     index = {p: k for k, p in enumerate(probe_ids)}
     offsets = np.array([p.offset_mm for p in probes], dtype=float).reshape(-1, 3)
@@ -286,9 +294,16 @@ def prepare(rec: LengthRecords | PointRecords, model: Model) -> Prepared:
                        c=c, dims=dims,
                        extent_mm=float(np.max(np.linalg.norm(Y - c, axis=1))) or 1.0)
     cloud = pc.PointCloud(rec.X_mm, N, k, probes, tuple(rec.ids))
-    V = pc.V_X(cloud, model.params)
-    keep = np.array([3 * i + a for i in range(rec.n) for a in range(dims)])
-    C = V[np.ix_(keep, keep)]
+    if structured is None:
+        structured = rec.n * dims > STRUCTURED_MIN_OBS and model.params.sigma_R_um > 0
+    if structured:
+        from .structured import StructuredCovariance
+
+        C = StructuredCovariance(cloud, model.params, dims)
+    else:
+        V = pc.V_X(cloud, model.params)
+        keep = np.array([3 * i + a for i in range(rec.n) for a in range(dims)])
+        C = V[np.ix_(keep, keep)]
     r = ((rec.X_mm - Y)[:, :dims] * 1000.0).reshape(-1)
     A, labels = fx.alignment_columns(design)
     return Prepared(rec, design, cloud, r, C, A, labels, np.repeat(np.arange(rec.n), dims),
@@ -576,16 +591,49 @@ def _psd_chi2(e: np.ndarray, C: np.ndarray) -> tuple[float, int]:
     return float(w @ w), int(keep.sum())
 
 
-def diagnose(rec: LengthRecords | PointRecords, model: Model, alpha: float = 0.01) -> Diagnosis:
-    """The analysis of spec section 3 on validated recordings."""
+def diagnose(rec: LengthRecords | PointRecords, model: Model, alpha: float = 0.01,
+             structured: bool | None = None) -> Diagnosis:
+    """The analysis of spec section 3 on validated recordings (``structured``: see
+    :func:`prepare`)."""
     if not (0.0 < alpha < 1.0):
         raise ModelError(f"alpha must be between 0 and 1, got {alpha!r}")
-    prep = prepare(rec, model)
+    prep = prepare(rec, model, structured)
     return diagnose_prepared(prep, alpha)
 
 
+def is_structured(prep: Prepared) -> bool:
+    return not isinstance(prep.C, np.ndarray)
+
+
+def _structured_whitener(prep: Prepared, names=None):
+    """The Gram whitener of :mod:`xlfuncs.structured` on the residual, the alignment and the
+    columns of every applicable candidate (or of ``names``), with the group Grams."""
+    parts, where = [prep.r_um[:, None], prep.A], {}
+    pos = 1 + prep.A.shape[1]
+    for eff in fx.EFFECTS:
+        if names is not None and eff.name not in names:
+            continue
+        try:
+            X = fx.columns(prep.design, eff.name).X
+        except fx.NotApplicable:
+            continue
+        parts.append(X)
+        where[eff.name] = pos
+        pos += X.shape[1]
+    B = np.column_stack(parts)
+    groups = {}
+    if names is None:
+        for by, lab in _group_labels(prep).items():
+            lab_obs = np.array([lab[a] for a in prep.obs_record], dtype=object)
+            for g in dict.fromkeys(lab):
+                groups[(by, g)] = np.flatnonzero(lab_obs == g)
+    W = prep.C.whitener(B, groups)
+    W.where = where
+    return W
+
+
 def diagnose_prepared(prep: Prepared, alpha: float = 0.01) -> Diagnosis:
-    W = Whitener(prep.C)
+    W = _structured_whitener(prep) if is_structured(prep) else Whitener(prep.C)
     yw = W(prep.r_um)
     Aw = W(prep.A)
     Q0, keptA = _orth(Aw)
@@ -719,7 +767,7 @@ def diagnose_prepared(prep: Prepared, alpha: float = 0.01) -> Diagnosis:
     resid_after = prep.r_um - X_sel @ beta
     # standard uncertainty of each residual under the baseline (alignment projected out)
     A = prep.A[:, keptA]
-    var = np.diag(prep.C).copy()
+    var = prep.C.diagonal() if is_structured(prep) else np.diag(prep.C).copy()
     if A.shape[1]:
         var = var - np.einsum("ij,jk,ik->i", A, cov0, A)
     u_obs = np.sqrt(np.maximum(var, 1e-30))
@@ -835,9 +883,10 @@ def locate_records(diag: Diagnosis, top: int = 10) -> list[dict]:
     A = prep.A
     cov0 = _gls(diag.whitener, A, prep.r_um)[1] if A.shape[1] else None
     zm = np.empty(rec.n)
+    blocks = prep.C.point_blocks() if is_structured(prep) else None
     for i in range(rec.n):
         sl = slice(dims * i, dims * i + dims)
-        B = prep.C[sl, sl]
+        B = blocks[i] if blocks is not None else prep.C[sl, sl]
         if cov0 is not None:
             B = B - A[sl] @ cov0 @ A[sl].T
         zm[i] = math.sqrt(_psd_chi2(e[i], B)[0])
@@ -854,16 +903,32 @@ def locate_groups(diag: Diagnosis) -> list[dict]:
     labels = _group_labels(prep)
     A = prep.A
     C = prep.C
+    structured = is_structured(prep)
+    cov0 = np.zeros((0, 0))
     if A.shape[1]:
         cov0 = _gls(diag.whitener, A, prep.r_um)[1]
-        C = C - A @ cov0 @ A.T
+        if not structured:
+            C = C - A @ cov0 @ A.T
     e = diag.resid_before
+    if structured:   # e = r - A beta0 and A as combinations of the whitener's columns
+        W = diag.whitener
+        c = W.B.shape[1]
+        p0 = A.shape[1]
+        A_coef = np.zeros((c, p0))
+        A_coef[1:1 + p0] = np.eye(p0)
+        e_coef = np.zeros(c)
+        e_coef[0] = 1.0
+        if p0:
+            e_coef[1:1 + p0] = -_gls(W, A, prep.r_um)[0]
     rows = []
     for by, lab in labels.items():
         lab_obs = [lab[a] for a in prep.obs_record]
         for g in dict.fromkeys(lab):
             idx = np.array([q for q, v in enumerate(lab_obs) if v == g])
-            chi2, dof = _psd_chi2(e[idx], C[np.ix_(idx, idx)])
+            if structured:
+                chi2, dof = W.group_chi2((by, g), e_coef, cov0, A_coef), len(idx)
+            else:
+                chi2, dof = _psd_chi2(e[idx], C[np.ix_(idx, idx)])
             if dof == 0:
                 continue
             z = diag.z_before[idx]
@@ -936,6 +1001,12 @@ def diagnosis_json(diag: Diagnosis) -> dict:
     out["p_after"] = math.exp(chi2_logsf(diag.chi2_after, diag.dof_after)) if diag.dof_after > 0 else None
     out["log10_p_before"] = diag.logp_before / math.log(10)
     out["covariance_rank"] = diag.whitener.rank
+    if is_structured(diag.prep):
+        C = diag.prep.C
+        out["approximation"] = {
+            "method": "structured covariance D + U U^T (Woodbury), GP factors by pivoted-Cholesky "
+                      "Nystrom factors", "pivot_tol": C.pivot_tol, "rank": dict(C.ranks),
+            "covariance_error_bound_um2": C.eps_C, "chi2_relative_error_bound": C.chi2_bound()}
     out["candidates"] = [{
         "name": n, "status": c.status, "step": c.step, "df": c.df,
         "delta_chi2": c.delta_chi2, "p_value": None if c.logp is None else math.exp(c.logp),
@@ -1078,7 +1149,8 @@ def effect_covariance(prep: Prepared, name: str, W: Whitener | None = None):
     """GLS covariance of the parameters of candidate ``name`` fitted alone with the baseline:
     ``(cov, labels)`` over its identifiable columns (the standard uncertainty a planted effect is
     measured against; used to size effects in the simulator and the benchmark)."""
-    W = Whitener(prep.C) if W is None else W
+    if W is None:
+        W = _structured_whitener(prep, [name]) if is_structured(prep) else Whitener(prep.C)
     cols = fx.columns(prep.design, name)
     Q0, keptA = _orth(W(prep.A))
     Xw = W(cols.X)

@@ -678,6 +678,8 @@ class FeatureUncertainty:
     V_local: dict[str, np.ndarray]
     V: dict[str, np.ndarray]
     factors: tuple[str, ...]
+    #: the low-rank evaluation's ranks and error bounds (xlfuncs.lowrank.Approximation), or None
+    approximation: object = None
 
     def u(self, factor: str = "total") -> np.ndarray:
         return np.sqrt(np.clip(np.diag(self.V[factor]), 0.0, None))

@@ -43,7 +43,7 @@ from . import pointcloud as pc
 from .errors import ModelError
 from .recordings import LengthRecords, PointRecords
 
-LAYOUTS = ("iso10360", "stepgauge", "ballplate", "holeplate", "spheres")
+LAYOUTS = ("iso10360", "stepgauge", "ballplate", "holeplate", "spheres", "scan")
 VOLUME_MM = (1000.0, 800.0, 600.0)
 EFFECT_NAMES = (
     "scale", "scale_x", "scale_y", "scale_z", "squareness_xy", "squareness_xz", "squareness_yz",
@@ -236,9 +236,33 @@ def spheres(probes, radius: float = 12.5, hours: float = 2.0) -> Layout:
                   _times(n, hours), X_nom=Xn)
 
 
+def scan(probes, points: int = 20_000, radius: float = 12.5, hours: float = 2.0,
+         z_min: float = 0.0) -> Layout:
+    """A dense scan (optical CMM, laser scanner) of the four spheres of :func:`spheres`:
+    ``points`` point records, a Fibonacci lattice on each sphere's cap above the normal's
+    z = ``z_min``, probes taking turns; nominal coordinates in a shifted, rotated artefact frame."""
+    centres = np.array([[250.0, 200.0, 100.0], [750.0, 200.0, 300.0], [750.0, 600.0, 150.0],
+                        [250.0, 600.0, 450.0]])
+    per = -(-points // 4)
+    q = np.arange(per) + 0.5
+    z = 1.0 - (1.0 - z_min) * q / per
+    phi = q * math.pi * (3.0 - math.sqrt(5.0))
+    rxy = np.sqrt(1 - z * z)
+    D = np.column_stack([rxy * np.cos(phi), rxy * np.sin(phi), z])
+    X = np.concatenate([c + radius * D for c in centres])[:points]
+    N = np.concatenate([D] * 4)[:points]
+    grp = [f"sphere {1 + i // per}" for i in range(points)]
+    ids = [f"S{1 + i // per}-{1 + i % per}" for i in range(points)]
+    K = np.arange(points) % len(probes)
+    th = math.radians(10.0)
+    R = np.array([[math.cos(th), -math.sin(th), 0.0], [math.sin(th), math.cos(th), 0.0], [0, 0, 1.0]])
+    Xn = (X - X.mean(axis=0)) @ R
+    return Layout("point", "scan", tuple(probes), X, N, K, ids, grp, _times(points, hours), X_nom=Xn)
+
+
 def layout(name: str, probes, **kw) -> Layout:
     builders = {"iso10360": iso10360, "stepgauge": stepgauge, "ballplate": ballplate,
-                "holeplate": holeplate, "spheres": spheres}
+                "holeplate": holeplate, "spheres": spheres, "scan": scan}
     if name not in builders:
         raise ModelError(f"unknown layout {name!r}; choose one of {', '.join(LAYOUTS)}")
     return builders[name](tuple(probes), **kw)
@@ -248,11 +272,23 @@ def layout(name: str, probes, **kw) -> Layout:
 # the machine's own errors: a draw from the Forbes 2025 model
 # ---------------------------------------------------------------------------------------------
 
+#: above this many points a GP draw uses the low-rank factor (the dense eigen-decomposition
+#: would need m^2 numbers)
+GP_DENSE_MAX = 5000
+
+
 def _gp(points: np.ndarray, sigma: float, lam: float, rng, size: int = 1) -> np.ndarray:
     """``size`` independent draws of a Gaussian process with kernel sigma^2 exp(-d^2/lam^2)."""
     m = len(points)
     if sigma <= 0 or m == 0:
         return np.zeros((m, size))
+    if m > GP_DENSE_MAX:   # a draw from the Nystrom factor K ~ L L^T of xlfuncs.lowrank
+        from . import lowrank as lr
+
+        fac, _trace = lr.controlled_factor(points, 1.0 / lam**2)
+        z = rng.standard_normal((fac.rank, size))
+        return sigma * np.concatenate([fac.rows(points[i0:i0 + 8192]).T @ z
+                                       for i0 in range(0, m, 8192)])
     D2 = np.sum((points[:, None, :] - points[None, :, :]) ** 2, axis=-1) if m <= 1500 else \
         np.maximum(np.sum(points**2, 1)[:, None] + np.sum(points**2, 1)[None, :] - 2 * points @ points.T, 0)
     K = sigma**2 * np.exp(-D2 / lam**2)
