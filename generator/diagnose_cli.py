@@ -142,7 +142,8 @@ def run_diagnose(rec_path: Path, model: dg.Model, out_dir: Path, *, alpha: float
         raise InputError(f"--alpha must be between 0 and 1, got {alpha!r}")
     rec = _read(rec_path) if rec is None else rec
     try:
-        check_diagnose_fits(rec.kind, rec.n, 2 if getattr(rec, "planar", False) else 3)
+        check_diagnose_fits(rec.kind, rec.n, 2 if getattr(rec, "planar", False) else 3,
+                            structured=dg.uses_structured(rec, model))
     except ResourceError as e:
         raise InputError(str(e), file=rec_path) from None
     try:

@@ -280,6 +280,17 @@ def test_the_memory_estimate_for_200000_length_records_is_refused_on_this_machin
         check_diagnose_fits("length", 200_000, available=64 * 2**30)
 
 
+def test_200000_point_records_fit_on_the_structured_path_but_not_dense():
+    """Large point scans take the structured covariance (xlfuncs.structured), linear in n: the
+    guard estimates that path (bench/results/million_diagnose.md measured 1.6 GB), not 3n x 3n."""
+    from xlfuncs.memory import ResourceError, check_diagnose_fits, diagnose_bytes
+
+    assert diagnose_bytes("point", 200_000, structured=True) < 3 * 2**30
+    check_diagnose_fits("point", 200_000, available=4 * 2**30, structured=True)
+    with pytest.raises(ResourceError, match="records fit"):
+        check_diagnose_fits("point", 200_000, available=4 * 2**30)
+
+
 def test_an_external_hyperlink_is_not_refused(tmp_path):
     """Hyperlinks open nothing by themselves: a workbook with one (to any address) passes."""
     from generator.safe_xlsx import check

@@ -259,6 +259,16 @@ def kabsch(X_nom: np.ndarray, X: np.ndarray, planar: bool) -> tuple[np.ndarray, 
 STRUCTURED_MIN_OBS = 6000
 
 
+def uses_structured(rec: LengthRecords | PointRecords, model: Model, structured: bool | None = None) -> bool:
+    """Whether :func:`prepare` takes the structured covariance for these records."""
+    if isinstance(rec, LengthRecords):
+        return False
+    if structured is not None:
+        return bool(structured)
+    dims = 2 if rec.planar else 3
+    return rec.n * dims > STRUCTURED_MIN_OBS and model.params.sigma_R_um > 0
+
+
 def prepare(rec: LengthRecords | PointRecords, model: Model, structured: bool | None = None) -> Prepared:
     """The linear model of the records.  ``structured``: for point records, the covariance as the
     operator of :mod:`xlfuncs.structured` (True), dense (False), or dense up to
@@ -294,9 +304,7 @@ def prepare(rec: LengthRecords | PointRecords, model: Model, structured: bool | 
                        c=c, dims=dims,
                        extent_mm=float(np.max(np.linalg.norm(Y - c, axis=1))) or 1.0)
     cloud = pc.PointCloud(rec.X_mm, N, k, probes, tuple(rec.ids))
-    if structured is None:
-        structured = rec.n * dims > STRUCTURED_MIN_OBS and model.params.sigma_R_um > 0
-    if structured:
+    if uses_structured(rec, model, structured):
         from .structured import StructuredCovariance
 
         C = StructuredCovariance(cloud, model.params, dims)

@@ -4,8 +4,11 @@ The dense parts of the mismatch locator (:mod:`xlfuncs.diagnose`) hold the covar
 records as n x n matrices: for length records C = G V_X G^T per factor (R, PQ, S, ET, ER, P),
 their sum and its Cholesky factor; for point records V_X of the measured points (3n x 3n, Forbes
 2025 eq. 28) and C restricted to the compared coordinates.  :func:`diagnose_bytes` is the
-estimate of that peak; when the algorithm changes (structured operators instead of dense
-matrices), change this function with it, and the guard in the CLI follows.
+estimate of that peak; large point records use the structured operator of
+:mod:`xlfuncs.structured` instead (C = D + U U^T never formed), whose peak grows linearly in n
+(measured in bench/results/million_diagnose.md: 386 MB at 1,000 records, 1,602 MB at 200,000,
+about 6 KB per record); when the algorithm changes, change this function with it, and the guard
+in the CLI follows.
 """
 
 from __future__ import annotations
@@ -19,15 +22,21 @@ from .errors import ModelError
 LENGTH_MATRICES = 10
 #: (dims n) x (dims n) matrices alive at the peak of a point-record diagnosis, besides V_X
 POINT_MATRICES = 6
+#: structured point-record diagnosis: a fixed part and bytes per record (measured ~6 KB, with margin)
+STRUCTURED_BASE_BYTES = 512 * 2**20
+STRUCTURED_BYTES_PER_RECORD = 8 * 2**10
 
 
 class ResourceError(ModelError):
     """The computation would need more memory than this machine has."""
 
 
-def diagnose_bytes(kind: str, n_records: int, dims: int = 3) -> int:
-    """Estimated peak memory (bytes) of :func:`xlfuncs.diagnose.diagnose` on ``n_records``."""
+def diagnose_bytes(kind: str, n_records: int, dims: int = 3, structured: bool = False) -> int:
+    """Estimated peak memory (bytes) of :func:`xlfuncs.diagnose.diagnose` on ``n_records``
+    (``structured``: point records on the structured operator, linear in n)."""
     n = int(n_records)
+    if structured and kind != "length":
+        return STRUCTURED_BASE_BYTES + STRUCTURED_BYTES_PER_RECORD * n
     if kind == "length":
         return 8 * LENGTH_MATRICES * n * n
     return 8 * ((3 * n) ** 2 + POINT_MATRICES * (dims * n) ** 2)
@@ -64,15 +73,19 @@ def _gib(b: float) -> str:
     return f"{b / 2**30:,.1f} GiB" if b >= 2**30 else f"{b / 2**20:,.0f} MiB"
 
 
-def check_diagnose_fits(kind: str, n_records: int, dims: int = 3, available: int | None = None) -> None:
+def check_diagnose_fits(kind: str, n_records: int, dims: int = 3, available: int | None = None,
+                        structured: bool = False) -> None:
     """Raise :class:`ResourceError` when :func:`diagnose_bytes` exceeds what is available, saying
     how many records would fit."""
-    need = diagnose_bytes(kind, n_records, dims)
+    need = diagnose_bytes(kind, n_records, dims, structured)
     have = available_bytes() if available is None else available
     if need <= have:
         return
-    per_n2 = diagnose_bytes(kind, 1, dims)          # the estimate is a multiple of n^2
-    fits = max(int(math.isqrt(max(have, 0) // per_n2)), 0)
+    if structured and kind != "length":
+        fits = max((have - STRUCTURED_BASE_BYTES) // STRUCTURED_BYTES_PER_RECORD, 0)
+    else:
+        per_n2 = diagnose_bytes(kind, 1, dims)          # the estimate is a multiple of n^2
+        fits = max(int(math.isqrt(max(have, 0) // per_n2)), 0)
     raise ResourceError(f"diagnosing {n_records:,} {kind} records needs about {_gib(need)} of memory, "
                         f"{_gib(have)} are available: at most about {fits:,} records fit; split the "
                         "recordings into smaller files (e.g. by group) and diagnose each")
