@@ -469,6 +469,14 @@ def _gls(book: Book, diag: Diagnosis, obs: dict, native: bool) -> dict:
         book.text(wi, 1, 1, "C^-1 = MINVERSE(C)")
         Ci = Block("Cinv", 2, 1, n, n)
         book.array(Ci, f"=MINVERSE({Cb.ref})", fmt="0.000E+00", note="inverse of the covariance C")
+        from openpyxl.utils import get_column_letter
+
+        for w_ in (wc, wi):
+            for j in range(n):   # 0.000E+00 of a negative number: 10 characters
+                w_.column_dimensions[get_column_letter(1 + j)].width = 11
+            book.print_setup(w_, matrix=(n, n), caption=(
+                f"{w_.title}: top-left corner of the {n} x {n} matrix; the whole matrix is in the workbook, "
+                "not in the printout"))
         out["C"] = Cb
         # column blocks: C^-1 r, C^-1 X
         book.text(ws, 1, 1, "C^-1 r")

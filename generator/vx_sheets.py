@@ -256,6 +256,9 @@ def write_V_sheets(book: Book, cloud: PointCloud, coords: dict[str, Block], vb: 
             note = f"V_{f}: {FACTOR_TITLES[f]}"
         book.array(target, formula, note=note, fmt=None)  # formatting 3m x 3m cells costs seconds
         ws.freeze_panes = "B2"
+        book.print_setup(ws, matrix=(n3, n3), caption=(
+            f"{ws.title} (µm²): top-left corner of the {n3} x {n3} matrix; the whole matrix is in the "
+            "workbook, not in the printout"))
         out[f] = target
     return out
 
