@@ -28,8 +28,16 @@ EXAMPLES_DIR = Path(__file__).parent / "examples"
 # -- commands ----------------------------------------------------------------------------------
 
 def cmd_build(args) -> int:
+    if args.pdf:
+        from .pdf import require_libreoffice
+
+        require_libreoffice()   # before anything is written
     results, files = build_task(Path(args.task), Path(args.out), plots=not args.no_plots,
                                 force=args.force, cache=args.cache)
+    if args.pdf:
+        from .pdf import print_books
+
+        files += print_books([f for f in files if f.suffix == ".xlsx"])
     for f in files:
         print(f)
     return 0
@@ -55,6 +63,10 @@ def cmd_new(args) -> int:
 
 def cmd_demo(args) -> int:
     out = Path(args.out)
+    if getattr(args, "pdf", False):
+        from .pdf import require_libreoffice
+
+        require_libreoffice()
     t0 = time.perf_counter()
     print(f"cmmwb {__version__} demo: building the worked examples of the three papers into {out}/")
     for kind in available():
@@ -73,6 +85,14 @@ def cmd_demo(args) -> int:
         diagnose_cli = None
     if diagnose_cli is not None:
         diagnose_cli.demo(out / "diagnose")
+    if getattr(args, "pdf", False):
+        from .pdf import print_books
+
+        t = time.perf_counter()
+        pdfs = print_books(sorted(out.rglob("*.xlsx")))
+        print(f"\n[pdf] {len(pdfs)} workbooks printed by LibreOffice ({time.perf_counter() - t:.1f} s)")
+        for f in pdfs:
+            print(f"    -> {f}")
     print(f"\nDone in {time.perf_counter() - t0:.1f} s. Open the .xlsx files in Excel or LibreOffice; "
           "every number is a formula you can follow back to the inputs.")
     return 0
@@ -120,6 +140,8 @@ def parser() -> argparse.ArgumentParser:
 
     s = sub.add_parser("demo", help="build every worked example of the three papers")
     s.add_argument("--out", default="cmmwb-demo", help="output folder (default: cmmwb-demo)")
+    s.add_argument("--pdf", action="store_true",
+                   help="also print every workbook to PDF beside it (needs LibreOffice)")
     s.set_defaults(func=cmd_demo)
 
     s = sub.add_parser("new", help="write a commented task file to start from")
@@ -132,6 +154,8 @@ def parser() -> argparse.ArgumentParser:
     s.add_argument("task")
     s.add_argument("--out", required=True, help="output folder")
     s.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
+    s.add_argument("--pdf", action="store_true",
+                   help="also print the workbook to DIR/<name>.pdf for the audit file (needs LibreOffice)")
     s.add_argument("--force", action="store_true",
                    help="replace outputs that were edited since cmmwb wrote them (keeps NAME.bak backups)")
     s.add_argument("--cache", choices=("results", "all", "none"), default="results",

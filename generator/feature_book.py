@@ -90,11 +90,13 @@ def write_feature_book(task: Task, results: dict, path, *, native_max_points: in
         _write_planning(book, task, results)
     if not native:
         _write_live(book, task, f, va, probe_rows)
-    book.results(["parameter", "value", "u"],
-                 [[name, Formula(f"={cell(r, 2, 'Budget')}"), Formula(f"={cell(r, 4, 'Budget')}")]
+    book.results(["parameter", "value", "u", "unit"],
+                 [[name, Formula(f"={cell(r, 2, 'Budget')}"), Formula(f"={cell(r, 4, 'Budget')}"), _unit(name)]
                   for name, r in rows],
-                 notes=[None, "fitted value (mm, rad, or unit-vector component)",
-                        "standard uncertainty in the parameter's unit"])
+                 notes=[None, "fitted value, in the unit of column 'unit' (mm, rad, or 1 for a unit-vector "
+                        "component)", "standard uncertainty, in the unit of column 'unit'",
+                        "unit of value and u (the contract's columns parameter, value, u are in the "
+                        "parameter's unit: mm, rad or 1)"])
     if not native:
         write_xlwings_conf(book)
     book.save(path)

@@ -63,6 +63,20 @@ class VXLayout:
     probe_rows: dict  # probe index -> row on Inputs
 
 
+def explain_inputs(book: Book) -> None:
+    """The instruction sheet's paragraphs on cell colours (inherited defaults) and printing."""
+    book.gap()
+    book.para("Cell colours and printing", bold=True)
+    book.para(
+        "Yellow: an input you type. Green: an input that inherits a default by formula (a probe's "
+        "sigma_PQ_um, sigma_P0_um, sigma_P_um and lambda_P on 'Inputs' are =sigma_PQ_um ... of the "
+        "task-wide values); its note says what it inherits. Typing a number there overrides the default "
+        "for that probe only and cuts the link. White: formulas. Grey: values computed by the core.",
+        "Printing: every sheet is set up for A4, scaled to the page width, with the header row repeated; "
+        "the V matrices print their top-left corner only (the whole matrix stays in the workbook); charts "
+        "print on their own page. `cmmwb build --pdf` prints the workbook to PDF with LibreOffice.")
+
+
 def _name_safe(i: int) -> str:
     return f"probe{i + 1}"
 
