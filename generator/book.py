@@ -280,9 +280,9 @@ class Book:
         """A native XY chart with explicit colours (LibreOffice draws unstyled markers white),
         visible axes at the lower and left edges of the plot (not crossing at zero), the legend
         below.  Every series stays visible where series coincide: marker series get distinct
-        symbols, hollow, the first drawn largest (later ones sit inside them); line series get
+        symbols and colours, hollow, growing in size (see the comment below); line series get
         distinct dash patterns."""
-        from openpyxl.chart import ScatterChart, Series
+        from openpyxl.chart import ScatterChart, Series  # noqa: F811
 
         chart = ScatterChart()
         chart.title = title
@@ -308,7 +308,11 @@ class Book:
                 s = Series(cs.y, cs.x, title=cs.title)
             if cs.markers:
                 s.marker.symbol = MARKERS[n_marker % len(MARKERS)]
-                s.marker.size = max(4, 9 - 2 * n_marker)
+                # LibreOffice draws the FIRST series on top and fills every marker; Excel draws the
+                # last on top and honours hollow markers.  Growing sizes + hollow markers keep
+                # coinciding series visible in both: small filled ones on top of larger ones in
+                # LibreOffice, nested outlines in Excel.
+                s.marker.size = 4 + 2 * n_marker
                 s.marker.graphicalProperties.noFill = True
                 s.marker.graphicalProperties.line.solidFill = colour
                 s.marker.graphicalProperties.line.width = 15875  # 1.25 pt
@@ -329,8 +333,9 @@ class Book:
     def bars(ws: Worksheet, anchor: str, title: str, y_title: str, categories, values: Sequence,
              *, titles_from_data: bool = True, width: float = 16, height: float = 7.5,
              horizontal: bool = True) -> None:
-        """A native bar chart (one bar series per entry of ``values``, categories from
-        ``categories``), value axis at the edge, explicit colours."""
+        """A native bar chart (one bar series per entry of ``values``: a column Reference whose
+        first cell is the title, or (title, Reference)), categories from ``categories``, value
+        axis at the edge, explicit colours."""
         from openpyxl.chart import BarChart
 
         chart = BarChart()
@@ -345,8 +350,13 @@ class Book:
         chart.y_axis.number_format = "General"
         if horizontal:
             chart.x_axis.scaling.orientation = "maxMin"   # first category on top
+        from openpyxl.chart import Series
+
         for ref in values:
-            chart.add_data(ref, titles_from_data=titles_from_data)
+            if isinstance(ref, tuple):   # (title, values in a row or column)
+                chart.series.append(Series(ref[1], title=ref[0]))
+            else:
+                chart.add_data(ref, titles_from_data=titles_from_data)
         chart.set_categories(categories)
         for k, s in enumerate(chart.series):
             s.graphicalProperties.solidFill = PALETTE[k % len(PALETTE)]
@@ -479,6 +489,7 @@ def save_atomic(wb: Workbook, path: Path) -> Path:
 
 # -- column widths and print setup ------------------------------------------------------------------
 
+WIDE_SHEET = 360               # characters of column width beyond which a sheet prints several pages across
 FIT_WIDTH_MAX_CELLS = 250_000   # larger sheets (value blocks of large books) keep their widths
 MAX_WIDTH = 60
 
@@ -589,9 +600,15 @@ def _page_setup(ws: Worksheet, *, landscape: bool | None = None, title_rows: int
     if caption:
         ws.oddHeader.center.text = caption
         ws.oddHeader.center.size = 9
+    width = _used_width(ws)
     if landscape is None:
-        landscape = _used_width(ws) > 100
+        landscape = width > 100
     ws.page_setup.orientation = "landscape" if landscape else "portrait"
+    if width > WIDE_SHEET:
+        # a very wide table (the diagnose Records): several pages across, the first column repeated,
+        # rather than one page at an unreadable scale
+        ws.page_setup.fitToWidth = math.ceil(width / (WIDE_SHEET * 0.75))
+        ws.print_title_cols = "A:A"
     if title_rows == -1:
         first = ws.cell(row=1, column=1)
         title_rows = 1 if (first.value is not None and first.font is not None and first.font.b

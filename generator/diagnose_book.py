@@ -25,7 +25,7 @@ from xlfuncs.diagnose import Diagnosis
 from xlfuncs.pointcloud import Parameters
 
 from .book import Book, ChartSeries, Formula
-from .xlref import Block, block, cell, col
+from .xlref import Block, block, cell
 
 NATIVE_MAX_OBS = 160
 FMT = "0.000000"
@@ -749,8 +749,12 @@ def _chart(book: Book, diag: Diagnosis, obs: dict) -> None:
         x, x_title = None, "coordinate row"
     series = [ChartSeries(title, x, Reference(ws, min_col=ci[key], min_row=r0, max_row=r1))
               for key, title in (("z", "before"), ("z_after", "after"))]
-    book.scatter(ws, f"{col(len(ci) + 2)}2", "Standardized residuals before and after the refit",
-                 x_title, "z", series)
+    # below the table (on its own printed page); "after" is drawn first so that LibreOffice, which
+    # draws the first series on top, shows it over "before" (see Book.scatter)
+    anchor_row = r1 + 3
+    book.scatter(ws, f"A{anchor_row}", "Standardized residuals z before and after the refit",
+                 x_title, "z", series[::-1], width=24, height=13)
+    book.print_setup(ws, row_breaks=[anchor_row - 1])
 
 
 # -- PNG plots -----------------------------------------------------------------------------------

@@ -73,7 +73,8 @@ def explain_inputs(book: Book) -> None:
         "task-wide values); its note says what it inherits. Typing a number there overrides the default "
         "for that probe only and cuts the link. White: formulas. Grey: values computed by the core.",
         "Printing: every sheet is set up for A4, scaled to the page width, with the header row repeated; "
-        "the V matrices print their top-left corner only (the whole matrix stays in the workbook); charts "
+        "large matrix sheets (V_R ... V_X, GP_blocks) print their top-left corner only (the whole matrix "
+        "stays in the workbook, the page header says so); charts "
         "print on their own page. `cmmwb build --pdf` prints the workbook to PDF with LibreOffice.")
 
 
@@ -137,8 +138,8 @@ def write_points(book: Book, cloud: PointCloud, probe_rows: dict) -> tuple[Block
         k = int(cloud.probe_index[i])
         book.text(ws, r, 1, cloud.labels[i])
         for c in range(3):
-            book.number(ws, r, 2 + c, cloud.X_mm[i, c])
-            book.number(ws, r, 5 + c, cloud.N[i, c])
+            book.number(ws, r, 2 + c, cloud.X_mm[i, c], fmt="General")   # mm, as entered
+            book.number(ws, r, 5 + c, cloud.N[i, c], fmt="0.000000")
         book.text(ws, r, 8, cloud.probes[k].id)
         for c in range(3):
             book.formula(ws, r, 9 + c, f"={cell(probe_rows[k], 2 + c, 'Inputs')}", fmt="General")
