@@ -17,8 +17,7 @@ from generator import budget_book
 from generator.cli import main
 from generator.recalc import soffice
 
-pytestmark = pytest.mark.skipif(soffice() is None or shutil.which("pdftotext") is None,
-                                reason="needs LibreOffice and pdftotext")
+EXAMPLES = Path(__file__).resolve().parent.parent / "generator" / "examples"
 
 #: page goals of issue 11 (A4)
 PAGE_GOALS = {"stepgauge": 40, "knuckle": 20, "cylinder_bore": 40, "diagnosis": 30}
@@ -29,6 +28,8 @@ UNIT = re.compile(r"(_mm|_um|_µm|_ppm|_urad|_µrad|_rad|_deg|_pct|/mm)$")
 @pytest.fixture(scope="module")
 def demo(tmp_path_factory):
     """{book path: [text of page 1, page 2, ...]} for every workbook of `cmmwb demo --pdf`."""
+    if soffice() is None or shutil.which("pdftotext") is None:
+        pytest.skip("needs LibreOffice and pdftotext")
     out = tmp_path_factory.mktemp("demo")
     assert main(["demo", "--out", str(out), "--pdf"]) == 0
     pages = {}
@@ -111,6 +112,32 @@ def test_numeric_headers_of_results_and_budgets_carry_units(demo):
 
 def test_knuckle_budget_headers_carry_units():
     assert all(UNIT.search(h) for h in budget_book.BUDGET_HEADER[1:])
+
+
+def test_no_header_is_cut(demo):
+    """Every column header (bold, boxed) fits its column's width."""
+    for book in demo:
+        wb = openpyxl.load_workbook(book)
+        for ws in wb.worksheets:
+            if ws.sheet_state != "visible" or ws.max_row * ws.max_column > 250_000:
+                continue
+            for row in ws.iter_rows(max_row=min(ws.max_row, 400)):
+                for c in row:
+                    if not (isinstance(c.value, str) and c.font.b and c.border.left.style):
+                        continue
+                    width = ws.column_dimensions[c.column_letter].width \
+                        if c.column_letter in ws.column_dimensions else 8.43
+                    assert width >= len(c.value), f"{book.name} {ws.title}!{c.coordinate} {c.value!r}: width {width}"
+
+
+def test_build_pdf_without_libreoffice_says_so_and_writes_nothing(tmp_path, monkeypatch, capsys):
+    import generator.pdf
+
+    monkeypatch.setattr(generator.pdf, "soffice", lambda: None)
+    out = tmp_path / "out"
+    assert main(["build", str(EXAMPLES / "knuckle.toml"), "--out", str(out), "--pdf"]) == 2
+    assert "needs LibreOffice" in capsys.readouterr().err
+    assert not out.exists()
 
 
 def test_every_results_value_is_cached(demo):
