@@ -118,8 +118,7 @@ def write_inputs(book: Book, params: Parameters, cloud: PointCloud, extra: list[
             own = getattr(p, key)
             name = f"{_name_safe(k)}_{key}"
             if own is None:
-                book.default(ws, r, 5 + c, name, f"={key}", lo=0.0,
-                             note="task-wide default; type a number to override for this probe")
+                book.default(ws, r, 5 + c, name, f"={key}", lo=0.0)   # green, with a note
             else:
                 book.input(ws, r, 5 + c, name, own, lo=0.0, note="per-probe override")
     return ws, probe_rows
