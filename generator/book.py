@@ -28,6 +28,9 @@ from .atomic import replacing
 from .xlref import Block, array_formula, block, cell, check_name
 
 INPUT_FILL = PatternFill("solid", fgColor="FFF2CC")      # pale yellow: type here
+#: pale green: an input that inherits a default by formula (e.g. ``=sigma_P0_um``); typing a
+#: number overrides it for this cell only
+DEFAULT_FILL = PatternFill("solid", fgColor="E2EFDA")
 VALUE_FILL = PatternFill("solid", fgColor="EDEDED")      # grey: values computed by the core
 HEADER_FONT = Font(bold=True)
 TITLE_FONT = Font(bold=True, size=14)
@@ -35,6 +38,11 @@ INPUT_FONT = Font(color="1F4E79")
 THIN = Side(style="thin", color="BFBFBF")
 BOX = Border(left=THIN, right=THIN, top=THIN, bottom=THIN)
 NUMBER_FORMAT = "0.000000"
+#: display formats by meaning (the cells keep full precision; only the display changes)
+FMT_MM = "0.0000"          # lengths and coordinates in mm (0.1 µm resolution)
+FMT_UM = "0.0000"          # uncertainties in µm (3-4 significant digits at 0.1-10 µm)
+FMT_SENS = "0.0000"        # sensitivities (dimensionless)
+FMT_SCI = "0.000E+00"      # quantities spanning decades (matrix entries, p-values)
 
 PARA_WIDTH = 95
 RESULTS = "Results"
@@ -87,6 +95,8 @@ class Book:
         # DataValidation.add is O(n) per cell: 12,000 cells took 30 s)
         self._validation_cells: dict[tuple[str, float | None, float | None], list[tuple[int, int]]] = {}
         self._task_info: dict | None = None
+        #: sheet title -> print settings given by the writer (see :meth:`print_setup`)
+        self._print: dict[str, dict] = {}
 
     # -- sheets ------------------------------------------------------------------------------
     def sheet(self, title: str, *, protect: bool = True) -> Worksheet:
@@ -210,8 +220,13 @@ class Book:
         """An editable input whose default is a formula (e.g. a per-probe sigma defaulting to the
         task-wide value): styled, unlocked and validated like :meth:`input`; typing a number
         overrides it."""
-        c = self.formula(ws, row, column, formula, note=note, fmt="General", name=name)
+        c = self.formula(ws, row, column, formula, fmt="General", name=name)
         self._style_input(ws, c, lo, hi)
+        c.fill = DEFAULT_FILL
+        inherited = formula.lstrip("=")
+        self.note(c, f"Default: inherits {inherited} (formula {formula}). Type a number to override "
+                     f"it for this cell only; the link to {inherited} is then cut."
+                  + (f" {note}" if note else ""))
         return c
 
     def formula(self, ws: Worksheet, row: int, column: int, formula: str, *, note: str | None = None,
@@ -260,40 +275,125 @@ class Book:
     # -- charts ------------------------------------------------------------------------------
     @staticmethod
     def scatter(ws: Worksheet, anchor: str, title: str, x_title: str, y_title: str,
-                series: Sequence["ChartSeries"], *, width: float = 16, height: float = 9) -> None:
-        """A native XY chart with explicit colours (LibreOffice draws unstyled markers white)
-        and visible axes (openpyxl 3.1 hides them in Excel unless told otherwise)."""
-        from openpyxl.chart import ScatterChart, Series
+                series: Sequence["ChartSeries"], *, width: float = 16, height: float = 9,
+                x_min: float | None = None, y_min: float | None = None) -> None:
+        """A native XY chart with explicit colours (LibreOffice draws unstyled markers white),
+        visible axes at the lower and left edges of the plot (not crossing at zero), the legend
+        below.  Every series stays visible where series coincide: marker series get distinct
+        symbols and colours, hollow, growing in size (see the comment below); line series get
+        distinct dash patterns."""
+        from openpyxl.chart import ScatterChart, Series  # noqa: F811
 
         chart = ScatterChart()
         chart.title = title
         chart.style = 13
         chart.x_axis.title = x_title
         chart.y_axis.title = y_title
-        for axis, fmt in ((chart.x_axis, "General"), (chart.y_axis, "General")):
+        for axis, lo in ((chart.x_axis, x_min), (chart.y_axis, y_min)):
             axis.delete = False
-            axis.number_format = fmt
+            axis.number_format = "General"
             axis.majorTickMark = "out"
+            axis.tickLblPos = "low"          # labels at the edge of the plot, never across the data
+            axis.crosses = "min"
+            if lo is not None:
+                axis.scaling.min = lo
+        chart.legend.position = "b"
+        n_marker = 0
+        n_line = 0
         for k, cs in enumerate(series):
-            colour = PALETTE[k % len(PALETTE)]
+            colour = cs.colour or PALETTE[k % len(PALETTE)]
             if cs.title_from_data:
                 s = Series(cs.y, cs.x, title_from_data=True)
             else:
                 s = Series(cs.y, cs.x, title=cs.title)
             if cs.markers:
-                s.marker.symbol = MARKERS[k % len(MARKERS)]
-                s.marker.size = 6
-                s.marker.graphicalProperties.solidFill = colour
+                s.marker.symbol = MARKERS[n_marker % len(MARKERS)]
+                # LibreOffice draws the FIRST series on top and fills every marker; Excel draws the
+                # last on top and honours hollow markers.  Growing sizes + hollow markers keep
+                # coinciding series visible in both: small filled ones on top of larger ones in
+                # LibreOffice, nested outlines in Excel.
+                s.marker.size = 4 + 2 * n_marker
+                s.marker.graphicalProperties.noFill = True
                 s.marker.graphicalProperties.line.solidFill = colour
+                s.marker.graphicalProperties.line.width = 15875  # 1.25 pt
                 s.graphicalProperties.line.noFill = True
+                n_marker += 1
             else:
                 s.marker.symbol = "none"
                 s.graphicalProperties.line.solidFill = colour
-                s.graphicalProperties.line.width = 19050  # 1.5 pt
+                s.graphicalProperties.line.width = 28575 if cs.bold else 19050  # 2.25 / 1.5 pt
+                s.graphicalProperties.line.dashStyle = cs.dash or DASHES[n_line % len(DASHES)]
+                n_line += 1
             s.smooth = False
             chart.series.append(s)
         chart.width, chart.height = width, height
         ws.add_chart(chart, anchor)
+
+    @staticmethod
+    def bars(ws: Worksheet, anchor: str, title: str, y_title: str, categories, values: Sequence,
+             *, titles_from_data: bool = True, width: float = 16, height: float = 7.5,
+             horizontal: bool = True) -> None:
+        """A native bar chart (one bar series per entry of ``values``: a column Reference whose
+        first cell is the title, or (title, Reference)), categories from ``categories``, value
+        axis at the edge, explicit colours."""
+        from openpyxl.chart import BarChart
+
+        chart = BarChart()
+        chart.type = "bar" if horizontal else "col"
+        chart.title = title
+        chart.style = 10
+        chart.y_axis.title = y_title
+        for axis in (chart.x_axis, chart.y_axis):
+            axis.delete = False
+            axis.majorTickMark = "out"
+            axis.tickLblPos = "low"
+        chart.y_axis.number_format = "General"
+        if horizontal:
+            chart.x_axis.scaling.orientation = "maxMin"   # first category on top
+        from openpyxl.chart import Series
+
+        for ref in values:
+            if isinstance(ref, tuple):   # (title, values in a row or column)
+                chart.series.append(Series(ref[1], title=ref[0]))
+            else:
+                chart.add_data(ref, titles_from_data=titles_from_data)
+        chart.set_categories(categories)
+        for k, s in enumerate(chart.series):
+            s.graphicalProperties.solidFill = PALETTE[k % len(PALETTE)]
+            s.graphicalProperties.line.solidFill = PALETTE[k % len(PALETTE)]
+        chart.legend.position = "b"
+        if len(values) == 1:
+            chart.legend = None
+        chart.width, chart.height = width, height
+        ws.add_chart(chart, anchor)
+
+    # -- printing and column widths --------------------------------------------------------------
+    def print_setup(self, ws: Worksheet, *, landscape: bool | None = None, title_rows: int | None = -1,
+                    area: str | None = None, row_breaks: Sequence[int] = (), fit_widths: bool = True,
+                    matrix: tuple[int, int] | None = None, caption: str | None = None) -> None:
+        """How ``ws`` prints (applied by :meth:`save`; sheets without a call get the defaults).
+
+        Every sheet a person reads prints on A4, scaled to the page width, with the sheet name and
+        page number in the footer.  ``landscape`` None chooses by the width of the used columns;
+        ``title_rows`` = the last header row repeated on every page (-1: row 1 when it holds bold
+        headers, None: none); ``area`` a print area; ``row_breaks`` rows that start a new page
+        (e.g. one budget per page).  ``matrix`` = (rows, columns) of a large matrix at B2: only
+        its top-left corner prints, with ``caption`` in the page header saying so (a 156 x 156
+        V_X would otherwise fill 60 pages)."""
+        self._print[ws.title] = dict(landscape=landscape, title_rows=title_rows, area=area,
+                                     row_breaks=tuple(row_breaks), fit_widths=fit_widths, matrix=matrix,
+                                     caption=caption)
+
+    def _finish_layout(self) -> None:
+        """Column widths that fit what each column shows, and the print setup of every sheet."""
+        for ws in self.wb.worksheets:
+            if ws.sheet_state != "visible":
+                continue
+            opts = self._print.get(ws.title, {})
+            if opts.get("fit_widths", True) and not opts.get("matrix") \
+                    and ws.max_row * ws.max_column <= FIT_WIDTH_MAX_CELLS:
+                fit_widths(ws)
+            _page_setup(ws, **{k: v for k, v in opts.items() if k != "fit_widths"})
 
     # -- the Results sheet ---------------------------------------------------------------------
     def results(self, columns: Sequence[str], rows: Iterable[Sequence[str | float]],
@@ -314,7 +414,7 @@ class Book:
                 else:
                     ws.cell(row=r, column=c).value = value
         for k in range(len(columns)):
-            ws.column_dimensions[ws.cell(row=1, column=k + 1).column_letter].width = 14
+            ws.column_dimensions[ws.cell(row=1, column=k + 1).column_letter].width = 12
         ws.freeze_panes = "A2"
         return ws
 
@@ -335,6 +435,7 @@ class Book:
         """Write the workbook atomically (temporary file in the same folder, then rename)."""
         path = Path(path)
         self._flush_validations()
+        self._finish_layout()
         info = self._task_info if self._task_info is not None else _TASK_INFO.get()
         if info is not None and info.get("kind") == self.kind:
             from .reader import write_task_sheet
@@ -355,6 +456,7 @@ def _by_column(cells: list[tuple[int, int]]):
 
 PALETTE = ("1F77B4", "FF7F0E", "2CA02C", "D62728", "9467BD", "8C564B", "E377C2", "7F7F7F")
 MARKERS = ("circle", "square", "diamond", "triangle", "x", "star", "dash", "plus")
+DASHES = ("solid", "dash", "sysDot", "dashDot", "lgDash", "sysDash", "lgDashDot", "sysDashDot")
 
 
 @dataclass(frozen=True)
@@ -367,6 +469,9 @@ class ChartSeries:
     y: object
     markers: bool = True
     title_from_data: bool = False
+    colour: str | None = None     #: e.g. "000000" for a reference line such as the MPE
+    dash: str | None = None       #: a DrawingML dash style; default: distinct per line series
+    bold: bool = False            #: a thicker line (the reference line of the chart)
 
 
 class Formula(str):
@@ -380,3 +485,138 @@ def save_atomic(wb: Workbook, path: Path) -> Path:
     with replacing(path, ".xlsx.tmp") as tmp:
         wb.save(tmp)
     return Path(path)
+
+
+# -- column widths and print setup ------------------------------------------------------------------
+
+WIDE_SHEET = 360               # characters of column width beyond which a sheet prints several pages across
+FIT_WIDTH_MAX_CELLS = 250_000   # larger sheets (value blocks of large books) keep their widths
+MAX_WIDTH = 60
+
+
+def display_len(value, fmt: str | None) -> int:
+    """About how many characters ``value`` (None: a formula, value unknown) shows in ``fmt``."""
+    fmt = fmt or "General"
+    known = isinstance(value, (int, float)) and not isinstance(value, bool)
+    if fmt == "General":
+        if known:
+            return len(f"{value:.9g}")
+        return 11
+    if fmt in ("@",):
+        return 10
+    core = fmt.split(";")[0]
+    if "E+" in core.upper():
+        return len(core) + 1
+    if "%" in core:
+        return len(core) + 5
+    dec = len(core.split(".", 1)[1]) if "." in core else 0
+    whole = len(str(int(abs(value)))) if known and math.isfinite(value) else 5
+    return whole + (dec + 1 if dec else 0) + 1   # digits, point and decimals, sign
+
+
+def fit_widths(ws: Worksheet) -> None:
+    """Widen the columns of ``ws`` so that no number shows ``###`` and no header is cut.
+
+    Numbers count with their format (formulas with room for five integer digits), headers (bold)
+    with their text, other text only where the cell to its right is filled (it would be cut).
+    Columns are never made narrower than the writer set them."""
+    from openpyxl.cell.cell import MergedCell
+    from openpyxl.utils import get_column_letter
+    from openpyxl.worksheet.formula import ArrayFormula
+
+    want: dict[int, float] = {}
+    rows = list(ws.iter_rows())
+    for row in rows:
+        for k, c in enumerate(row):
+            v = c.value
+            if isinstance(c, MergedCell):
+                continue
+            if v is None:
+                # a cell inside an array formula's block: formatted, its value comes from the array
+                if c.number_format in (None, "General"):
+                    continue
+                n = display_len(None, c.number_format)
+            elif isinstance(v, ArrayFormula) or (isinstance(v, str) and c.data_type == "f"):
+                n = display_len(None, c.number_format)
+            elif isinstance(v, (int, float)) and not isinstance(v, bool):
+                n = display_len(v, c.number_format)
+            else:
+                text = str(v)
+                bold = bool(c.font is not None and c.font.b)
+                boxed = bool(c.border is not None and c.border.left is not None and c.border.left.style)
+                right = row[k + 1].value if k + 1 < len(row) else None
+                if not (bold and boxed) and right is None:
+                    continue   # free text overflows into the empty cells to its right
+                if c.alignment is not None and c.alignment.wrap_text:
+                    continue
+                n = min(len(text), 40) * (1.1 if bold else 1.0)
+            want[c.column] = max(want.get(c.column, 0.0), n)
+    for column, n in want.items():
+        letter = get_column_letter(column)
+        have = ws.column_dimensions[letter].width if letter in ws.column_dimensions else None
+        width = min(MAX_WIDTH, n + 2.0)
+        if have is None or have < width:
+            ws.column_dimensions[letter].width = round(width, 1)
+
+
+def _used_width(ws: Worksheet) -> float:
+    from openpyxl.utils import get_column_letter
+
+    total = 0.0
+    for column in range(1, ws.max_column + 1):
+        letter = get_column_letter(column)
+        dim = ws.column_dimensions[letter] if letter in ws.column_dimensions else None
+        total += dim.width if dim is not None and dim.width else 8.43
+    return total
+
+
+def _page_setup(ws: Worksheet, *, landscape: bool | None = None, title_rows: int | None = -1,
+                area: str | None = None, row_breaks: Sequence[int] = (),
+                matrix: tuple[int, int] | None = None, caption: str | None = None) -> None:
+    from openpyxl.utils import get_column_letter
+    from openpyxl.worksheet.pagebreak import Break
+
+    ws.page_setup.paperSize = ws.PAPERSIZE_A4
+    ws.page_setup.fitToWidth = 1
+    ws.page_setup.fitToHeight = 0
+    ws.sheet_properties.pageSetUpPr.fitToPage = True
+    ws.print_options.gridLines = False
+    ws.page_margins.left = ws.page_margins.right = 0.5
+    ws.page_margins.top = ws.page_margins.bottom = 0.6
+    ws.oddFooter.left.text = "&A"
+    ws.oddFooter.left.size = 8
+    ws.oddFooter.right.text = "page &P of &N"
+    ws.oddFooter.right.size = 8
+    if matrix is not None:
+        n_rows, n_cols = matrix
+        rows, cols = min(n_rows, 24), min(n_cols, 12)
+        ws.print_area = f"A1:{get_column_letter(1 + cols)}{1 + rows}"
+        ws.oddHeader.center.text = caption or (
+            f"{ws.title}: top-left {rows} x {cols} of the {n_rows} x {n_cols} matrix; "
+            "the whole matrix is in the workbook, not in the printout")
+        ws.oddHeader.center.size = 9
+        ws.page_setup.orientation = "landscape"
+        return
+    if caption:
+        ws.oddHeader.center.text = caption
+        ws.oddHeader.center.size = 9
+    width = _used_width(ws)
+    if landscape is None:
+        landscape = width > 100
+    ws.page_setup.orientation = "landscape" if landscape else "portrait"
+    if width > WIDE_SHEET:
+        # a very wide table (the diagnose Records): several pages across, the first column repeated,
+        # rather than one page at an unreadable scale
+        ws.page_setup.fitToWidth = math.ceil(width / (WIDE_SHEET * 0.75))
+        ws.print_title_cols = "A:A"
+    if title_rows == -1:
+        first = ws.cell(row=1, column=1)
+        title_rows = 1 if (first.value is not None and first.font is not None and first.font.b
+                           and first.font.sz != TITLE_FONT.sz) else None
+    if title_rows:
+        ws.print_title_rows = f"1:{title_rows}"
+    if area:
+        ws.print_area = area
+    for r in row_breaks:
+        if r > 1:
+            ws.row_breaks.append(Break(id=r - 1))

@@ -28,11 +28,12 @@ from .xlref import block, cell
 C_INPUT, C_X, C_S, C_U, C_C = 1, 2, 3, 4, 5
 C_QTY, C_VX, C_VY, C_VZ, C_MEAN = 7, 8, 9, 10, 11
 
-FMT_X = "0.00##"
-FMT_S = "0.000000"
-FMT_U = "0.0000"
+FMT_X = "0.00##"          # mm, as entered
+FMT_S = "0.0000"          # sensitivities, 4 decimals
+FMT_Q = "0.000E+00"       # intermediate quantities (cross products span decades)
+FMT_U = "0.0000"          # µm
 
-BUDGET_HEADER = ["input", "x_i_mm", "dl_dx_i", "u_i_um", "contribution_um"]
+BUDGET_HEADER = ["input", "x_i_mm", "dl_dx_i_mm/mm", "u_i_um", "contribution_um"]
 BUDGET_NOTES = [
     "Input quantity x_i: a coordinate difference of two essential points, e.g. x_CS4 = x(S4) - x(C) "
     "(Wojtyła/Płowucha 2023, section 2).",
@@ -118,7 +119,7 @@ class _BlockWriter:
         r = self.qrow
         self.book.text(self.ws, r, C_QTY, label)
         for k, f in enumerate(comps):
-            self.book.formula(self.ws, r, C_VX + k, f"={f}", fmt=FMT_S)
+            self.book.formula(self.ws, r, C_VX + k, f"={f}", fmt=FMT_Q)
         self.book.text(self.ws, r, C_MEAN, meaning)
         self.qrow += 1
         return [cell(r, C_VX + k) for k in range(3)]
@@ -126,7 +127,7 @@ class _BlockWriter:
     def scalar(self, label: str, formula: str, meaning: str) -> str:
         r = self.qrow
         self.book.text(self.ws, r, C_QTY, label)
-        self.book.formula(self.ws, r, C_VX, f"={formula}", fmt=FMT_S)
+        self.book.formula(self.ws, r, C_VX, f"={formula}", fmt=FMT_Q)
         self.book.text(self.ws, r, C_MEAN, meaning)
         self.qrow += 1
         return cell(r, C_VX)
@@ -149,7 +150,9 @@ def write_variant(book: Book, ws, r0: int, title: str, vb: bd.VariantBudget, *,
     book.header(ws, r0 + 1, C_INPUT, BUDGET_HEADER,
                 [*BUDGET_NOTES[:2], f"{BUDGET_NOTES[2]} Here: {SENS_TEXT[spec.kind]}.",
                  *BUDGET_NOTES[3:]] if notes else None)
-    book.header(ws, r0 + 1, C_QTY, ["intermediate", "x", "y", "z", "meaning"])
+    book.header(ws, r0 + 1, C_QTY, ["intermediate", "x", "y", "z", "meaning"],
+                [None, "x component (unit: mm for coordinate vectors, mm² for cross products, mm/mm "
+                 "for gradients)", "y component", "z component", None] if notes else None)
 
     # input quantities: x_i = coordinate differences of named points
     vecs: dict[str, list[str]] = {}
@@ -275,6 +278,49 @@ def _variant_table(book: Book, ws, r0: int, title: str, d: bd.DistanceBudget,
     return r + 3
 
 
+def _pareto(book: Book, ws, r0: int, items: list[tuple[str, float, str, float]], u_ref: str,
+            what: str) -> int:
+    """A Pareto table of the contributions (largest first, ordered by the values at build time;
+    the cells stay live) and its bar chart; returns the rows used.
+
+    ``items`` = (label, factor, contribution cell, contribution at build time): the table shows
+    |factor * contribution| (µm) and its share of u_c^2 (%), which add up to 100 %."""
+    from openpyxl.chart import Reference
+
+    book.text(ws, r0, 1, f"Contributions to {what}, largest first (Pareto; order as built)",
+              font=HEADER_FONT)
+    book.header(ws, r0 + 1, 1, ["input", "abs_contribution_um", "share_of_u_c2_pct"],
+                ["input quantity of the budget above", "|dl/dx_i u_i| (µm; for a position: 2 |dl/dx_i u_i| of "
+                 "its distance budget, Table 9)", "(contribution / u_c)^2 in %: the shares add up to 100 %"])
+    order = sorted(range(len(items)), key=lambda k: -abs(items[k][1] * items[k][3]))
+    r = r0 + 2
+    for k in order:
+        label, factor, ref, _ = items[k]
+        book.text(ws, r, 1, label)
+        f = f"ABS({ref})" if factor == 1 else f"{factor:g}*ABS({ref})"
+        book.formula(ws, r, 2, f"={f}", fmt=FMT_U)
+        book.formula(ws, r, 3, f"=100*({cell(r, 2)}/{u_ref})^2", fmt="0.0")
+        r += 1
+    last = r - 1
+    book.bars(ws, f"D{r0 + 1}", f"Contributions to {what} (µm), largest first", "|contribution| / µm",
+              Reference(ws, min_col=1, min_row=r0 + 2, max_row=last),
+              [Reference(ws, min_col=2, min_row=r0 + 1, max_row=last)],
+              width=17, height=max(6.0, 0.45 * len(items) + 2.5))
+    chart_rows = int(max(6.0, 0.45 * len(items) + 2.5) / 0.53) + 2
+    return max(last - r0 + 2, chart_rows)
+
+
+def _page_breaks(blocks: list[tuple[int, int]]) -> list[int]:
+    """Rows that start a new page so that no block (first row, last row) is split, assuming
+    ``ROWS_PER_PAGE`` rows per printed page."""
+    breaks, top = [], 1
+    for a, b in sorted(blocks):
+        if b - top + 1 > ROWS_PER_PAGE and a > top:
+            breaks.append(a)
+            top = a
+    return breaks
+
+
 def _ref(target_sheet: str, coord: str, here: str) -> str:
     r, c = _split(coord)
     return cell(r, c, None if target_sheet == here else target_sheet)
@@ -315,18 +361,36 @@ def _write_distance_sheet(book: Book, task, c, d: bd.DistanceBudget) -> CharCell
     book.text(ws, 1, 1, f"{c.name}: {MODEL_TEXT[c.model]}", font=HEADER_FONT)
     book.text(ws, 2, 1, _points_text(c) + f"; variant requested: {c.variant}")
     cc, r, others = _distance_section(book, ws, 4, f"Budget of {c.name}", d)
-    r = _others_and_table(book, ws, r, [(c.name, d, cc, others)])
+    keep = [(1, r - 1)]
+    pareto = [(inp, 1.0, row["contribution"], float(x))
+              for inp, row, x in zip(d.chosen.inputs, cc.rows, d.chosen.contributions_um)]
+    r = _others_and_table(book, ws, r, [(c.name, d, cc, others)], keep=keep, pareto=pareto,
+                          pareto_u=cc.u, what=f"u_c of {c.name}")
     ws.freeze_panes = "B1"
     return cc
 
 
-def _others_and_table(book: Book, ws, r: int, sections) -> int:
-    """Variant tables first (near the top), then the budgets of the other variants."""
+ROWS_PER_PAGE = 50   # budget rows that fit one landscape A4 page at the fit-to-width scale
+
+
+def _others_and_table(book: Book, ws, r: int, sections, *, keep: list[tuple[int, int]],
+                      pareto: list[tuple[str, float, str, float]], pareto_u: str, what: str) -> int:
+    """Variant tables first (near the top), the Pareto of the contributions, then the budgets of
+    the other variants; sets the print setup (the chosen budgets, the variant tables and the
+    Pareto print, each block on one page; the other variants stay in the workbook only)."""
     # the tables need the other variants' cells: compute the layout of the blocks first by
     # writing the tables after the blocks but placing the tables above them
     table_rows = sum(len(d.variants) + 5 for _, d, _, _ in sections)
     r_table = r
-    r_blocks = r + table_rows + 1
+    keep.append((r, r + table_rows - 1))
+    r_pareto = r + table_rows
+    pareto_rows = _pareto(book, ws, r_pareto, pareto, pareto_u, what)
+    keep.append((r_pareto, r_pareto + pareto_rows - 1))
+    r_blocks = r_pareto + pareto_rows + 1
+    book.print_setup(ws, landscape=True, title_rows=None, area=f"A1:K{r_pareto + pareto_rows - 1}",
+                     row_breaks=_page_breaks(keep),
+                     caption=f"{ws.title}: chosen budget, variants, contributions (the budgets of the "
+                             "other variants are in the workbook below, not printed)")
     book.text(ws, r_blocks, 1, "Budgets of the other variants", font=HEADER_FONT)
     r_blocks += 1
     for name, d, cc, others in sections:
@@ -350,7 +414,7 @@ def _write_position_sheet(book: Book, task, c, pb: bd.PositionBudget) -> CharCel
     book.text(ws, 2, 1, "POS = 2 sqrt((l1 - l1_TED)^2 + (l2 - l2_TED)^2); u_POS = 2 sqrt(u_l1^2 + "
               "u_l2^2) (Table 9 convention: the RMS of POS at the exact location, docs/errata.md)")
     book.text(ws, 4, 1, f"Budget of {c.name} (Table 9)", font=HEADER_FONT)
-    book.header(ws, 5, 1, ["input", "value_mm", "sensitivity", "u_um", "contribution_um",
+    book.header(ws, 5, 1, ["input", "value_mm", "sensitivity_mm/mm", "u_um", "contribution_um",
                            "TED_mm", "datum"],
                 ["the distances of the axis point from the two datums", "l_i (mm), from the "
                  "distance budgets below", "2: POS = 2 |deviation|; u_POS = 2 sqrt(u_l1^2 + "
@@ -360,14 +424,22 @@ def _write_position_sheet(book: Book, task, c, pb: bd.PositionBudget) -> CharCel
     # distance budgets further down
     sections = []
     r = 13
+    keep = [(1, 12)]
     dist_cells = []
     for i, d in enumerate(pb.distances):
         heading = (f"Budget of {distance_name(c, i)}: distance of {pb.point} from the "
                    f"{pb.datums[i]} datum")
+        r_start = r
         cc, r, others = _distance_section(book, ws, r, heading, d)
+        keep.append((r_start, r - 1))
         dist_cells.append(cc)
         sections.append((distance_name(c, i), d, cc, others))
-    _others_and_table(book, ws, r, sections)
+    # u_POS^2 = sum over both distance budgets of (2 * contribution)^2 (Table 9 convention)
+    pareto = [(f"{distance_name(c, i)}: {inp}", bd.POSITION_FACTOR, row["contribution"], float(x))
+              for i, (d, cc) in enumerate(zip(pb.distances, dist_cells))
+              for inp, row, x in zip(d.chosen.inputs, cc.rows, d.chosen.contributions_um)]
+    _others_and_table(book, ws, r, sections, keep=keep, pareto=pareto, pareto_u="E9",
+                      what=f"u_POS of {c.name}")
     rows = []
     for i, (d, cc) in enumerate(zip(pb.distances, dist_cells)):
         rr = 6 + i

@@ -30,8 +30,16 @@ EXAMPLES_DIR = Path(__file__).parent / "examples"
 # -- commands ----------------------------------------------------------------------------------
 
 def cmd_build(args) -> int:
+    if args.pdf:
+        from .pdf import require_libreoffice
+
+        require_libreoffice()   # before anything is written
     results, files = build_task(Path(args.task), Path(args.out), plots=not args.no_plots,
                                 force=args.force, cache=args.cache)
+    if args.pdf:
+        from .pdf import print_books
+
+        files += print_books([f for f in files if f.suffix == ".xlsx"])
     print(f"[{results['kind']}] {results['name']}")
     for line in job(results["kind"]).summary(results):
         print(f"    {line}")
@@ -73,6 +81,10 @@ def new_task(kind: str, stem: str) -> tuple[str, dict[str, str]]:
 
 def cmd_demo(args) -> int:
     out = Path(args.out)
+    if getattr(args, "pdf", False):
+        from .pdf import require_libreoffice
+
+        require_libreoffice()
     t0 = time.perf_counter()
     print(f"cmmwb {__version__} demo: building the worked examples of the three papers into {out}/")
     for kind in available():
@@ -91,6 +103,14 @@ def cmd_demo(args) -> int:
         diagnose_cli = None
     if diagnose_cli is not None:
         diagnose_cli.demo(out / "diagnose")
+    if getattr(args, "pdf", False):
+        from .pdf import print_books
+
+        t = time.perf_counter()
+        pdfs = print_books(sorted(out.rglob("*.xlsx")))
+        print(f"\n[pdf] {len(pdfs)} workbooks printed by LibreOffice ({time.perf_counter() - t:.1f} s)")
+        for f in pdfs:
+            print(f"    -> {f}")
     print(f"\nDone in {time.perf_counter() - t0:.1f} s. Open the .xlsx files in Excel or LibreOffice; "
           "every number is a formula you can follow back to the inputs.")
     return 0
@@ -177,8 +197,10 @@ def parser() -> argparse.ArgumentParser:
     s = add_command(sub, "demo", "build every worked example of the three papers",
                     "Builds the worked examples of the three papers (workbooks, JSON, PNG plots) and the "
                     "mismatch-locator demonstrations into one folder, and prints the headline results.",
-                    ("cmmwb demo", "cmmwb demo --out /tmp/demo"))
+                    ("cmmwb demo", "cmmwb demo --out /tmp/demo --pdf"))
     s.add_argument("--out", default="cmmwb-demo", metavar="DIR", help="output folder (default: cmmwb-demo)")
+    s.add_argument("--pdf", action="store_true",
+                   help="also print every workbook to PDF beside it (needs LibreOffice)")
     s.set_defaults(func=cmd_demo)
 
     s = add_command(sub, "new", "write a commented task file to start from",
@@ -197,10 +219,13 @@ def parser() -> argparse.ArgumentParser:
                     "DIR/<name>.json and PNG plots, all or nothing; prints the headline results.",
                     ("cmmwb build gauge.toml --out gauge",
                      "cmmwb build gauge.toml --out gauge --force      # after editing the workbook",
-                     "cmmwb build bore.toml --out bore --no-plots --cache none"))
+                     "cmmwb build bore.toml --out bore --no-plots --cache none",
+                     "cmmwb build knuckle.toml --out knuckle --pdf    # and a printed PDF for the audit file"))
     s.add_argument("task", metavar="TASK.toml", help="the task file (see cmmwb new)")
     s.add_argument("--out", required=True, metavar="DIR", help="output folder (created if missing)")
     s.add_argument("--no-plots", action="store_true", help="skip the PNG plots (default: write them)")
+    s.add_argument("--pdf", action="store_true",
+                   help="also print the workbook to DIR/<name>.pdf for the audit file (needs LibreOffice)")
     s.add_argument("--force", action="store_true",
                    help="replace outputs that were edited since cmmwb wrote them, keeping NAME.bak backups "
                         "(default: refuse)")

@@ -25,7 +25,7 @@ from xlfuncs.diagnose import Diagnosis
 from xlfuncs.pointcloud import Parameters
 
 from .book import Book, ChartSeries, Formula
-from .xlref import Block, block, cell, col
+from .xlref import Block, block, cell
 
 NATIVE_MAX_OBS = 160
 FMT = "0.000000"
@@ -66,9 +66,13 @@ def write_book(diag: Diagnosis, path: Path, *, title_extra: str = "", params: Pa
     _fill_after(book, diag, obs, gls)
     _candidates(book, diag)
     _groups(book, diag)
-    _results(book, diag, gls)
+    cached = _results(book, diag, gls)
     _chart(book, diag, obs)
-    return book.save(path)
+    out = book.save(path)
+    from . import cache
+
+    cache.store(out, "diagnose", {"rows": cached})   # Results values for programs that do not calculate
+    return out
 
 
 # -- instructions, inputs ------------------------------------------------------------------------
@@ -469,6 +473,14 @@ def _gls(book: Book, diag: Diagnosis, obs: dict, native: bool) -> dict:
         book.text(wi, 1, 1, "C^-1 = MINVERSE(C)")
         Ci = Block("Cinv", 2, 1, n, n)
         book.array(Ci, f"=MINVERSE({Cb.ref})", fmt="0.000E+00", note="inverse of the covariance C")
+        from openpyxl.utils import get_column_letter
+
+        for w_ in (wc, wi):
+            for j in range(n):   # 0.000E+00 of a negative number: 10 characters
+                w_.column_dimensions[get_column_letter(1 + j)].width = 11
+            book.print_setup(w_, matrix=(n, n), caption=(
+                f"{w_.title}: top-left corner of the {n} x {n} matrix; the whole matrix is in the workbook, "
+                "not in the printout"))
         out["C"] = Cb
         # column blocks: C^-1 r, C^-1 X
         book.text(ws, 1, 1, "C^-1 r")
@@ -534,7 +546,7 @@ def _gls(book: Book, diag: Diagnosis, obs: dict, native: bool) -> dict:
         for j, (e, l) in enumerate(diag.sel_labels):
             book.text(ws, row + 1 + j, c0, l if e == "alignment" else (e if l == e else f"{e} {l}"))
             book.formula(ws, row + 1 + j, c0 + 2, f"=SQRT({Minv.cell(j, j)})", fmt="0.000000E+00")
-            unit = ("µm" if l.startswith("t") else "µrad") if e == "alignment" else fx.BY_NAME[e].unit
+            unit = ("µm" if l.startswith("t") else "µrad") if e == "alignment" else _display_unit(fx.BY_NAME[e].unit)
             book.text(ws, row + 1 + j, c0 + 3, unit)
         out.update(M=M, g=g, Minv=Minv, b=b, u_col=c0 + 2, b_row=row + 1, c0=c0)
         row += p + 2
@@ -668,7 +680,7 @@ def _candidates(book: Book, diag: Diagnosis) -> None:
             v = c[key]
             if v is not None and (key != "df" or c["status"] in ("chosen", "tested")):
                 ws.cell(row=r, column=3 + k).value = float(v) if isinstance(v, float) else v
-        book.text(ws, r, 8, fx.BY_NAME[c["name"]].unit)
+        book.text(ws, r, 8, _display_unit(fx.BY_NAME[c["name"]].unit))
         if c["reason"]:
             book.text(ws, r, 9, c["reason"])
     ws.column_dimensions["A"].width = 20
@@ -702,21 +714,34 @@ def _groups(book: Book, diag: Diagnosis) -> None:
     ws.column_dimensions["B"].width = 22
 
 
-def _results(book: Book, diag: Diagnosis, gls: dict) -> None:
+def _display_unit(unit: str) -> str:
+    """A unit as the workbooks spell it (µm, µrad); diagnosis.json keeps the spec's um, urad."""
+    return unit.replace("um", "µm").replace("urad", "µrad").replace("µrµm", "µrad") if unit != "1" else unit
+
+
+def _results(book: Book, diag: Diagnosis, gls: dict) -> list[dict]:
+    """The Results sheet; returns its rows' values (the core's numbers, as in diagnosis.json) for
+    the cached values."""
     st = gls["stats"]
-    rows = []
+    js = diag.to_json()
+    rows, cached = [], []
     for key, unit in (("chi2_before", "1"), ("dof_before", "1"), ("p_before", "1"), ("chi2_after", "1"),
-                      ("dof_after", "1"), ("rms_before_um", "um"), ("rms_after_um", "um")):
+                      ("dof_after", "1"), ("rms_before_um", "µm"), ("rms_after_um", "µm")):
         rows.append([key, Formula(f"={st[key]}"), "", unit])
+        cached.append({"value": float(js[key])})
     for j, (e, l) in enumerate(diag.sel_labels):
         if e == "alignment":
             continue
         b = gls["b"].cell(j, 0)
         u = cell(gls["b_row"] + j, gls["u_col"], "GLS")
-        rows.append([e if l == e else f"{e} {l}", Formula(f"={b}"), Formula(f"={u}"), fx.BY_NAME[e].unit])
+        rows.append([e if l == e else f"{e} {l}", Formula(f"={b}"), Formula(f"={u}"),
+                     _display_unit(fx.BY_NAME[e].unit)])
+        cached.append({"value": float(diag.beta[j]), "u": float(math.sqrt(max(diag.cov_beta[j, j], 0.0)))})
     book.results(["quantity", "value", "u", "unit"], rows, [
         "chi2_before ... rms_after_um as in diagnosis.json; then one row per estimated effect parameter",
-        None, "standard uncertainty", "spec section 5 spelling"])
+        "in the row's unit", "standard uncertainty, in the row's unit",
+        "unit of value and u (diagnosis.json spells µm as um, µrad as urad: spec section 5)"])
+    return cached
 
 
 def _chart(book: Book, diag: Diagnosis, obs: dict) -> None:
@@ -731,8 +756,12 @@ def _chart(book: Book, diag: Diagnosis, obs: dict) -> None:
         x, x_title = None, "coordinate row"
     series = [ChartSeries(title, x, Reference(ws, min_col=ci[key], min_row=r0, max_row=r1))
               for key, title in (("z", "before"), ("z_after", "after"))]
-    book.scatter(ws, f"{col(len(ci) + 2)}2", "Standardized residuals before and after the refit",
-                 x_title, "z", series)
+    # below the table (on its own printed page); "after" is drawn first so that LibreOffice, which
+    # draws the first series on top, shows it over "before" (see Book.scatter)
+    anchor_row = r1 + 3
+    book.scatter(ws, f"A{anchor_row}", "Standardized residuals z before and after the refit",
+                 x_title, "z", series[::-1], width=24, height=13)
+    book.print_setup(ws, row_breaks=[anchor_row - 1])
 
 
 # -- PNG plots -----------------------------------------------------------------------------------

@@ -44,7 +44,7 @@ from . import __version__
 from .book import Book, Formula
 from .feature_job import KIND, Task, fitted, propagation_method
 from .large_book import LIVE, addin_ranges, write_xlwings_conf
-from .vx_sheets import write_inputs, write_point_cloud_model, write_points
+from .vx_sheets import explain_inputs, write_inputs, write_point_cloud_model, write_points
 from .xlref import Block, block, cell
 
 #: native V_X formulas up to this many points (7 matrices of 3m x 3m plus J, G, V_A).  Measured
@@ -90,11 +90,13 @@ def write_feature_book(task: Task, results: dict, path, *, native_max_points: in
         _write_planning(book, task, results)
     if not native:
         _write_live(book, task, f, va, probe_rows)
-    book.results(["parameter", "value", "u"],
-                 [[name, Formula(f"={cell(r, 2, 'Budget')}"), Formula(f"={cell(r, 4, 'Budget')}")]
+    book.results(["parameter", "value", "u", "unit"],
+                 [[name, Formula(f"={cell(r, 2, 'Budget')}"), Formula(f"={cell(r, 4, 'Budget')}"), _unit(name)]
                   for name, r in rows],
-                 notes=[None, "fitted value (mm, rad, or unit-vector component)",
-                        "standard uncertainty in the parameter's unit"])
+                 notes=[None, "fitted value, in the unit of column 'unit' (mm, rad, or 1 for a unit-vector "
+                        "component)", "standard uncertainty, in the unit of column 'unit'",
+                        "unit of value and u (the contract's columns parameter, value, u are in the "
+                        "parameter's unit: mm, rad or 1)"])
     if not native:
         write_xlwings_conf(book)
     book.save(path)
@@ -163,6 +165,7 @@ def _instructions(book: Book, task: Task, f, native: bool, limit: int) -> None:
             "xlwings, Import Functions; 'xlwings.conf' already names the module). In LibreOffice, or in "
             f"Excel without the add-in, '{LIVE}' shows #NAME?: by design, no other cell refers to it, so "
             "every result stays visible.")
+    explain_inputs(book)
     book.gap()
     book.para("Conventions", bold=True)
     book.para(*ERRATA, *task.notes)
@@ -562,9 +565,46 @@ def _write_budget(book: Book, f, va: dict, fitref: dict) -> list[tuple[str, int]
         book.formula(ws, r, 4, f"=SQRT(MAX(0,{va['local']['total'].cell(p, p)}))", fmt=SMALL)
         for q, fac in enumerate(pc.FACTORS):
             book.formula(ws, r, 5 + q, f"=SQRT(MAX(0,{va['local'][fac].cell(p, p)}))", fmt=SMALL)
+    _budget_in_um(book, ws, r0 + 2 + len(f.local_names) + 1, rows)
     ws.column_dimensions["A"].width = 14
     ws.freeze_panes = "B2"
     return rows
+
+
+#: display scale of an uncertainty: mm -> µm, rad -> µrad, a unit-vector component -> 1e-6
+_U_DISPLAY = {"mm": (1e3, "µm"), "rad": (1e6, "µrad"), "1": (1e6, "1e-6")}
+
+
+def _budget_in_um(book: Book, ws, r0: int, rows: list[tuple[str, int]]) -> None:
+    """The reported parameters' u and u per factor again, in µm (lengths) and µrad (angles), and
+    a chart of u per factor of the length parameters (Forbes 2025 section 5.6)."""
+    from openpyxl.chart import Reference
+
+    book.text(ws, r0, 1, "The same uncertainties in µm (lengths) and µrad (angles); unit-vector "
+                         "components in 1e-6", font=None)
+    book.header(ws, r0 + 1, 1, ["parameter", "u_unit", "u", *[f"u_{fac}" for fac in pc.FACTORS]],
+                [None, "unit of u and u_R ... u_P in this row", "u of the table above, scaled to u_unit", None,
+                 None, None, None, None, None])
+    length_rows = []
+    for k, (name, src) in enumerate(rows):
+        r = r0 + 2 + k
+        scale, unit = _U_DISPLAY[_unit(name)]
+        book.text(ws, r, 1, name)
+        book.text(ws, r, 2, unit)
+        for q in range(1 + len(pc.FACTORS)):
+            book.formula(ws, r, 3 + q, f"={cell(src, 4 + q)}*{scale:g}", fmt="0.0000")
+        if unit == "µm":
+            length_rows.append(r)
+    if not length_rows:
+        return
+    anchor = r0 + 3 + len(rows)
+    book.print_setup(ws, row_breaks=[anchor - 1])   # the chart on its own printed page
+    book.bars(ws, f"A{anchor}", "u per influence factor of the length parameters (µm), "
+              "Forbes 2025 section 5.6", "u / µm",
+              Reference(ws, min_col=4, max_col=3 + len(pc.FACTORS), min_row=r0 + 1),
+              [(ws.cell(row=r, column=1).value, Reference(ws, min_col=4, max_col=3 + len(pc.FACTORS),
+                                                          min_row=r, max_row=r))
+               for r in length_rows], horizontal=False, width=18, height=8)
 
 
 def _unit(name: str) -> str:

@@ -37,7 +37,7 @@ from xlfuncs import pointcloud as pc
 from . import __version__
 from .book import VALUE_FILL, Book
 from .errors import InputError
-from .vx_sheets import NATIVE_MAX_POINTS, write_inputs, write_points
+from .vx_sheets import NATIVE_MAX_POINTS, explain_inputs, write_inputs, write_points
 from .xlref import Block, block, cell
 
 GP_FACTORS = ("ET", "ER", "P")
@@ -80,6 +80,9 @@ def write_large_book(task, results: dict, path: Path) -> None:
     _write_live(book, task, refs)
     if task.mpe is not None:
         _write_mpe(book, task)
+    from .pointcloud_job import _budget_chart
+
+    _budget_chart(book, book.wb["Budget"], task, first)   # after MPE: the chart draws its MPE line
     book.results(RESULT_COLUMNS, results_rows(task, first))
     write_xlwings_conf(book)
     book.save(path)
@@ -165,6 +168,7 @@ def _instructions(book: Book, task) -> None:
         "Scale/squareness, ET and ER act on the ram positions x_i - p_k(i) (sections 4.3, 5.3, 5.4); probing "
         "effects of different probes are independent (section 5.5).",
         *task.notes)
+    explain_inputs(book)
 
 
 def _template(book: Book, **styles):
@@ -215,6 +219,10 @@ def _write_gp_blocks(book: Book, task, blocks: dict) -> dict:
                 c._style = copy(style)
     ws.freeze_panes = "C2"
     _write_snapshot(book, ws, task, 3 + 9 * len(GP_FACTORS) + 1)
+    n = len(task.pairs)
+    book.print_setup(ws, matrix=(n, 2 + 9 * len(GP_FACTORS)), caption=(
+        f"{GP}: the first rows of the {n} pair blocks (values); the whole table is in the workbook, not in "
+        "the printout"))
     return cols
 
 
@@ -314,9 +322,6 @@ def _write_budget(book: Book, task, X: Block, U: Block, probe_rows: dict, gp_col
     ws.freeze_panes = "D2"
     for col, w in zip("ABC", (8, 8, 7)):
         ws.column_dimensions[col].width = w
-    from .pointcloud_job import _budget_chart
-
-    _budget_chart(book, ws, task, first)
     return first
 
 

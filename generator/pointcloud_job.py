@@ -20,7 +20,7 @@ from . import __version__
 from .book import Book, ChartSeries, Formula
 from .errors import InputError
 from .taskfile import check_keys, number, read_point_cloud, string, table, task_kind_and_name, text_list
-from .vx_sheets import NATIVE_MAX_POINTS, point_block, write_point_cloud_model
+from .vx_sheets import NATIVE_MAX_POINTS, explain_inputs, point_block, write_point_cloud_model
 from .xlref import Block, block, cell
 
 KIND = "pointcloud"
@@ -169,6 +169,7 @@ def write_book(task: Task, results: dict, path: Path) -> None:
     budget = _write_budget(book, task, layout)
     if task.mpe is not None:
         _write_mpe(book, task)
+    _budget_chart(book, book.wb["Budget"], task, budget)
     book.results(RESULT_COLUMNS, results_rows(task, budget))
     book.save(path)
 
@@ -207,7 +208,11 @@ def _instructions(book: Book, task: Task) -> None:
         "Coords — one row per coordinate: the vectors the V blocks are built from, the rows of G_X|S (eq. 11) and G_k (eq. 24).",
         "V_R, V_PQ, V_S, V_ET, V_ER, V_P — the six 3m x 3m contributions (µm²); V_X their sum (eq. 28).",
         "Budget — d, u, U and u per factor for each distance (µm).",
-        "MPE — C(d) = K u(d)/(A + d/B) from the summary formula (33)-(34), its maximum and the conforming rescaling (section 6.8).")
+        "MPE — C(d) = K u(d)/(A + d/B) from the summary formula (33)-(34), its maximum, 'conforms' (yes when "
+        "C_max <= 1) and the conforming rescaling (section 6.8).",
+        "Charts: below the tables of 'Budget' (U = K u(d) per group of distances against the MPE line, "
+        "Figures 6/7) and 'MPE' (Figures 4/5); each prints on its own page.")
+    explain_inputs(book)
     book.gap()
     book.para("Conventions (see docs/errata.md)", bold=True)
     book.para(
@@ -222,7 +227,7 @@ def _instructions(book: Book, task: Task) -> None:
 def _write_budget(book: Book, task: Task, layout) -> int:
     ws = book.sheet("Budget")
     cols = ["from", "to", "group", "d_mm", "u_um", "U_um", "u_R_um", "u_PQ_um", "u_S_um", "u_ET_um",
-            "u_ER_um", "u_P_um", "dx_mm", "dy_mm", "dz_mm", "nx", "ny", "nz"]
+            "u_ER_um", "u_P_um", "dx_mm", "dy_mm", "dz_mm", "nx_mm/mm", "ny_mm/mm", "nz_mm/mm"]
     notes = [None, None, "free label (e.g. LL, RR, LR, FF of Forbes 2025 Figures 6/7)",
              "d_ij = ||x_j - x_i||", "u(d_ij), eq. (30): root sum of squares of the components",
              "U = K u", *["u_F(d_ij) = sqrt(n^T (V_ii + V_jj - V_ij - V_ji) n), eq. (29) on V_F"] * 6,
@@ -252,7 +257,6 @@ def _write_budget(book: Book, task: Task, layout) -> int:
     ws.freeze_panes = "D2"
     for c, w in zip("ABC", (8, 8, 7)):
         ws.column_dimensions[c].width = w
-    _budget_chart(book, ws, task, first)
     return first
 
 
@@ -270,9 +274,18 @@ def _budget_chart(book: Book, ws, task: Task, first: int) -> None:
                                   Reference(ws, min_col=4, min_row=first + start, max_row=first + end),
                                   Reference(ws, min_col=6, min_row=first + start, max_row=first + end)))
         start = end + 1
-    if len(series) <= 12:
-        book.scatter(ws, "T2", "Expanded uncertainty K u(d) against d (Forbes 2025 Figures 6/7)",
-                     "d / mm", "U / µm", series)
+    if task.mpe is not None:
+        # the MPE line A + d/B of Forbes 2025 Figures 6/7, from the grid on the MPE sheet
+        mp = book.wb["MPE"]
+        series.append(ChartSeries("MPE = A + d/B", Reference(mp, min_col=1, min_row=2, max_row=1 + MPE_GRID_POINTS),
+                                  Reference(mp, min_col=2, min_row=2, max_row=1 + MPE_GRID_POINTS),
+                                  markers=False, colour="000000", dash="solid", bold=True))
+    if len(series) <= 13:
+        # below the table, on its own printed page
+        anchor_row = first + len(task.pairs) + 2
+        book.scatter(ws, f"A{anchor_row}", "Expanded uncertainty U = K u(d) against d (Forbes 2025 Figures 6/7)",
+                     "d / mm", "U / µm", series, width=24, height=13, x_min=0, y_min=0)
+        book.print_setup(ws, row_breaks=[anchor_row - 1])
 
 
 def _write_mpe(book: Book, task: Task) -> None:
@@ -310,14 +323,20 @@ def _write_mpe(book: Book, task: Task) -> None:
         scaled = key in pc.Parameters.SIGMAS
         book.formula(ws, r, 11, f"={key}/MAX(1,C_max)" if scaled else f"={key}", fmt="0.0000")
         r += 1
+    book.text(ws, 3, 10, "conforms")
+    book.formula(ws, 3, 11, '=IF(C_max<=1,"yes","no")', fmt=None,
+                 note="yes when K u(d) <= MPE(d) at every grid distance (C_max <= 1), Forbes 2025 eq. (36)")
     ws.freeze_panes = "A2"
     from openpyxl.chart import Reference
 
     x = Reference(ws, min_col=1, min_row=first, max_row=first + n - 1)
-    book.scatter(ws, "M4", "MPE and K u(d) with components (Forbes 2025 Figures 4/5)", "d / mm", "µm",
+    anchor_row = first + n + 1
+    book.scatter(ws, f"A{anchor_row}", "MPE and K u(d) with components (Forbes 2025 Figures 4/5)", "d / mm", "µm",
                  [ChartSeries(None, x, Reference(ws, min_col=c, min_row=1, max_row=first + n - 1),
-                              markers=False, title_from_data=True) for c in range(2, 8)],
-                 width=18, height=10)
+                              markers=False, title_from_data=True,
+                              colour="000000" if c == 2 else None, bold=c in (2, 3)) for c in range(2, 8)],
+                 width=24, height=13, x_min=0, y_min=0)
+    book.print_setup(ws, row_breaks=[anchor_row - 1])
 
 
 # -- plots -------------------------------------------------------------------------------------

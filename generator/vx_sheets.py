@@ -63,6 +63,21 @@ class VXLayout:
     probe_rows: dict  # probe index -> row on Inputs
 
 
+def explain_inputs(book: Book) -> None:
+    """The instruction sheet's paragraphs on cell colours (inherited defaults) and printing."""
+    book.gap()
+    book.para("Cell colours and printing", bold=True)
+    book.para(
+        "Yellow: an input you type. Green: an input that inherits a default by formula (a probe's "
+        "sigma_PQ_um, sigma_P0_um, sigma_P_um and lambda_P on 'Inputs' are =sigma_PQ_um ... of the "
+        "task-wide values); its note says what it inherits. Typing a number there overrides the default "
+        "for that probe only and cuts the link. White: formulas. Grey: values computed by the core.",
+        "Printing: every sheet is set up for A4, scaled to the page width, with the header row repeated; "
+        "large matrix sheets (V_R ... V_X, GP_blocks) print their top-left corner only (the whole matrix "
+        "stays in the workbook, the page header says so); charts "
+        "print on their own page. `cmmwb build --pdf` prints the workbook to PDF with LibreOffice.")
+
+
 def _name_safe(i: int) -> str:
     return f"probe{i + 1}"
 
@@ -103,8 +118,7 @@ def write_inputs(book: Book, params: Parameters, cloud: PointCloud, extra: list[
             own = getattr(p, key)
             name = f"{_name_safe(k)}_{key}"
             if own is None:
-                book.default(ws, r, 5 + c, name, f"={key}", lo=0.0,
-                             note="task-wide default; type a number to override for this probe")
+                book.default(ws, r, 5 + c, name, f"={key}", lo=0.0)   # green, with a note
             else:
                 book.input(ws, r, 5 + c, name, own, lo=0.0, note="per-probe override")
     return ws, probe_rows
@@ -123,8 +137,8 @@ def write_points(book: Book, cloud: PointCloud, probe_rows: dict) -> tuple[Block
         k = int(cloud.probe_index[i])
         book.text(ws, r, 1, cloud.labels[i])
         for c in range(3):
-            book.number(ws, r, 2 + c, cloud.X_mm[i, c])
-            book.number(ws, r, 5 + c, cloud.N[i, c])
+            book.number(ws, r, 2 + c, cloud.X_mm[i, c], fmt="General")   # mm, as entered
+            book.number(ws, r, 5 + c, cloud.N[i, c], fmt="0.000000")
         book.text(ws, r, 8, cloud.probes[k].id)
         for c in range(3):
             book.formula(ws, r, 9 + c, f"={cell(probe_rows[k], 2 + c, 'Inputs')}", fmt="General")
@@ -256,6 +270,9 @@ def write_V_sheets(book: Book, cloud: PointCloud, coords: dict[str, Block], vb: 
             note = f"V_{f}: {FACTOR_TITLES[f]}"
         book.array(target, formula, note=note, fmt=None)  # formatting 3m x 3m cells costs seconds
         ws.freeze_panes = "B2"
+        book.print_setup(ws, matrix=(n3, n3), caption=(
+            f"{ws.title} (µm²): top-left corner of the {n3} x {n3} matrix; the whole matrix is in the "
+            "workbook, not in the printout"))
         out[f] = target
     return out
 

@@ -11,7 +11,7 @@ import pytest
 from openpyxl.worksheet.formula import ArrayFormula
 
 from generator import templates
-from generator.book import INPUT_FILL
+from generator.book import DEFAULT_FILL, INPUT_FILL
 from generator.reader import TASK_SHEET
 from generator.cache import results_table
 from generator.jobs import job
@@ -95,7 +95,11 @@ def test_a_template_is_made_for_people(name):
                     where = f"{ws.title}!{c.coordinate}"
                     # a number, or a per-probe default (=sigma_PQ_um) a number may replace
                     assert isinstance(c.value, (int, float)) or str(c.value).startswith("="), where
-                    assert c.fill.fgColor.rgb.endswith(INPUT_FILL.fgColor.rgb[-6:]), where
+                    # yellow; green for an input that inherits a default by formula (issue 11)
+                    fill = DEFAULT_FILL if str(c.value).startswith("=") else INPUT_FILL
+                    assert c.fill.fgColor.rgb.endswith(fill.fgColor.rgb[-6:]), where
+                    if fill is DEFAULT_FILL:
+                        assert c.comment is not None and "inherits" in c.comment.text, where
                     assert any(c.coordinate in dv.sqref for dv in validated), f"{where} not validated"
                     assert (ws.title, c.coordinate) in named, f"{where} has no defined name"
                 if isinstance(c.value, ArrayFormula) or c.data_type == "f":
@@ -116,6 +120,7 @@ def test_a_template_shows_its_results_without_calculating(tmp_path, name):
     rows = results_rows({"Results": {c.coordinate: c.value for r in wb["Results"].iter_rows()
                                      for c in r if c.value is not None}})
     expected = results_table(kind, results)
+    # the contract's columns (a book may add columns to the right, e.g. the feature books' unit)
     assert len(rows) == len(expected) > 0 and all(v is not None for r in rows for v in r.values())
     # the template was made on some CPU, the JSON here on this one: numbers agree to 1e-9 of the
     # column's largest value (an exactly-zero value is 0 on one BLAS kernel and 1e-15 on another)
