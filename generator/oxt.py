@@ -9,6 +9,10 @@ Contents of the extension:
                            ``XCmmwb.idl`` by LibreOffice's ``unoidl-write`` (shipped with the
                            sources, so packing needs no SDK; :func:`rebuild_type_library` remakes it)
 ``cmmwb_calc.py``          the component: Calc functions calling ``xlfuncs.udf``
+``CalcAddIns.xcu``         the functions' names, descriptions and Excel (compatibility) names as
+                           configuration data: Calc reads it at start-up, so the ``.xlsx`` import
+                           maps ``cmm_pair_blocks(...)`` to the add-in (without it the compatibility
+                           names come too late and the cells show #NAME?)
 ``pythonpath/xlfuncs/``    the numerical core, copied from this installation (LibreOffice adds
                            ``pythonpath`` beside a component to ``sys.path``)
 
@@ -31,6 +35,7 @@ from .atomic import replacing
 SOURCES = Path(__file__).parent / "lo_addin"
 COMPONENT = "cmmwb_calc.py"
 TYPE_LIBRARY = "XCmmwb.rdb"
+IMPLEMENTATION = "org.cmmwb.calc.CmmwbAddIn"
 
 MANIFEST = """<?xml version="1.0" encoding="UTF-8"?>
 <manifest:manifest xmlns:manifest="http://openoffice.org/2001/manifest">
@@ -38,8 +43,52 @@ MANIFEST = """<?xml version="1.0" encoding="UTF-8"?>
                        manifest:full-path="{rdb}"/>
   <manifest:file-entry manifest:media-type="application/vnd.sun.star.uno-component;type=Python"
                        manifest:full-path="{component}"/>
+  <manifest:file-entry manifest:media-type="application/vnd.sun.star.configuration-data"
+                       manifest:full-path="CalcAddIns.xcu"/>
 </manifest:manifest>
 """
+
+
+def functions() -> dict:
+    """``FUNCTIONS`` of the component (name -> (argument names, description)), read without
+    importing it (it needs LibreOffice's ``uno``)."""
+    import ast
+
+    tree = ast.parse((SOURCES / COMPONENT).read_text())
+    for node in tree.body:
+        if isinstance(node, ast.AnnAssign | ast.Assign):
+            target = node.target if isinstance(node, ast.AnnAssign) else node.targets[0]
+            if getattr(target, "id", None) == "FUNCTIONS":
+                return ast.literal_eval(node.value)
+    raise RuntimeError(f"no FUNCTIONS in {COMPONENT}")
+
+
+def calc_addins_xcu() -> str:
+    """Configuration data ``org.openoffice.Office.CalcAddIns`` describing every function, with
+    its Excel name (upper case; Calc compares names without case) as ``CompatibilityName``."""
+    from xml.sax.saxutils import escape, quoteattr
+
+    def prop(name: str, value: str, lang: bool = True) -> str:
+        attr = ' xml:lang="en-US"' if lang else ""
+        return f'<prop oor:name="{name}"><value{attr}>{escape(value)}</value></prop>'
+
+    out = ['<?xml version="1.0" encoding="UTF-8"?>',
+           '<oor:component-data xmlns:oor="http://openoffice.org/2001/registry" '
+           'xmlns:xs="http://www.w3.org/2001/XMLSchema" oor:name="CalcAddIns" oor:package="org.openoffice.Office">',
+           '<node oor:name="AddInInfo">',
+           f'<node oor:name={quoteattr(IMPLEMENTATION)} oor:op="replace">',
+           '<node oor:name="AddInFunctions">']
+    for name, (args, description) in functions().items():
+        out.append(f'<node oor:name={quoteattr(name.upper())} oor:op="replace">')
+        out += [prop("DisplayName", name), prop("Description", description),
+                prop("Category", "Add-In", lang=False), prop("CompatibilityName", name.upper())]
+        out.append('<node oor:name="Parameters">')
+        for arg in args:
+            out.append(f'<node oor:name={quoteattr(arg)} oor:op="replace">'
+                       f'{prop("DisplayName", arg)}{prop("Description", arg)}</node>')
+        out.append("</node></node>")
+    out += ["</node></node></node>", "</oor:component-data>", ""]
+    return "\n".join(out)
 
 
 def oxt_bytes() -> bytes:
@@ -59,6 +108,7 @@ def oxt_bytes() -> bytes:
         add("META-INF/manifest.xml", MANIFEST.format(rdb=TYPE_LIBRARY, component=COMPONENT).encode())
         add("description.xml", (SOURCES / "description.xml").read_text().replace("@VERSION@", __version__).encode())
         add(TYPE_LIBRARY, (SOURCES / TYPE_LIBRARY).read_bytes())
+        add("CalcAddIns.xcu", calc_addins_xcu().encode())
         add(COMPONENT, (SOURCES / COMPONENT).read_text().replace("@VERSION@", __version__).encode())
         core = Path(xlfuncs.__file__).parent
         for f in sorted(core.glob("*.py")):
