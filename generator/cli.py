@@ -247,7 +247,7 @@ def parser() -> argparse.ArgumentParser:
     s.add_argument("--json", action="store_true", help="print the Results rows as JSON (default: a table)")
     s.set_defaults(func=cmd_recalc)
 
-    for extra in ("read_cli", "diagnose_cli"):
+    for extra in ("read_cli", "diagnose_cli", "addin_cli", "import_cli"):
         try:
             mod = __import__(f"generator.{extra}", fromlist=["register"])
         except ModuleNotFoundError:

@@ -161,7 +161,7 @@ def _instructions(book: Book, task: Task, f, native: bool, limit: int) -> None:
             "parameters on 'Inputs' and the weights on 'Local': value, u and u per factor of each parameter "
             "(as on 'Budget'), and per grey factor V_A of the reported parameters and of the paper "
             "parameters (x 1e12) in the cells where 'V_A' has them. In Excel with the add-in they refit and "
-            "recompute live; install and use: docs/excel_addin.md of cmmwb (save as .xlsm, reference "
+            "recompute live; install and use: docs/addins.md of cmmwb (save as .xlsm, reference "
             "xlwings, Import Functions; 'xlwings.conf' already names the module). In LibreOffice, or in "
             f"Excel without the add-in, '{LIVE}' shows #NAME?: by design, no other cell refers to it, so "
             "every result stays visible.")
@@ -632,7 +632,7 @@ def _write_live(book: Book, task: Task, f, va: dict, probe_rows: dict) -> None:
     weights = block(2, 2, m, 1, "Local")
     circle_plane = (task.circle_plane or "space") if task.element == "circle" else ""
     book.text(ws, 1, 1, "The numbers of 'Budget' and the grey values of 'V_A' as formulas of the cmmwb "
-                        "Excel add-in (xlfuncs.udf, docs/excel_addin.md): live in Excel with the add-in, "
+                        "Excel add-in (xlfuncs.udf, docs/addins.md): live in Excel with the add-in, "
                         "#NAME? elsewhere (no other cell refers to this sheet)", font=None)
     # the fit options of the task (the add-in refits the points with them)
     oc = LIVE_OPTION_COLUMN

@@ -146,7 +146,7 @@ def _instructions(book: Book, task) -> None:
         "Live_addin — the same numbers as formulas of the cmmwb Excel add-in (xlwings user-defined "
         "functions cmm_distances and cmm_pair_blocks in xlfuncs.udf), cell for cell in the layout of "
         "'GP_blocks' and 'Budget'. In Excel with the add-in they recompute live from Inputs and Points; "
-        "install and use: docs/excel_addin.md of cmmwb (save as .xlsm, reference xlwings, Import "
+        "install and use: docs/addins.md of cmmwb (save as .xlsm, reference xlwings, Import "
         "Functions; 'xlwings.conf' already names the module). In LibreOffice, or in Excel without the "
         "add-in, this sheet shows #NAME?: by design, no other cell refers to it, so every result "
         "stays visible.")

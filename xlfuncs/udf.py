@@ -2,8 +2,9 @@
 
 For workbooks beyond the native-formula limit (``generator.large_book``) Excel users on Windows
 can recompute the heavy Gaussian-process blocks live, with the core of this package, instead of
-reading the values written at build time.  Install and use: ``docs/excel_addin.md``
-(UDF Modules = ``xlfuncs.udf``).  On other platforms the xlwings decorators do nothing and the
+reading the values written at build time.  Install and use: ``docs/addins.md``
+(UDF Modules = ``xlfuncs.udf``).  The LibreOffice Calc add-in (``generator/lo_addin``) calls
+these same functions.  On other platforms the xlwings decorators do nothing and the
 functions are plain Python (the tests call them with the cell values of the ranges).
 
 Arguments are cell ranges in the layout of the generated workbooks:
@@ -28,7 +29,22 @@ import math
 from typing import Any, Sequence
 
 import numpy as np
-import xlwings as xw
+
+try:
+    import xlwings as xw
+except ImportError:  # LibreOffice's Python (the Calc add-in, docs/addins.md) has no xlwings
+    class _PassThrough:
+        """The xlwings decorators as no-ops: the functions stay plain Python."""
+
+        @staticmethod
+        def func(f=None, **_kw):
+            return f if f is not None else (lambda g: g)
+
+        @staticmethod
+        def arg(*_a, **_kw):
+            return lambda g: g
+
+    xw = _PassThrough()
 
 from . import blocked as bl
 from . import features as ft

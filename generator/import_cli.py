@@ -1,0 +1,34 @@
+"""``cmmwb import FILE --out TASK.toml|RECORDINGS.csv``: QIF and AQDEF files in (docs/import.md)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+
+def cmd_import(args) -> int:
+    from .importers import run_import
+
+    files, report = run_import(Path(args.file), Path(args.out), features=args.feature, kind=args.kind,
+                               normals=args.normals, force=args.force)
+    for line in report:
+        print(f"  {line}")
+    for f in files:
+        print(f)
+    return 0
+
+
+def register(sub) -> None:
+    s = sub.add_parser("import", help="QIF measured points (or Q-DAS AQDEF values) -> task file + points "
+                                      "CSV (see docs/import.md)")
+    s.add_argument("file", help="a QIF file (.qif) or an AQDEF file (.dfq, .dfd with its .dfx)")
+    s.add_argument("--out", required=True, help="task file to write (.toml; the points go to the .csv "
+                                                "of the same name) or recordings (.csv)")
+    s.add_argument("--feature", action="append", metavar="NAME",
+                   help="feature to import (FeatureName or id; repeat for a pointcloud task of several)")
+    s.add_argument("--kind", choices=("feature", "pointcloud"),
+                   help="task kind (default: feature for one --feature, pointcloud for several)")
+    s.add_argument("--normals", choices=("file", "from-feature"), default="file",
+                   help="point normals from the file (default), or from the measured element when the "
+                        "file has none (stated in the task notes)")
+    s.add_argument("--force", action="store_true", help="overwrite existing output files")
+    s.set_defaults(func=cmd_import)

@@ -1,0 +1,338 @@
+"""QIF (ISO 23952, Quality Information Framework) measured point sets.
+
+A schema-driven reader of the parts of a QIF document that cmmwb uses (element names of the
+QIF 3.0 schema ``Features.xsd``/``Primitives.xsd``; QIF 2.x ``MeasurePoint`` lists too):
+
+``FileUnits/PrimaryUnits/LinearUnit``   ``UnitName`` and ``UnitConversion/Factor`` (to metres):
+                                        every coordinate is converted to mm with it
+``MeasuredPointSet`` (QIF 3)            ``Points`` (x y z ...), ``Normals`` (i j k ...),
+                                        ``Compensated``, ``ProbeRadius``, per-set ``Units``
+``PointList/MeasurePoint`` (QIF 2)      ``Point``, ``Normal``, ``Compensated``, ``ProbeRadius``
+``<Kind>FeatureMeasurement``/``Actual`` the feature the points belong to (``PointList`` of
+                                        ``WholePointSetId``/``RangePointSetId``), its measured
+                                        geometry, and through ``FeatureItemId`` its name
+                                        (``FeatureName``) and nominal (``InternalExternal``)
+
+Everything else that would change the meaning of the points is named in an error
+(``BinaryPoints``, a ``CoordinateSystemId``/``TranformId`` frame, ``SinglePointSetId``
+subsets); the rest of the document (plans, characteristics, statistics) is not read and the
+report says so.  XML is parsed with ``defusedxml`` (no DTDs, no entity expansion).
+
+Normals: when the file gives none, a feature task can take them from the measured element
+(``normals = "from-feature"``): plane normal, radial directions of circles, cylinders and
+spheres, with the sign of ``InternalExternal`` -- stated in the task notes.  Nothing is
+invented silently.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from defusedxml import ElementTree as DET
+
+from ..errors import InputError
+from .guarded import read_input
+
+#: QIF feature kinds that are cmmwb elements (xlfuncs.features.ELEMENTS)
+ELEMENTS = {"Line": "line", "Plane": "plane", "Circle": "circle", "Sphere": "sphere",
+            "Cylinder": "cylinder", "Cone": "cone"}
+
+
+@dataclass
+class PointSet:
+    id: str
+    X_mm: np.ndarray                 # (n, 3)
+    N: np.ndarray | None             # (n, 3) unit normals, or None
+    compensated: bool | None         # True: surface points; False: stylus-tip centres
+    probe_radius_mm: float | None
+    where: str
+
+
+@dataclass
+class Feature:
+    kind: str                        # QIF kind: Plane, Circle, ...
+    id: str                          # id of the FeatureMeasurement / FeatureActual
+    name: str                        # FeatureName of its FeatureItem (or the id)
+    set_ids: list[tuple[str, tuple[int, int] | None]]
+    geometry: dict                   # measured geometry in mm (Location, Normal, Axis, ...)
+    internal: bool | None            # InternalExternal of the nominal: True INTERNAL
+
+
+@dataclass
+class QifDocument:
+    path: Path
+    version: str
+    unit_name: str
+    mm_per_unit: float
+    sets: dict[str, PointSet] = field(default_factory=dict)
+    features: list[Feature] = field(default_factory=list)
+    not_read: list[str] = field(default_factory=list)
+
+    def feature(self, key: str) -> Feature:
+        for f in self.features:
+            if key in (f.name, f.id):
+                return f
+        names = ", ".join(f"{f.name} ({f.kind.lower()}, id {f.id})" for f in self.features) or "none"
+        raise InputError(f"no feature named or numbered {key!r}; the file has: {names}",
+                         file=self.path, where="--feature")
+
+    def points_of(self, f: Feature) -> PointSet:
+        """The points of one feature, joined from its point sets (ranges are 1-based, inclusive)."""
+        parts = []
+        for sid, rng in f.set_ids:
+            if sid not in self.sets:
+                raise InputError(f"feature {f.name} refers to point set {sid}, which the file does not "
+                                 "hold", file=self.path, where=f"{f.kind}Feature id={f.id}")
+            s = self.sets[sid]
+            sl = slice(None) if rng is None else slice(rng[0] - 1, rng[1])
+            parts.append((s, sl))
+        X = np.vstack([s.X_mm[sl] for s, sl in parts])
+        N = None if any(s.N is None for s, _ in parts) else np.vstack([s.N[sl] for s, sl in parts])
+        comp = {s.compensated for s, _ in parts}
+        radii = {s.probe_radius_mm for s, _ in parts}
+        return PointSet(",".join(s.id for s, _ in parts), X, N, comp.pop() if len(comp) == 1 else None,
+                        radii.pop() if len(radii) == 1 else None, parts[0][0].where)
+
+
+def _local(tag: str) -> str:
+    return tag.rsplit("}", 1)[-1]
+
+
+def _child(el, name: str):
+    for c in el:
+        if _local(c.tag) == name:
+            return c
+    return None
+
+
+def _children(el, name: str):
+    return [c for c in el if _local(c.tag) == name]
+
+
+def _numbers(path: Path, text: str | None, where: str) -> np.ndarray:
+    try:
+        v = np.array([float(t) for t in (text or "").split()], dtype=float)
+    except ValueError as e:
+        raise InputError(f"not a list of numbers ({e})", file=path, where=where) from None
+    if not np.all(np.isfinite(v)):
+        raise InputError("contains a non-finite number", file=path, where=where)
+    return v
+
+
+def _linear_unit(path: Path, el, where: str) -> tuple[str, float] | None:
+    """(UnitName, mm per unit) of a ``LinearUnit`` element, or None."""
+    if el is None:
+        return None
+    name = (_child(el, "UnitName").text or "").strip() if _child(el, "UnitName") is not None else "?"
+    conv = _child(el, "UnitConversion")
+    if conv is None or _child(conv, "Factor") is None:
+        known = {"mm": 1.0, "millimeter": 1.0, "millimetre": 1.0, "m": 1000.0, "meter": 1000.0,
+                 "inch": 25.4, "in": 25.4}
+        if name.lower() not in known:
+            raise InputError(f"length unit {name!r} without UnitConversion/Factor", file=path, where=where)
+        return name, known[name.lower()]
+    factor = _numbers(path, _child(conv, "Factor").text, f"{where}/UnitConversion/Factor")
+    offset = _child(conv, "Offset")
+    if offset is not None and float(offset.text or 0) != 0:
+        raise InputError("a length unit with an offset is not supported", file=path, where=where)
+    if factor.size != 1 or factor[0] <= 0:
+        raise InputError("UnitConversion/Factor must be one positive number", file=path, where=where)
+    return name, float(factor[0]) * 1000.0
+
+
+def read_qif(path: str | Path) -> QifDocument:
+    """Parse a QIF document (guarded read, defusedxml)."""
+    path = Path(path)
+    raw = read_input(path)
+    try:
+        root = DET.fromstring(raw, forbid_dtd=True)
+    except DET.ParseError as e:
+        raise InputError(f"not well-formed XML: {e}", file=path) from None
+    except Exception as e:  # defusedxml: DTD, entities, external references
+        raise InputError(f"refused: {type(e).__name__} (QIF files need no DTD or entities)", file=path) from None
+    if _local(root.tag) != "QIFDocument":
+        raise InputError(f"root element is {_local(root.tag)!r}, not QIFDocument", file=path)
+    version = root.get("versionQIF", "?")
+
+    unit = None
+    fu = _child(root, "FileUnits")
+    if fu is not None and _child(fu, "PrimaryUnits") is not None:
+        unit = _linear_unit(path, _child(_child(fu, "PrimaryUnits"), "LinearUnit"),
+                            "FileUnits/PrimaryUnits/LinearUnit")
+    unit_name, mm = unit if unit else ("mm (QIF default: no FileUnits/PrimaryUnits/LinearUnit)", 1.0)
+    doc = QifDocument(path, version, unit_name, mm)
+
+    # names and nominals of the feature items
+    items: dict[str, tuple[str, str | None]] = {}
+    nominal_def: dict[str, str] = {}
+    definitions: dict[str, bool | None] = {}
+    for el in root.iter():
+        tag = _local(el.tag)
+        if tag.endswith("FeatureDefinition") and el.get("id"):
+            ie = _child(el, "InternalExternal")
+            definitions[el.get("id")] = None if ie is None else {"INTERNAL": True, "EXTERNAL": False}.get(
+                (ie.text or "").strip())
+        elif tag.endswith("FeatureNominal") and el.get("id"):
+            d = _child(el, "FeatureDefinitionId")
+            if d is not None:
+                nominal_def[el.get("id")] = (d.text or "").strip()
+        elif tag.endswith("FeatureItem") and el.get("id"):
+            name = _child(el, "FeatureName")
+            nom = _child(el, "FeatureNominalId")
+            items[el.get("id")] = ((name.text or "").strip() if name is not None else el.get("id"),
+                                   None if nom is None else (nom.text or "").strip())
+
+    # point sets (QIF 3) and point lists (QIF 2)
+    for el in root.iter():
+        tag = _local(el.tag)
+        if tag == "MeasuredPointSet":
+            _read_set(doc, el)
+        elif (tag.endswith("FeatureMeasurement") or tag.endswith("FeatureActual")) and el.get("id"):
+            _read_feature(doc, el, tag, items, nominal_def, definitions)
+    if not doc.sets:
+        raise InputError("no measured points (no MeasuredPointSet and no PointList/MeasurePoint): "
+                         "cmmwb imports measured point sets; this file holds "
+                         + (", ".join(sorted({_local(c.tag) for c in root})) or "nothing"), file=path)
+    doc.not_read.append("plans, characteristics, statistics and nominal features other than "
+                        "InternalExternal are not read (cmmwb needs the points)")
+    return doc
+
+
+def _read_set(doc: QifDocument, el) -> None:
+    path, sid = doc.path, el.get("id", "?")
+    where = f"MeasuredPointSet id={sid}"
+    for unsupported in ("BinaryPoints", "BinaryNormals", "CoordinateSystemId", "TranformId"):
+        if _child(el, unsupported) is not None:
+            what = {"BinaryPoints": "binary point lists", "BinaryNormals": "binary normal lists",
+                    "CoordinateSystemId": "points in another coordinate system",
+                    "TranformId": "points under a transform"}[unsupported]
+            raise InputError(f"{unsupported}: {what} are not supported by this importer "
+                             "(export the points as decimal Points in the file's primary frame)",
+                             file=path, where=where)
+    mm = doc.mm_per_unit
+    units = _child(el, "Units")
+    if units is not None:
+        lu = _linear_unit(path, _child(units, "LinearUnit"), f"{where}/Units/LinearUnit")
+        if lu:
+            mm = lu[1]
+    pts = _child(el, "Points")
+    if pts is None:
+        raise InputError("no Points", file=path, where=where)
+    P = _numbers(path, pts.text, f"{where}/Points")
+    count = int(el.get("count", P.size // 3))
+    if P.size != 3 * count:
+        raise InputError(f"count = {count} but Points holds {P.size} numbers (expected {3 * count})",
+                         file=path, where=where)
+    N = None
+    nel = _child(el, "Normals")
+    if nel is not None:
+        N = _numbers(path, nel.text, f"{where}/Normals").reshape(-1, 3)
+        if N.shape[0] != count:
+            raise InputError(f"{N.shape[0]} normals for {count} points", file=path, where=where)
+        N = _unit(path, N, where)
+    comp = _child(el, "Compensated")
+    radius = _child(el, "ProbeRadius")
+    doc.sets[sid] = PointSet(sid, P.reshape(-1, 3) * mm, N,
+                             None if comp is None else (comp.text or "").strip() == "true",
+                             None if radius is None else float(radius.text) * mm, where)
+
+
+def _unit(path: Path, N: np.ndarray, where: str) -> np.ndarray:
+    norm = np.linalg.norm(N, axis=1)
+    if np.any(np.abs(norm - 1) > 1e-3):
+        k = int(np.argmax(np.abs(norm - 1)))
+        raise InputError(f"normal {k + 1} has length {norm[k]:.6g}, not 1", file=path, where=where)
+    return N / norm[:, None]
+
+
+def _vec(path, el, name, where, mm: float = 1.0):
+    c = _child(el, name)
+    if c is None:
+        return None
+    v = _numbers(path, c.text, f"{where}/{name}")
+    if v.size != 3:
+        raise InputError(f"{name}: expected 3 numbers", file=path, where=where)
+    return v * mm
+
+
+def _read_feature(doc: QifDocument, el, tag: str, items, nominal_def, definitions) -> None:
+    path, fid = doc.path, el.get("id")
+    kind = tag.replace("FeatureMeasurement", "").replace("FeatureActual", "")
+    where = f"{tag} id={fid}"
+    item = _child(el, "FeatureItemId")
+    name, nominal = items.get((item.text or "").strip(), (fid, None)) if item is not None else (fid, None)
+    internal = definitions.get(nominal_def.get(nominal or "", ""))
+    set_ids: list[tuple[str, tuple[int, int] | None]] = []
+    plist = _child(el, "PointList")
+    if plist is not None:
+        mps = _children(plist, "MeasurePoint")
+        if mps:  # QIF 2: the points are inside the feature
+            X, N = [], []
+            for k, mp in enumerate(mps):
+                X.append(_vec(path, mp, "Point", f"{where}/MeasurePoint[{k + 1}]"))
+                N.append(_vec(path, mp, "Normal", f"{where}/MeasurePoint[{k + 1}]"))
+            if any(x is None for x in X):
+                raise InputError("a MeasurePoint without Point", file=path, where=where)
+            comp = _child(mps[0], "Compensated")
+            radius = _child(mps[0], "ProbeRadius")
+            sid = f"feature{fid}"
+            normals = None if any(n is None for n in N) else _unit(path, np.array(N), where)
+            doc.sets[sid] = PointSet(sid, np.array(X) * doc.mm_per_unit, normals,
+                                     None if comp is None else (comp.text or "").strip() == "true",
+                                     None if radius is None else float(radius.text) * doc.mm_per_unit, where)
+            set_ids.append((sid, None))
+        for ref in plist:
+            rt = _local(ref.tag)
+            if rt == "WholePointSetId":
+                set_ids.append(((ref.text or "").strip(), None))
+            elif rt == "RangePointSetId":
+                lo, hi = (int(x) for x in ref.get("range", "").split())
+                set_ids.append(((ref.text or "").strip(), (lo, hi)))
+            elif rt == "SinglePointSetId":
+                doc.not_read.append(f"{where} ({name}): single points of a set (SinglePointSetId) -- "
+                                    "constructed from other features' points; not imported")
+                set_ids = []
+                break
+    geometry = {}
+    for key in ("Location", "Normal", "Direction"):
+        v = _vec(path, el, key, where, doc.mm_per_unit if key == "Location" else 1.0)
+        if v is not None:
+            geometry[key] = v
+    axis = _child(el, "Axis")
+    if axis is not None:
+        geometry["AxisPoint"] = _vec(path, axis, "AxisPoint", where, doc.mm_per_unit)
+        geometry["Direction"] = _vec(path, axis, "Direction", where)
+    if set_ids:
+        doc.features.append(Feature(kind, fid, name, set_ids, geometry, internal))
+
+
+def normals_from_feature(doc: QifDocument, f: Feature, X: np.ndarray) -> tuple[np.ndarray, str]:
+    """Outward unit normals of the points from the measured element, and the sentence that
+    says so.  INTERNAL features (holes) point towards the axis/centre."""
+    g, where = f.geometry, f"{f.kind}Feature id={f.id} ({f.name})"
+    sign = -1.0 if f.internal else 1.0
+    side = ("INTERNAL: towards the axis" if f.internal else
+            "EXTERNAL: away from the axis" if f.internal is False else
+            "InternalExternal not given: taken as EXTERNAL, away from the axis")
+    if f.kind == "Plane" and "Normal" in g:
+        N = np.tile(g["Normal"] / np.linalg.norm(g["Normal"]), (len(X), 1))
+        return N, f"normals = the measured plane normal of {where} (the file gives no point normals)"
+    if f.kind in ("Circle", "Cylinder", "Cone"):
+        c = g.get("Location", g.get("AxisPoint"))
+        a = g.get("Normal", g.get("Direction"))
+        if c is not None and a is not None:
+            a = a / np.linalg.norm(a)
+            r = X - c
+            r -= np.outer(r @ a, a)
+            N = sign * r / np.linalg.norm(r, axis=1)[:, None]
+            return N, (f"normals = radial directions from the measured axis of {where} ({side}); the file "
+                       "gives no point normals")
+    if f.kind == "Sphere" and "Location" in g:
+        r = X - g["Location"]
+        return sign * r / np.linalg.norm(r, axis=1)[:, None], \
+            f"normals = radial directions from the measured centre of {where} ({side})"
+    raise InputError(f"the file gives no normals for the points of {f.name}, and a {f.kind.lower()} "
+                     "gives none from its geometry; the point-cloud model needs the outward normal of "
+                     "every point (Forbes 2025 eq. (26))", file=doc.path, where=where)
