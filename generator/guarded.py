@@ -33,7 +33,7 @@ MAX_BYTES: dict[str, int] = {
     "points": 256 * MiB,       # a points table (CSV)
     "recordings": 256 * MiB,   # a recordings file (CSV)
     "workbook": 64 * MiB,      # an .xlsx workbook (cmmwb read / recalc)
-    "import": 64 * MiB,        # a file of another program's format (importers)
+    "import": 256 * MiB,       # a file of another program's format (importers: QIF scans are large)
 }
 
 _WHAT = {"task": "the task file", "points": "the points table", "recordings": "the recordings",

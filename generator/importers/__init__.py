@@ -5,7 +5,7 @@
 ``aqdef``  Q-DAS AQDEF (``.dfq``, ``.dfd`` + ``.dfx``) characteristic values -> what they can
            give: length recordings need point coordinates, which AQDEF does not carry
 
-Every file is read through :func:`guarded.read_input` (regular file, size cap).
+Every file is read through :func:`generator.guarded.read_bytes` (kind "import": a regular file, size cap).
 """
 
 from __future__ import annotations

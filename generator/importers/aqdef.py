@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..errors import InputError
-from .guarded import read_input
+from ..guarded import read_bytes
 
 
 @dataclass
@@ -57,7 +57,7 @@ def read_aqdef(paths: list[Path]) -> tuple[dict, dict[int, Characteristic]]:
     part: dict = {}
     chars: dict[int, Characteristic] = {}
     for path in paths:
-        for lineno, line in enumerate(_decode(read_input(path)).splitlines(), start=1):
+        for lineno, line in enumerate(_decode(read_bytes(path, "import")).splitlines(), start=1):
             line = line.rstrip("\r")
             if not line.strip():
                 continue

@@ -33,7 +33,7 @@ import numpy as np
 from defusedxml import ElementTree as DET
 
 from ..errors import InputError
-from .guarded import read_input
+from ..guarded import read_bytes
 
 #: QIF feature kinds that are cmmwb elements (xlfuncs.features.ELEMENTS)
 ELEMENTS = {"Line": "line", "Plane": "plane", "Circle": "circle", "Sphere": "sphere",
@@ -145,7 +145,7 @@ def _linear_unit(path: Path, el, where: str) -> tuple[str, float] | None:
 def read_qif(path: str | Path) -> QifDocument:
     """Parse a QIF document (guarded read, defusedxml)."""
     path = Path(path)
-    raw = read_input(path)
+    raw = read_bytes(path, "import")
     try:
         root = DET.fromstring(raw, forbid_dtd=True)
     except DET.ParseError as e:
