@@ -4,7 +4,7 @@ estimate them right, and stay quiet on records that agree with the simulation?
 Every data set is simulated by :mod:`xlfuncs.simulate` (a CMM drawn from the Forbes 2025 model
 with the Table 3 MPE1 parameters, plus planted effects) and diagnosed with the same MPE1 model.
 Nothing is tuned per effect: the selection threshold is alpha = 0.01 with the Bonferroni factor
-of spec section 3.3, and every planted effect gets its size from one rule:
+of docs/recordings.md section 3.3, and every planted effect gets its size from one rule:
 
     size = SNR x (its GLS standard uncertainty in that design),  SNR ~ U[SNR_LO, SNR_HI],
     random sign (vector effects: random direction, Mahalanobis length SNR)
@@ -336,7 +336,7 @@ def summarize(results: list[dict], meta: dict) -> str:
         lines.append(f"| {label} | {cat} | {len(rs)} | {what} |")
     if meta.get("power"):
         lines += ["", "## Power curve (why the sizes are SNR 10-13)", "",
-                  "The gate of spec section 3 is the omnibus chi-square test (p < 0.01 over all "
+                  "The gate of docs/recordings.md section 3 is the omnibus chi-square test (p < 0.01 over all "
                   "records); on about 100 records it needs an aggregate signal of about 9 standard "
                   "uncertainties to fire 95 % of the time, whatever the effect.  At 2-4 sigma no test "
                   "at alpha = 0.01 can reach 95 % (even an oracle one-sided z-test has power "

@@ -117,7 +117,7 @@ def _instructions(book: Book, diag: Diagnosis, native: bool, source: str) -> Non
     book.gap()
     book.para("Conventions", bold=True)
     book.para(
-        "Units: coordinates mm, residuals and uncertainties µm; estimates in the units of spec section 4 "
+        "Units: coordinates mm, residuals and uncertainties µm; estimates in the units of docs/recordings.md section 4 "
         "(µm/m, µrad, ppm/K, µm, µrad/m, µm/m per hour, µm/h).",
         "Sign: measured - true = sum of effects + noise. Angular error motions act with angle kappa*t, t "
         "the carriage travel (x - p)_axis from machine zero; drifts are zero at time_s = 0.",
@@ -131,7 +131,7 @@ def _inputs(book: Book, diag: Diagnosis, params: Parameters | None) -> dict:
     book.header(ws, 1, 1, ["parameter", "value", "unit", "meaning"])
     book.text(ws, 2, 1, "alpha")
     book.input(ws, 2, 2, "alpha", diag.alpha, lo=0.0, hi=1.0,
-               note="significance level: mismatch when p < alpha (spec section 3.1)")
+               note="significance level: mismatch when p < alpha (docs/recordings.md section 3.1)")
     book.text(ws, 2, 3, "1")
     book.text(ws, 2, 4, "significance level of the chi-square test and of the effect search")
     r = 3
@@ -628,7 +628,7 @@ def _fill_after(book: Book, diag: Diagnosis, obs: dict, gls: dict) -> None:
     if native:
         Ci = gls["Ci"].ref
         stat("chi2_before", f"=MMULT(TRANSPOSE({e_before.ref}),MMULT({Ci},{e_before.ref}))",
-             "r0' C^-1 r0, r0 the residual of the baseline (spec 3.1)", array=True)
+             "r0' C^-1 r0, r0 the residual of the baseline (docs/recordings.md section 3.1)", array=True)
         stat("dof_before", f"=COUNT({e_before.ref})-{p0}", "records (coordinates) minus alignment parameters",
              fmt="0")
         stat("chi2_after", f"=MMULT(TRANSPOSE({e_after.ref}),MMULT({Ci},{e_after.ref}))",
@@ -666,10 +666,14 @@ def _fill_after(book: Book, diag: Diagnosis, obs: dict, gls: dict) -> None:
 
 # -- search log, groups, results, chart ----------------------------------------------------------
 
+_CANDIDATE_FORMATS = {"step": "0", "df": "0", "delta_chi2": "0.000", "p_value": "0.00E+00",
+                      "p_adjusted": "0.00E+00"}
+
+
 def _candidates(book: Book, diag: Diagnosis) -> None:
     ws = book.sheet("Candidates")
     j = diag.to_json()
-    book.text(ws, 1, 1, "The search of the core (spec section 3.3): GLS forward selection, likelihood-ratio "
+    book.text(ws, 1, 1, "The search of the core (docs/recordings.md section 3.3): GLS forward selection, likelihood-ratio "
                         "test Δχ² with Bonferroni correction for the candidates tested in each step")
     cols = ["name", "verdict", "step", "df", "delta_chi2", "p_value", "p_adjusted", "unit", "reason"]
     book.header(ws, 2, 1, cols)
@@ -679,13 +683,18 @@ def _candidates(book: Book, diag: Diagnosis) -> None:
         for k, key in enumerate(("step", "df", "delta_chi2", "p_value", "p_adjusted")):
             v = c[key]
             if v is not None and (key != "df" or c["status"] in ("chosen", "tested")):
-                ws.cell(row=r, column=3 + k).value = float(v) if isinstance(v, float) else v
+                cell_ = ws.cell(row=r, column=3 + k)
+                cell_.value = float(v) if isinstance(v, float) else v
+                cell_.number_format = _CANDIDATE_FORMATS[key]
         book.text(ws, r, 8, _display_unit(fx.BY_NAME[c["name"]].unit))
         if c["reason"]:
-            book.text(ws, r, 9, c["reason"])
+            book.text(ws, r, 9, c["reason"], wrap=True)     # wrapped: the sheet prints on the page width
+            ws.row_dimensions[r].height = 13.0 * max(1, math.ceil(len(c["reason"]) / 72))
     ws.column_dimensions["A"].width = 20
     ws.column_dimensions["B"].width = 16
-    ws.column_dimensions["I"].width = 100
+    for col in "EFG":
+        ws.column_dimensions[col].width = 12
+    ws.column_dimensions["I"].width = 70
     r = len(j["candidates"]) + 5
     for s, step in enumerate(j["steps"], start=1):
         book.text(ws, r, 1, f"step {s}: {len(step)} candidates tested (Bonferroni factor {len(step)})")
@@ -696,12 +705,13 @@ def _candidates(book: Book, diag: Diagnosis) -> None:
             book.text(ws, r, 1, item["name"])
             for k, key in enumerate(("df", "delta_chi2", "p_value", "p_adjusted")):
                 ws.cell(row=r, column=2 + k).value = item[key]
+                ws.cell(row=r, column=2 + k).number_format = _CANDIDATE_FORMATS[key]
         r += 2
 
 
 def _groups(book: Book, diag: Diagnosis) -> None:
     ws = book.sheet("Groups")
-    book.text(ws, 1, 1, "Chi-square of the records of every group (spec section 3.2), flagged when p < "
+    book.text(ws, 1, 1, "Chi-square of the records of every group (docs/recordings.md section 3.2), flagged when p < "
                         "alpha / number of groups")
     cols = ["by", "group", "records", "chi2", "dof", "p_value", "mean_z", "rms_z", "flagged"]
     book.header(ws, 2, 1, cols)
@@ -715,7 +725,7 @@ def _groups(book: Book, diag: Diagnosis) -> None:
 
 
 def _display_unit(unit: str) -> str:
-    """A unit as the workbooks spell it (µm, µrad); diagnosis.json keeps the spec's um, urad."""
+    """A unit as the workbooks spell it (µm, µrad); diagnosis.json keeps the contract's um, urad (docs/recordings.md)."""
     return unit.replace("um", "µm").replace("urad", "µrad").replace("µrµm", "µrad") if unit != "1" else unit
 
 
@@ -740,7 +750,7 @@ def _results(book: Book, diag: Diagnosis, gls: dict) -> list[dict]:
     book.results(["quantity", "value", "u", "unit"], rows, [
         "chi2_before ... rms_after_um as in diagnosis.json; then one row per estimated effect parameter",
         "in the row's unit", "standard uncertainty, in the row's unit",
-        "unit of value and u (diagnosis.json spells µm as um, µrad as urad: spec section 5)"])
+        "unit of value and u (diagnosis.json spells µm as um, µrad as urad: docs/recordings.md section 5)"])
     return cached
 
 

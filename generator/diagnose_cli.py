@@ -2,7 +2,7 @@
 concealed-effect demonstration of ``cmmwb demo``.
 
 ``cmmwb diagnose RECORDINGS.csv --task TASK.toml --out DIR`` (or ``--sigma-um S``) writes
-``DIR/diagnosis.json`` (spec section 5), ``DIR/diagnosis.xlsx`` (native refit) and PNG plots, all
+``DIR/diagnosis.json`` (docs/recordings.md section 5), ``DIR/diagnosis.xlsx`` (native refit) and PNG plots, all
 or nothing, and prints the plain-language answer.
 
 ``cmmwb simulate --layout iso10360 --task TASK.toml --effect squareness_xy=4 --seed 1 --out

@@ -11,7 +11,7 @@ point-cloud model V_X (eq. 28) of the task's hyper-parameters:
 * point records: C = V_X of the measured points (:func:`xlfuncs.pointcloud.V_X`), restricted to
   x, y in 2-D data.
 
-Then (spec section 3):
+Then (docs/recordings.md section 3):
 
 1. chi-square of the residuals against C (GLS, alignment projected out for points), p-value,
    ``mismatch = p < alpha``;
@@ -43,7 +43,7 @@ from . import pointcloud as pc
 from .errors import ModelError
 from .recordings import LengthRecords, PointRecords, RecordingsError
 
-ALIAS_CORR = 0.98           # spec section 3.3
+ALIAS_CORR = 0.98           # docs/recordings.md section 3.3
 EXACT_ALIAS = 1.0 - 1e-5    # "exact" aliases: canonical correlation 1 up to the noise of indicated
                             # coordinates (µm in hundreds of mm) that the columns are built from
 DEPENDENT = 1e-6            # a column whose projected norm is below this share is dependent
@@ -204,7 +204,7 @@ class Prepared:
 
 
 def _unique_probings(rec: LengthRecords, k1: np.ndarray, k2: np.ndarray):
-    """Ends with identical coordinates, normal and probe are one probing (spec section 6)."""
+    """Ends with identical coordinates, normal and probe are one probing (docs/recordings.md section 6)."""
     N1 = rec.N1 if rec.N1 is not None else np.zeros_like(rec.X1_mm)
     N2 = rec.N2 if rec.N2 is not None else np.zeros_like(rec.X2_mm)
     keys: dict[tuple, int] = {}
@@ -549,7 +549,7 @@ class Diagnosis:
 
 
 def _group_labels(prep: Prepared) -> dict[str, list[str]]:
-    """Labels of every record under each grouping of spec section 3.2."""
+    """Labels of every record under each grouping of docs/recordings.md section 3.2."""
     rec, D = prep.rec, prep.design
     out: dict[str, list[str]] = {}
     if rec.group is not None:
@@ -601,7 +601,7 @@ def _psd_chi2(e: np.ndarray, C: np.ndarray) -> tuple[float, int]:
 
 def diagnose(rec: LengthRecords | PointRecords, model: Model, alpha: float = 0.01,
              structured: bool | None = None) -> Diagnosis:
-    """The analysis of spec section 3 on validated recordings (``structured``: see
+    """The analysis of docs/recordings.md section 3 on validated recordings (``structured``: see
     :func:`prepare`)."""
     if not (0.0 < alpha < 1.0):
         raise ModelError(f"alpha must be between 0 and 1, got {alpha!r}")
@@ -712,7 +712,7 @@ def diagnose_prepared(prep: Prepared, alpha: float = 0.01) -> Diagnosis:
                 c = cands[name]
                 Xk = white[name][:, c.kept]
                 # aliasing with a chosen effect: projected on the complement of the alignment
-                # and the other chosen effects (spec section 6)
+                # and the other chosen effects (docs/recordings.md section 6)
                 alias = _alias_with_chosen(Q0, white, cands, chosen, name)
                 if alias is not None:
                     other, rho = alias
@@ -905,7 +905,7 @@ def locate_records(diag: Diagnosis, top: int = 10) -> list[dict]:
 
 
 def locate_groups(diag: Diagnosis) -> list[dict]:
-    """Chi-square of the records of every group (spec section 3.2), with the baseline-adjusted
+    """Chi-square of the records of every group (docs/recordings.md section 3.2), with the baseline-adjusted
     covariance; flagged when p < alpha / (number of groups tested)."""
     prep = diag.prep
     labels = _group_labels(prep)

@@ -10,7 +10,7 @@ multiple probes) or at the artefact point.
 * point record i, coordinate c: column = delta_c(point i).
 
 Sign convention: ``measured - true = sum of effects + noise``.  Units of the parameters are those
-of spec section 4, so the estimates come out in them directly:
+of docs/recordings.md section 4, so the estimates come out in them directly:
 
 =====================  =========================================================  =========
 name                   delta (µm) per unit parameter                              unit
@@ -27,7 +27,7 @@ offset_drift           (t_s/3600) e_c             (point records only)          
 =====================  =========================================================  =========
 
 For point records the scale-type effects, thermal expansion and scale drift act about the
-centroid c of the nominal points (spec section 6); the rigid alignment absorbs the choice
+centroid c of the nominal points (docs/recordings.md section 6); the rigid alignment absorbs the choice
 for the effects that do not vary from record to record.
 """
 
@@ -46,7 +46,7 @@ AXES = "xyz"
 @dataclass(frozen=True)
 class Effect:
     name: str
-    unit: str                  # spec section 5 spelling
+    unit: str                  # docs/recordings.md section 5 spelling
     plain: str                 # "a squareness error between x and y"
     hint: str                  # what separates it from look-alikes
     vector: bool = False
@@ -61,7 +61,7 @@ def _angular(rot: str, carriage: str) -> Effect:
                   "section 3.3: rotation errors act through the probe offset)")
 
 
-#: the table of spec section 4, in its order (the order decides among exact aliases)
+#: the table of docs/recordings.md section 4, in its order (the order decides among exact aliases)
 EFFECTS: tuple[Effect, ...] = (
     Effect("scale", "um/m", "a scale error", "lengths in several directions (ISO 10360-2: seven positions)"),
     Effect("scale_x", "um/m", "an x-axis scale error", "lengths along other directions than x"),
@@ -310,7 +310,7 @@ def _point_columns(D: Design, name: str) -> Columns:
 
 
 def alignment_columns(D: Design) -> tuple[np.ndarray, list[str]]:
-    """Rigid-body alignment of point records (baseline nuisance, spec section 1b): translations
+    """Rigid-body alignment of point records (baseline nuisance, docs/recordings.md section 1b): translations
     (µm) and small rotations (µrad) about the centroid, delta = t + 1e-3 omega x (y - c).
     2-D data: t_x, t_y and the rotation about z."""
     m = len(D.Y)

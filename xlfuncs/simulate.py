@@ -329,7 +329,7 @@ def model_errors(X: np.ndarray, N: np.ndarray | None, k: np.ndarray, probes, par
 
 
 # ---------------------------------------------------------------------------------------------
-# planted effects (spec section 4), written independently of xlfuncs.effects
+# planted effects (docs/recordings.md section 4), written independently of xlfuncs.effects
 # ---------------------------------------------------------------------------------------------
 
 def _rot(axis: int, angle_rad: float) -> np.ndarray:
@@ -420,7 +420,7 @@ def planted_probing(L: Layout, planted: dict, t_probe: np.ndarray, T_probe: np.n
 def simulate(L: Layout, params: pc.Parameters, planted: dict | None = None, seed: int | None = 0,
              temperature_C=None, rng=None):
     """Recordings of layout ``L`` measured by a CMM drawn from the model ``params``, with the
-    planted effects ``planted`` ({name: value in the unit of spec section 4}).
+    planted effects ``planted`` ({name: value in the unit of docs/recordings.md section 4}).
 
     ``temperature_C``: None (no temperature column), a number (constant), a pair (linear ramp
     over the session) or an array (one value per record)."""
