@@ -91,7 +91,8 @@ def write_feature_book(task: Task, results: dict, path, *, native_max_points: in
     if not native:
         _write_live(book, task, f, va, probe_rows)
     book.results(["parameter", "value", "u", "unit"],
-                 [[name, Formula(f"={cell(r, 2, 'Budget')}"), Formula(f"={cell(r, 4, 'Budget')}"), _unit(name)]
+                 [[name, Formula(f"={cell(r, 2, 'Budget')}"),
+                   Formula(f"={cell(r, U_COLUMN, 'Budget')}/{u_display(name)[0]:g}"), _unit(name)]
                   for name, r in rows],
                  notes=[None, "fitted value, in the unit of column 'unit' (mm, rad, or 1 for a unit-vector "
                         "component)", "standard uncertainty, in the unit of column 'unit'",
@@ -141,9 +142,10 @@ def _instructions(book: Book, task: Task, f, native: bool, limit: int) -> None:
         "'Points'. G and V_A recalculate. After moving points or changing weights the fitted values on "
         "'Fit' are no longer the least-squares solution: the Gauss-Newton step on 'H' then is not zero "
         "(rebuild from the task file to refit: `cmmwb read`, edit, `cmmwb build`).",
-        "2. 'Budget' lists each parameter with u and its six components (u^2 = sum of u_f^2); 'Results' is "
-        "the machine-readable summary. Units: lengths mm, angles rad, direction components 1; u in the "
-        "parameter's unit (1 µm = 0.001 mm).",
+        "2. 'Budget' lists each parameter with u and its six components (u^2 = sum of u_f^2), in µm for "
+        "lengths, µrad for angles and 1e-6 for direction components (column u_unit); 'Results' is "
+        "the machine-readable summary, where u is in the parameter's unit as the task file's keys say "
+        "(lengths mm, angles rad, direction components 1).",
         "3. Reported parameters: the locating point of a line, plane, cylinder or cone is the point of the "
         "axis (plane) nearest to the reference point (the centroid of the points unless the task sets "
         "reference_mm); its uncertainty is that of the axis in the plane through it orthogonal to the axis. "
@@ -525,84 +527,84 @@ def _write_V_A(book: Book, f, unc, G: Block, V) -> dict:
     return {"local": out_local, "global": out_glob, "T": T, "grey": grey}
 
 
+#: display scale of an uncertainty: mm -> µm, rad -> µrad, a unit-vector component -> 1e-6
+_U_DISPLAY = {"mm": (1e3, "µm"), "rad": (1e6, "µrad"), "1": (1e6, "1e-6")}
+
+#: columns of the 'Budget' tables: u and u per factor start in column U_COLUMN, in u_unit
+U_COLUMN = 5
+
+
+def u_display(name: str) -> tuple[float, str]:
+    """The display scale and unit of the uncertainty of parameter ``name`` on 'Budget'."""
+    return _U_DISPLAY[_unit(name)]
+
+
+def _budget_table(book: Book, ws, top: int, names, values, blocks: dict) -> list[tuple[str, int]]:
+    """One budget table from row ``top`` (header): parameter, value, unit, u_unit, u and u per
+    factor, the uncertainties in µm / µrad (1e-6 for a unit-vector component) from the diagonal
+    of the V_A blocks ``blocks`` (which are in the parameters' units squared)."""
+    cols = ["parameter", "value", "unit", "u_unit", "u", *[f"u_{fac}" for fac in pc.FACTORS]]
+    notes = [None, "fitted value, in the unit of column 'unit'", None,
+             "unit of u and u_R ... u_P in this row: µm for a length, µrad for an angle, 1e-6 for a "
+             "unit-vector component",
+             "u = sqrt(diag V_A), in u_unit; u^2 = sum of u_f^2 (Forbes 2025 section 5.6)"] + \
+            [f"u_{fac}: sqrt of the diagonal of V_A,{fac}, in u_unit" for fac in pc.FACTORS]
+    book.header(ws, top, 1, cols, notes)
+    rows = []
+    for p, name in enumerate(names):
+        r = top + 1 + p
+        scale, unit = u_display(name)
+        book.text(ws, r, 1, name)
+        if isinstance(values[p], float):
+            ws.cell(row=r, column=2).value = values[p]
+        else:
+            book.formula(ws, r, 2, f"={values[p]}", fmt=FMT)
+        book.text(ws, r, 3, _unit(name))
+        book.text(ws, r, 4, unit)
+        for q, fac in enumerate(("total", *pc.FACTORS)):
+            book.formula(ws, r, U_COLUMN + q, f"=SQRT(MAX(0,{blocks[fac].cell(p, p)}))*{scale:g}", fmt="0.0000")
+        rows.append((name, r))
+    return rows
+
+
 def _write_budget(book: Book, f, va: dict, fitref: dict) -> list[tuple[str, int]]:
     ws = book.sheet("Budget")
-    cols = ["parameter", "value", "unit", "u", *[f"u_{fac}" for fac in pc.FACTORS]]
-    notes = [None, "fitted value (from 'Fit')", None,
-             "u = sqrt(diag V_A); u^2 = sum of u_f^2 (Forbes 2025 section 5.6)"] + \
-            [f"u_{fac}: sqrt of the diagonal of T V_A,{fac} T^T" for fac in pc.FACTORS]
-    book.header(ws, 1, 1, cols, notes)
-    values = _value_refs(f)
-    rows = []
-    for p, name in enumerate(f.names):
-        r = 2 + p
-        book.text(ws, r, 1, name)
-        book.formula(ws, r, 2, f"={values[p]}", fmt=FMT)
-        book.text(ws, r, 3, _unit(name))
-        tot = va["global"]["total"]
-        book.formula(ws, r, 4, f"=SQRT(MAX(0,{tot.cell(p, p)}))", fmt=SMALL)
-        for q, fac in enumerate(pc.FACTORS):
-            book.formula(ws, r, 5 + q, f"=SQRT(MAX(0,{va['global'][fac].cell(p, p)}))", fmt=SMALL)
-        rows.append((name, r))
+    rows = _budget_table(book, ws, 1, f.names, _value_refs(f), va["global"])
     r0 = 2 + len(f.names) + 2
     book.text(ws, r0, 1, "Paper parameters (Forbes 2022, element in standard position in the "
                          "solution frame on 'Fit'); values are offsets from the fit, 0 at the solution",
               font=None)
-    book.header(ws, r0 + 1, 1, ["parameter", "value", "unit", "u",
-                                *[f"u_{fac}" for fac in pc.FACTORS]])
+    values = []
     for p, name in enumerate(f.local_names):
-        r = r0 + 2 + p
-        book.text(ws, r, 1, name)
         if name == "r0_mm" and "fit_r0" in fitref and f.kind not in ("sphere", "circle"):
-            book.formula(ws, r, 2, "=fit_r0", fmt=FMT)
+            values.append("fit_r0")
         elif name == "phi_rad":
-            book.formula(ws, r, 2, "=fit_phi", fmt=FMT)
+            values.append("fit_phi")
         elif f.kind in ("sphere", "circle"):
-            book.formula(ws, r, 2, f"={values[p]}", fmt=FMT)
+            values.append(_value_refs(f)[p])
         else:
-            ws.cell(row=r, column=2).value = 0.0
-        book.text(ws, r, 3, _unit(name))
-        book.formula(ws, r, 4, f"=SQRT(MAX(0,{va['local']['total'].cell(p, p)}))", fmt=SMALL)
-        for q, fac in enumerate(pc.FACTORS):
-            book.formula(ws, r, 5 + q, f"=SQRT(MAX(0,{va['local'][fac].cell(p, p)}))", fmt=SMALL)
-    _budget_in_um(book, ws, r0 + 2 + len(f.local_names) + 1, rows)
+            values.append(0.0)
+    paper = _budget_table(book, ws, r0 + 1, f.local_names, values, va["local"])
+    _factor_chart(book, ws, paper[-1][1] + 2, rows)
     ws.column_dimensions["A"].width = 14
     ws.freeze_panes = "B2"
     return rows
 
 
-#: display scale of an uncertainty: mm -> µm, rad -> µrad, a unit-vector component -> 1e-6
-_U_DISPLAY = {"mm": (1e3, "µm"), "rad": (1e6, "µrad"), "1": (1e6, "1e-6")}
-
-
-def _budget_in_um(book: Book, ws, r0: int, rows: list[tuple[str, int]]) -> None:
-    """The reported parameters' u and u per factor again, in µm (lengths) and µrad (angles), and
-    a chart of u per factor of the length parameters (Forbes 2025 section 5.6)."""
+def _factor_chart(book: Book, ws, anchor: int, rows: list[tuple[str, int]]) -> None:
+    """A chart of u per factor of the length parameters in µm (Forbes 2025 section 5.6), on its
+    own printed page."""
     from openpyxl.chart import Reference
 
-    book.text(ws, r0, 1, "The same uncertainties in µm (lengths) and µrad (angles); unit-vector "
-                         "components in 1e-6", font=None)
-    book.header(ws, r0 + 1, 1, ["parameter", "u_unit", "u", *[f"u_{fac}" for fac in pc.FACTORS]],
-                [None, "unit of u and u_R ... u_P in this row", "u of the table above, scaled to u_unit", None,
-                 None, None, None, None, None])
-    length_rows = []
-    for k, (name, src) in enumerate(rows):
-        r = r0 + 2 + k
-        scale, unit = _U_DISPLAY[_unit(name)]
-        book.text(ws, r, 1, name)
-        book.text(ws, r, 2, unit)
-        for q in range(1 + len(pc.FACTORS)):
-            book.formula(ws, r, 3 + q, f"={cell(src, 4 + q)}*{scale:g}", fmt="0.0000")
-        if unit == "µm":
-            length_rows.append(r)
+    length_rows = [r for name, r in rows if _unit(name) == "mm"]
     if not length_rows:
         return
-    anchor = r0 + 3 + len(rows)
+    first, last = U_COLUMN + 1, U_COLUMN + len(pc.FACTORS)
     book.print_setup(ws, row_breaks=[anchor - 1])   # the chart on its own printed page
     book.bars(ws, f"A{anchor}", "u per influence factor of the length parameters (µm), "
               "Forbes 2025 section 5.6", "u / µm",
-              Reference(ws, min_col=4, max_col=3 + len(pc.FACTORS), min_row=r0 + 1),
-              [(ws.cell(row=r, column=1).value, Reference(ws, min_col=4, max_col=3 + len(pc.FACTORS),
+              Reference(ws, min_col=first, max_col=last, min_row=1),
+              [(ws.cell(row=r, column=1).value, Reference(ws, min_col=first, max_col=last,
                                                           min_row=r, max_row=r))
                for r in length_rows], horizontal=False, width=18, height=8)
 
@@ -651,7 +653,7 @@ def _write_live(book: Book, task: Task, f, va: dict, probe_rows: dict) -> None:
     book.header(ws, 2, 1, cols,
                 [f"cmm_feature(element, points, probes, params, circle_plane, weights, axis_hint, "
                  "reference_mm): each reported parameter with its value, u and u per factor, the "
-                 "rows and columns A, B, D:J of 'Budget', computed live by the Excel add-in "
+                 "rows of 'Budget' with u in the parameter's unit (as on 'Results'), computed live by the Excel add-in "
                  "(Forbes 2022 fit; Forbes 2025 section 5.6)"] + [None] * (len(cols) - 1))
     book.array(Block(LIVE, 3, 1, g, len(cols)), f"=cmm_feature({head},{options})", fmt=None)
     names, lnames = list(f.names), list(f.local_names)

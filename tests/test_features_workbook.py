@@ -207,8 +207,9 @@ def test_workbook_agrees_with_the_json(built, case, engine):
     # Budget: the six components per parameter (Forbes 2025 section 5.6)
     cells = values["Budget"]
     for p, n in enumerate(names):
+        scale, _ = feature_book.u_display(n)            # Budget shows u in µm, µrad or 1e-6
         for q, fac in enumerate(FACTORS):
-            got = cells[f"{'EFGHIJ'[q]}{2 + p}"]
+            got = cells[f"{'FGHIJK'[q]}{2 + p}"] / scale
             # compared as variances u_f^2: a component that is exactly zero (e.g. a rigid probe
             # offset on a radius) is sqrt(rounding) in both engines, ~1e-8 u, not 0
             ref = fe["components"][fac][n]
@@ -298,8 +299,8 @@ def test_the_workbook_is_live(tmp_path):
     wb.save(edited)
     cells = recalculate(edited, "formulas")["Budget"]
     for p_, n in enumerate(res["feature"]["parameter_names"]):
-        ref = 2 * res["feature"]["components"]["R"][n]
-        assert agree(cells[f"E{2 + p_}"], ref)
+        ref = 2 * res["feature"]["components"]["R"][n] * feature_book.u_display(n)[0]
+        assert agree(cells[f"F{2 + p_}"], ref)
 
 
 def test_point_labels_stay_text(tmp_path):
