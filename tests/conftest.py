@@ -6,9 +6,17 @@ import math
 import os
 from pathlib import Path
 
+import numpy  # noqa: F401  (loads OpenBLAS, so that its threads can be limited below)
 import pytest
 
 from generator.recalc import recalculate, soffice
+
+if os.environ.get("PYTEST_XDIST_WORKER"):
+    # the suite runs as `-n 2` workers on a 2-core machine: one BLAS thread each, or the two
+    # workers' BLAS threads fight over the cores (the kernel, OPENBLAS_CORETYPE, is unchanged)
+    from threadpoolctl import threadpool_limits
+
+    threadpool_limits(1)
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "generator" / "examples"
 ENGINES = ["formulas", pytest.param("libreoffice", marks=pytest.mark.libreoffice)]
