@@ -930,38 +930,50 @@ def _record_obs(prep: Prepared) -> list[np.ndarray]:
 def _outlier_rows(prep, W, Q, resid, skip, scaled=False):
     """Likelihood-ratio test of a gross error in every single record (a point: its coordinates):
     the drop of chi-square when that record's own mean-shift columns are added (the record left
-    out), with C known or (``scaled``) as an F-test.  Bonferroni over the records tested."""
+    out), with C known or (``scaled``) as an F-test.  Bonferroni over the records tested.  A
+    column whose whitened remainder after Q is below 1e-3 of its norm is not testable."""
     Wm = W.W
     nu = W.rank - Q.shape[1]
     rest = float(resid @ resid)
+    n = prep.rec.n
+    d = len(prep.r_um) // n                      # observations per record (1, 2 or 3)
+    todo = np.array([a for a in range(n) if a not in skip], dtype=int)
     rows = []
-    obs = _record_obs(prep)
-    todo = [a for a in range(prep.rec.n) if a not in skip]
-    chunk = 256
+    chunk = max(1, 768 // d)
     for q0 in range(0, len(todo), chunk):
         recs = todo[q0:q0 + chunk]
-        cols = np.concatenate([obs[a] for a in recs])
+        cols = (recs[:, None] * d + np.arange(d)[None, :]).reshape(-1)   # obs of record a: d*a + axis
         Wc = Wm[:, cols]
         Z = _out(Q, Wc)
-        ref = np.linalg.norm(Wc, axis=0)
-        pos = 0
-        for a in recs:
-            k = len(obs[a])
-            Za = Z[:, pos:pos + k]
-            Qz, kz = _orth(Za, ref[pos:pos + k], tol=1e-3)
-            pos += k
-            if not kz:
+        ok = np.linalg.norm(Z, axis=0) > 1e-3 * np.linalg.norm(Wc, axis=0)
+        Z = Z * ok
+        b = (Z.T @ resid).reshape(len(recs), d)
+        Zr = Z.reshape(Z.shape[0], len(recs), d)
+        G = np.einsum("kia,kib->iab", Zr, Zr)
+        lam, V = np.linalg.eigh(G)
+        keep = lam > 1e-9 * np.maximum(lam.max(axis=1, keepdims=True), 1e-300)
+        proj = np.einsum("iab,ia->ib", V, b)
+        dchis = np.sum(np.where(keep, proj**2 / np.where(keep, lam, 1.0), 0.0), axis=1)
+        dfs = keep.sum(axis=1)
+        for t, a in enumerate(recs):
+            df = int(dfs[t])
+            if df == 0:
                 continue
-            proj = Qz.T @ resid
-            dchi = float(proj @ proj)
-            logp = _test_logp(dchi, len(kz), rest, nu, scaled)
+            dchi = float(dchis[t])
+            logp = _test_logp(dchi, df, rest, nu, scaled)
             if logp is None:
                 continue
-            rows.append({"record": a, "df": len(kz), "delta_chi2": dchi, "logp": logp, "Qz": Qz,
-                         "rows": [int(obs[a][j]) for j in kz]})
+            rows.append({"record": int(a), "df": df, "delta_chi2": dchi, "logp": logp, "chunk": (Zr, t),
+                         "rows": [int(d * a + j) for j in range(d) if ok.reshape(len(recs), d)[t, j]]})
     K = max(len(rows), 1)
     for r in rows:
         r["log_p_adjusted"] = min(0.0, r["logp"] + math.log(K))
+    best = min(rows, key=lambda r: (r["log_p_adjusted"], r["record"])) if rows else None
+    if best is not None:        # the orthonormal columns of the best one only
+        Zr, t = best["chunk"]
+        best["Qz"], _ = _orth(Zr[:, t, :])
+    for r in rows:
+        r.pop("chunk")
     return rows
 
 
@@ -1004,6 +1016,7 @@ def _search(prep, W, Q0, y0, white, cands_in, identifiable, alpha, *, outliers=F
             # outliers before physics: the record is left out of the rest of the search
             S.outliers.append(best_out["record"])
             S.outlier_rows.append({k: v for k, v in best_out.items() if k != "Qz"} | {"step": step})
+            best_out["rows"] = [q for q in best_out["rows"]]
             S.outlier_cols.append((best_out["record"], best_out["rows"]))
             S.Q = np.column_stack([S.Q, best_out["Qz"]])
             S.resid = _out(best_out["Qz"], S.resid)
@@ -1531,7 +1544,7 @@ def summary_text(diag: Diagnosis) -> str:
     after = diag.chi2_after / max(diag.dof_after, 1)
     text = head + "; " + "; ".join(pieces + (["; then ".join(parts)] if parts else []))
     what = ("it" if len(diag.chosen) + len(diag.outliers) == 1 else "them")
-    text += f"; after {'leaving out' if not diag.chosen else 'adding'} {what} chi2/dof is {after:.2f}"
+    text += f"; after {f'leaving {what} out' if not diag.chosen else f'adding {what}'} chi2/dof is {after:.2f}"
     if not diag.explained and not diag.noise_scale:
         rest = unexplained_rest(diag)
         where = ""
