@@ -146,6 +146,17 @@ def _log_betainc(a: float, b: float, x: float) -> float:
     return math.log1p(-v) if v < 1.0 else -math.inf
 
 
+def f_logcdf(F: float, d1: float, d2: float) -> float:
+    """Natural log of P(X <= F), X ~ F(d1, d2)."""
+    if d1 <= 0 or d2 <= 0:
+        raise ModelError("the F distribution needs positive degrees of freedom")
+    if F <= 0.0:
+        return -math.inf
+    if not math.isfinite(F):
+        return 0.0
+    return _log_betainc(0.5 * d1, 0.5 * d2, d1 * F / (d1 * F + d2))
+
+
 def f_logsf(F: float, d1: float, d2: float) -> float:
     """Natural log of P(X > F), X ~ F(d1, d2) (the test of an effect when the scale of the
     covariance is estimated from the residual: docs/recordings.md section 7, noise level)."""
@@ -589,6 +600,7 @@ class Diagnosis:
     targeted_K: int = 0               # candidates of the targeted test
     logp_after: float = 0.0
     outlier_search: bool = False
+    outliers_not_isolated: bool = False
     outliers: list[dict] = field(default_factory=list)
     noise_scale: dict | None = None
     groups_scaled: list[dict] = field(default_factory=list)
@@ -780,11 +792,15 @@ def diagnose_prepared(prep: Prepared, alpha: float = 0.01) -> Diagnosis:
     mismatch = gate is not None
 
     outlier_search = mismatch and outliers_searchable(prep, W)
+    overflow = False
     noise = None
     kept_answer = None
     groups_scaled: list[dict] = []
     if mismatch:
         srch = _search(prep, W, Q0, y0, white, cands, identifiable, alpha, outliers=outlier_search)
+        overflow = srch.overflow
+        if overflow:
+            srch = _search(prep, W, Q0, y0, white, cands, identifiable, alpha, outliers=False)
         fit = _refit(prep, W, keptA, srch)
         if fit[2] < math.log(alpha):
             # not explained: is the rest uniformly larger than the simulation allows, with no
@@ -792,6 +808,8 @@ def diagnose_prepared(prep: Prepared, alpha: float = 0.01) -> Diagnosis:
             # covariance estimated (F-tests), then the groups against the scaled covariance
             sc = _search(prep, W, Q0, y0, white, cands, identifiable, alpha, outliers=outlier_search,
                          scaled=True)
+            if sc.overflow:
+                sc = _search(prep, W, Q0, y0, white, cands, identifiable, alpha, outliers=False, scaled=True)
             sfit = _refit(prep, W, keptA, sc)
             beta_s, cov_s, chi2_s, dof_s = sfit[3], sfit[4], sfit[0], sfit[1]
             if dof_s >= 1:
@@ -834,6 +852,7 @@ def diagnose_prepared(prep: Prepared, alpha: float = 0.01) -> Diagnosis:
     diag.logp_targeted, diag.gate, diag.targeted_K = logp_targeted, gate, len(first)
     diag.logp_after = logp_after
     diag.outlier_search = outlier_search
+    diag.outliers_not_isolated = overflow
     diag.outliers = _outlier_report(diag, srch)
     diag.noise_scale = noise
     diag.groups_scaled = groups_scaled
@@ -847,7 +866,8 @@ def diagnose_prepared(prep: Prepared, alpha: float = 0.01) -> Diagnosis:
 
 
 GATE_SHARE = 0.5           # each of the two gates judged at alpha/2 (docs/recordings.md section 7)
-MAX_OUTLIER_SHARE = 0.1    # at most this share of the records is called an outlier
+MAX_OUTLIER_SHARE = 0.03   # isolated outliers: at most this share of the records (and at least 2);
+                           # when more look gross, it is a structure and no record is called an outlier
 OUTLIER_MAX_OBS = 4000     # the outlier search needs the dense whitener (n_obs^2 numbers)
 
 
@@ -866,6 +886,7 @@ class _Search:
     Q: np.ndarray
     resid: np.ndarray
     outlier_cols: list[tuple[int, list[int]]] = field(default_factory=list)  # (record, kept rows)
+    overflow: bool = False           # more records than MAX_OUTLIER_SHARE looked gross: structure
 
 
 def _copy_candidate(c: Candidate) -> Candidate:
@@ -986,12 +1007,12 @@ def _search(prep, W, Q0, y0, white, cands_in, identifiable, alpha, *, outliers=F
     cands = {n: _copy_candidate(c) for n, c in cands_in.items()}
     S = _Search(cands, [], [], [], [], Q0, y0)
     order = {n: i for i, n in enumerate(fx.NAMES)}
-    max_out = max(1, int(MAX_OUTLIER_SHARE * prep.rec.n))
+    max_out = max(2, math.ceil(MAX_OUTLIER_SHARE * prep.rec.n))
     for step in range(1, MAX_STEPS + 1):
         rows = _effect_rows(prep, W, Q0, S.Q, S.resid, white, cands, identifiable, S.chosen, scaled,
                             mutate=True)
         out_rows = (_outlier_rows(prep, W, S.Q, S.resid, set(S.outliers), scaled)
-                    if outliers and len(S.outliers) < max_out else [])
+                    if outliers and not S.overflow else [])
         if not rows and not out_rows:
             break
         best = None
@@ -1011,8 +1032,13 @@ def _search(prep, W, Q0, y0, white, cands_in, identifiable, alpha, *, outliers=F
                 best = min(ties, key=lambda r: order[r["name"]])
             S.steps.append([{k: v for k, v in r.items() if k not in ("kz", "Qz")} for r in rows])
         best_out = min(out_rows, key=lambda r: (r["log_p_adjusted"], r["record"])) if out_rows else None
-        if best_out is not None and best_out["log_p_adjusted"] < math.log(alpha) and (
-                best is None or best_out["log_p_adjusted"] <= best["log_p_adjusted"]):
+        wants_out = best_out is not None and best_out["log_p_adjusted"] < math.log(alpha) and (
+            best is None or best_out["log_p_adjusted"] <= best["log_p_adjusted"])
+        if wants_out and len(S.outliers) >= max_out:
+            # more gross records than isolated outliers can be: a structure, not outliers
+            S.overflow, wants_out = True, False
+            break
+        if wants_out:
             # outliers before physics: the record is left out of the rest of the search
             S.outliers.append(best_out["record"])
             S.outlier_rows.append({k: v for k, v in best_out.items() if k != "Qz"} | {"step": step})
@@ -1246,7 +1272,9 @@ def _groups_of(prep: Prepared, W, X: np.ndarray, beta: np.ndarray, cov: np.ndarr
             if dof == 0:
                 continue
             if dof_scale:
-                logp = f_logsf(chi2 / dof / scale2, dof, dof_scale)
+                # uniform inflation: neither larger nor smaller than the common scale (two-sided)
+                F = chi2 / dof / scale2
+                logp = min(0.0, math.log(2.0) + min(f_logsf(F, dof, dof_scale), f_logcdf(F, dof, dof_scale)))
             else:
                 logp = chi2_logsf(chi2, dof)
             item = {"by": by, "group": g, "records": int(len(set(prep.obs_record[idx]))),
@@ -1393,6 +1421,7 @@ def diagnosis_json(diag: Diagnosis) -> dict:
     out["gate"] = diag.gate
     out["explained"] = diag.explained
     out["outliers"] = diag.outliers if (diag.outlier_search or not diag.mismatch) else None
+    out["outliers_not_isolated"] = diag.outliers_not_isolated
     out["with_outliers"] = diag.with_outliers
     out["noise_scale"] = diag.noise_scale
     out["unexplained"] = unexplained_rest(diag)
