@@ -13,6 +13,10 @@ i.e. the same aggregate signal-to-noise ratio for every effect and design.  How 
 in each record is measured and reported (the largest single-record shift in units of that
 record's standard uncertainty).
 
+Second edition (docs/recordings.md section 7): sets with one gross outlier (G ~ U[6, 12] standard
+uncertainties), sets with inflated noise (every random factor x U[1.3, 2]), and a power curve of the
+two gates against the omnibus gate alone and the oracle.
+
 Concealment categories (issue 5):
 
 * ``small``    spread over all records, too small to see in any single record

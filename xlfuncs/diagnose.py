@@ -27,6 +27,11 @@ Then (docs/recordings.md section 3):
 4. the refit with the chosen effects: estimates, standard uncertainties (GLS covariance),
    chi-square and RMS before and after.
 
+Second edition (docs/recordings.md section 7, docs/diagnose.md section 6): two gates (omnibus or
+targeted, alpha/2 each), single-record outliers as candidates of the search (left out by their
+own mean-shift columns), ``p_after``/``explained`` and where the rest concentrates, and the noise
+level (the search repeated with F-tests when the refit is not explained).
+
 numpy only; the chi-square tail is the regularized incomplete gamma function (series and
 continued fraction), in logarithms so that p-values far below 1e-308 still rank.
 """
