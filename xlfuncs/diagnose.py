@@ -1052,6 +1052,8 @@ def _search(prep, W, Q0, y0, white, cands_in, identifiable, alpha, *, outliers=F
             S.Q = np.column_stack([S.Q, best_out["Qz"]])
             S.resid = _out(best_out["Qz"], S.resid)
         elif best is not None and best["log_p_adjusted"] < math.log(alpha):
+            if S.outliers and not S.chosen and not _still_mismatch(W, S, best, alpha, scaled):
+                break     # the outliers explain the mismatch: no gate opens for physics
             c = cands[best["name"]]
             c.status = "chosen"
             c.kept = [c.kept[j] for j in best["kz"]]
@@ -1066,6 +1068,17 @@ def _search(prep, W, Q0, y0, white, cands_in, identifiable, alpha, *, outliers=F
         if cands[name].status == "untested":
             cands[name].status = "not tested"
     return S
+
+
+def _still_mismatch(W, S: _Search, best: dict, alpha: float, scaled: bool) -> bool:
+    """With the outliers left out, do the records still disagree by the two gates (omnibus on
+    what remains, or the best candidate of this step, alpha/2 each)?  (Scaled search: the
+    targeted gate only, the omnibus has no meaning when the scale is estimated.)"""
+    half = math.log(GATE_SHARE * alpha)
+    if best["log_p_adjusted"] < half:
+        return True
+    nu = W.rank - S.Q.shape[1]
+    return (not scaled) and nu > 0 and chi2_logsf(float(S.resid @ S.resid), nu) < half
 
 
 def _refit(prep, W, keptA, S: _Search):
