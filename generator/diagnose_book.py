@@ -108,7 +108,8 @@ def _instructions(book: Book, diag: Diagnosis, native: bool, source: str) -> Non
          f"which is too large ({prep.C.shape[0]} rows) or singular for native MINVERSE); GLS — the "
          "normal equations on them."),
         "Candidates — the search of the core: every candidate, its Δχ², raw and Bonferroni-adjusted "
-        "p-values, verdict and why it was not identifiable or aliased.",
+        "p-values, verdict and why it was not identifiable or aliased; the two gates (omnibus or "
+        "targeted, alpha/2 each), the outliers left out and the noise level (docs/recordings.md section 7).",
         "Groups — chi-square of the records of each group (group, probe, probing, direction, temperature "
         "and time bands): where the mismatch concentrates.",
         "Results — the numbers of diagnosis.json, as formulas.",
@@ -722,6 +723,32 @@ def _candidates(book: Book, diag: Diagnosis) -> None:
         ws.column_dimensions[col].width = 12
     ws.column_dimensions["I"].width = 70
     r = len(j["candidates"]) + 5
+    # second edition (docs/recordings.md section 7): the gates, outliers, noise level
+    book.text(ws, r, 1, f"gate: {j['gate'] or 'none'} (omnibus p = {j['p_before']:.3g}, targeted p = "
+                        f"{(j['p_targeted'] if j['p_targeted'] is not None else 1.0):.3g}, each judged at alpha/2); "
+                        f"explained: {'yes' if j['explained'] else 'no'} (p_after = {j['p_after']:.3g})"
+              if j["p_after"] is not None else f"gate: {j['gate'] or 'none'}")
+    r += 1
+    if j["noise_scale"]:
+        ns = j["noise_scale"]
+        book.text(ws, r, 1, f"noise level: the declared uncertainties are too small by {ns['estimate']:.4g} "
+                            f"(u = {ns['u']:.2g}); no structure a candidate or group explains")
+        r += 1
+    if j["outliers"]:
+        book.text(ws, r, 1, "outliers left out of the effect search (likelihood-ratio test of one record, "
+                            "Bonferroni over the records)")
+        r += 1
+        book.header(ws, r, 1, ["id", "step", "df", "residual_um", "z", "p_adjusted"])
+        ws.column_dimensions["D"].width = max(ws.column_dimensions["D"].width or 0, 12)
+        for o in j["outliers"]:
+            r += 1
+            book.text(ws, r, 1, o["id"])
+            for k, key in enumerate(("step", "df", "residual_um", "z", "p_adjusted")):
+                ws.cell(row=r, column=2 + k).value = o[key]
+                ws.cell(row=r, column=2 + k).number_format = {"p_adjusted": "0.00E+00", "step": "0",
+                                                              "df": "0"}.get(key, "0.000")
+        r += 1
+    r += 1
     for s, step in enumerate(j["steps"], start=1):
         book.text(ws, r, 1, f"step {s}: {len(step)} candidates tested (Bonferroni factor {len(step)})")
         r += 1

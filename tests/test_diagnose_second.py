@@ -152,6 +152,7 @@ def test_uniformly_inflated_noise_gives_a_noise_scale_and_no_effect():
     assert math.isclose(ns["estimate"] ** 2, j["chi2_after"] / j["dof_after"], rel_tol=1e-12)
     assert j["effects"] == [] and j["outliers"] == []
     assert j["explained"] is False
+    assert "too small by a factor" in j["summary"] and "no physical effect is chosen" in j["summary"]
 
 
 def test_an_effect_with_correct_noise_gives_no_noise_scale():

@@ -1590,8 +1590,9 @@ def summary_text(diag: Diagnosis) -> str:
                      + (f", {seen}" if seen else ""))
     after = diag.chi2_after / max(diag.dof_after, 1)
     text = head + "; " + "; ".join(pieces + (["; then ".join(parts)] if parts else []))
-    what = ("it" if len(diag.chosen) + len(diag.outliers) == 1 else "them")
-    text += f"; after {f'leaving {what} out' if not diag.chosen else f'adding {what}'} chi2/dof is {after:.2f}"
+    if diag.chosen or diag.outliers:
+        what = ("it" if len(diag.chosen) + len(diag.outliers) == 1 else "them")
+        text += f"; after {f'leaving {what} out' if not diag.chosen else f'adding {what}'} chi2/dof is {after:.2f}"
     if not diag.explained and not diag.noise_scale:
         rest = unexplained_rest(diag)
         where = ""
