@@ -609,7 +609,7 @@ class Diagnosis:
     outliers: list[dict] = field(default_factory=list)
     noise_scale: dict | None = None
     groups_scaled: list[dict] = field(default_factory=list)
-    groups_after: list[dict] = field(default_factory=list)
+    groups_after: list[dict] = field(default_factory=list)   # only when not explained
     with_outliers: dict | None = None
 
     @property
@@ -864,7 +864,7 @@ def diagnose_prepared(prep: Prepared, alpha: float = 0.01) -> Diagnosis:
     diag.with_outliers = kept_answer
     diag.groups = locate_groups(diag)
     diag.groups_after = (_groups_of(prep, W, X_sel, beta, cov, labels_coef(prep, W, keptA, srch), alpha,
-                                    z=diag.z_after) if mismatch else [])
+                                    z=diag.z_after) if mismatch and not diag.explained else [])
     diag.located = locate_records(diag)
     diag.summary = summary_text(diag)
     return diag
