@@ -108,7 +108,8 @@ def _instructions(book: Book, diag: Diagnosis, native: bool, source: str) -> Non
          f"which is too large ({prep.C.shape[0]} rows) or singular for native MINVERSE); GLS — the "
          "normal equations on them."),
         "Candidates — the search of the core: every candidate, its Δχ², raw and Bonferroni-adjusted "
-        "p-values, verdict and why it was not identifiable or aliased.",
+        "p-values, verdict and why it was not identifiable or aliased; the two gates (omnibus or "
+        "targeted, alpha/2 each), the outliers left out and the noise level (docs/recordings.md section 7).",
         "Groups — chi-square of the records of each group (group, probe, probing, direction, temperature "
         "and time bands): where the mismatch concentrates.",
         "Results — the numbers of diagnosis.json, as formulas.",
@@ -253,7 +254,9 @@ def _length_records(book: Book, diag: Diagnosis, inputs: dict):
     for q, label in enumerate(chosen_cols):
         name, par = label.split(":", 1)
         for a, R in enumerate(rows):
-            f = length_formula(name, par, R, inputs["probe_cells"])
+            # an outlier left out (docs/recordings.md section 7): its own mean-shift column, 1 on its row
+            f = (1.0 if rec.ids[a] == par else 0.0) if name == "outlier" else \
+                length_formula(name, par, R, inputs["probe_cells"])
             _value_or_formula(book, ws, R.row, ci[label], f)
     ws.freeze_panes = "B2"
     return rows, obs
@@ -398,8 +401,9 @@ def _point_records(book: Book, diag: Diagnosis, inputs: dict):
                 _value_or_formula(book, wc, r, cc[lab], alignment_formula(lab, a, P, centroid))
             for label in chosen_cols:
                 name, par = label.split(":", 1)
-                _value_or_formula(book, wc, r, cc[label],
-                                  point_formula(name, par, a, P, centroid, inputs["probe_cells"]))
+                f = (1.0 if par == f"{rec.ids[i]}.{ax}" else 0.0) if name == "outlier" else \
+                    point_formula(name, par, a, P, centroid, inputs["probe_cells"])
+                _value_or_formula(book, wc, r, cc[label], f)
     wc.freeze_panes = "C2"
     obs = {"sheet": "Coords", "rows": [R.row for R in rows], "ci": cc, "chosen_cols": chosen_cols,
            "first_X": cc[al[0]] if al else cc.get(chosen_cols[0]) if chosen_cols else None,
@@ -546,7 +550,8 @@ def _gls(book: Book, diag: Diagnosis, obs: dict, native: bool) -> dict:
         for j, (e, l) in enumerate(diag.sel_labels):
             book.text(ws, row + 1 + j, c0, l if e == "alignment" else (e if l == e else f"{e} {l}"))
             book.formula(ws, row + 1 + j, c0 + 2, f"=SQRT({Minv.cell(j, j)})", fmt="0.000000E+00")
-            unit = ("µm" if l.startswith("t") else "µrad") if e == "alignment" else _display_unit(fx.BY_NAME[e].unit)
+            unit = (("µm" if l.startswith("t") else "µrad") if e == "alignment" else "µm" if e == "outlier"
+                    else _display_unit(fx.BY_NAME[e].unit))
             book.text(ws, row + 1 + j, c0 + 3, unit)
         out.update(M=M, g=g, Minv=Minv, b=b, u_col=c0 + 2, b_row=row + 1, c0=c0)
         row += p + 2
@@ -653,14 +658,36 @@ def _fill_after(book: Book, diag: Diagnosis, obs: dict, gls: dict) -> None:
         stat("dof_after", f"={count}-{p}", "minus every fitted parameter", fmt="0")
     stat("p_before", f"=CHIDIST({stats['chi2_before']},{stats['dof_before']})",
          "chi-square tail probability", fmt="0.000E+00")
+    # the targeted gate (docs/recordings.md section 7): the smallest Bonferroni-adjusted p-value of the
+    # candidates of the first step, from the core's search (Candidates sheet)
+    book.text(wg, row, c0, "p_targeted")
+    book.number(wg, row, c0 + 1, math.exp(diag.logp_targeted) if diag.targeted_K else 1.0, fmt="0.000E+00",
+                computed=True)
+    stats["p_targeted"] = cell(row, c0 + 1, "GLS")
+    row += 1
     book.text(wg, row, c0, "mismatch")
-    book.formula(wg, row, c0 + 1, f"=IF({stats['p_before']}<alpha,\"yes\",\"no\")", fmt=None)
+    book.formula(wg, row, c0 + 1, f"=IF(OR({stats['p_before']}<alpha/2,{stats['p_targeted']}<alpha/2),"
+                                  f"\"yes\",\"no\")", fmt=None,
+                 note="two gates, alpha/2 each: the omnibus chi-square or the targeted test (docs/recordings.md section 7)")
     stats["mismatch"] = cell(row, c0 + 1, "GLS")
+    row += 1
+    stat("p_after", f"=CHIDIST({stats['chi2_after']},{stats['dof_after']})",
+         "chi-square tail probability of what remains after the refit", fmt="0.000E+00")
+    book.text(wg, row, c0, "explained")
+    book.formula(wg, row, c0 + 1, f"=IF({stats['p_after']}>=alpha,\"yes\",\"no\")", fmt=None,
+                 note="the remaining chi-square passes: p_after >= alpha (docs/recordings.md section 7)")
+    stats["explained"] = cell(row, c0 + 1, "GLS")
     row += 1
     stat("chi2_per_dof_before", f"={stats['chi2_before']}/{stats['dof_before']}", "")
     stat("chi2_per_dof_after", f"={stats['chi2_after']}/{stats['dof_after']}", "")
     stat("rms_before_um", f"=SQRT(SUMSQ({e_before.ref})/COUNT({e_before.ref}))", "RMS of the residuals (µm)")
     stat("rms_after_um", f"=SQRT(SUMSQ({e_after.ref})/COUNT({e_after.ref}))", "RMS after the refit (µm)")
+    if diag.noise_scale:
+        stat("noise_scale", f"=SQRT({stats['chi2_per_dof_after']})",
+             "the declared uncertainties are too small by this factor: sqrt(chi2/dof) after the refit "
+             "(docs/recordings.md section 7, noise level)")
+        stat("u_noise_scale", f"={stats['noise_scale']}/SQRT(2*{stats['dof_after']})",
+             "standard uncertainty of the noise scale, s / sqrt(2 dof)")
     gls["stats"] = stats
 
 
@@ -696,6 +723,32 @@ def _candidates(book: Book, diag: Diagnosis) -> None:
         ws.column_dimensions[col].width = 12
     ws.column_dimensions["I"].width = 70
     r = len(j["candidates"]) + 5
+    # second edition (docs/recordings.md section 7): the gates, outliers, noise level
+    book.text(ws, r, 1, f"gate: {j['gate'] or 'none'} (omnibus p = {j['p_before']:.3g}, targeted p = "
+                        f"{(j['p_targeted'] if j['p_targeted'] is not None else 1.0):.3g}, each judged at alpha/2); "
+                        f"explained: {'yes' if j['explained'] else 'no'} (p_after = {j['p_after']:.3g})"
+              if j["p_after"] is not None else f"gate: {j['gate'] or 'none'}")
+    r += 1
+    if j["noise_scale"]:
+        ns = j["noise_scale"]
+        book.text(ws, r, 1, f"noise level: the declared uncertainties are too small by {ns['estimate']:.4g} "
+                            f"(u = {ns['u']:.2g}); no structure a candidate or group explains")
+        r += 1
+    if j["outliers"]:
+        book.text(ws, r, 1, "outliers left out of the effect search (likelihood-ratio test of one record, "
+                            "Bonferroni over the records)")
+        r += 1
+        book.header(ws, r, 1, ["id", "step", "df", "residual_um", "z", "p_adjusted"])
+        ws.column_dimensions["D"].width = max(ws.column_dimensions["D"].width or 0, 12)
+        for o in j["outliers"]:
+            r += 1
+            book.text(ws, r, 1, o["id"])
+            for k, key in enumerate(("step", "df", "residual_um", "z", "p_adjusted")):
+                ws.cell(row=r, column=2 + k).value = o[key]
+                ws.cell(row=r, column=2 + k).number_format = {"p_adjusted": "0.00E+00", "step": "0",
+                                                              "df": "0"}.get(key, "0.000")
+        r += 1
+    r += 1
     for s, step in enumerate(j["steps"], start=1):
         book.text(ws, r, 1, f"step {s}: {len(step)} candidates tested (Bonferroni factor {len(step)})")
         r += 1
@@ -736,16 +789,20 @@ def _results(book: Book, diag: Diagnosis, gls: dict) -> list[dict]:
     js = diag.to_json()
     rows, cached = [], []
     for key, unit in (("chi2_before", "1"), ("dof_before", "1"), ("p_before", "1"), ("chi2_after", "1"),
-                      ("dof_after", "1"), ("rms_before_um", "µm"), ("rms_after_um", "µm")):
+                      ("dof_after", "1"), ("rms_before_um", "µm"), ("rms_after_um", "µm"),
+                      ("p_targeted", "1"), ("p_after", "1")):
         rows.append([key, Formula(f"={st[key]}"), "", unit])
-        cached.append({"value": float(js[key])})
+        cached.append({"value": float(js[key] if js[key] is not None else 1.0)})
+    if diag.noise_scale:
+        rows.append(["noise_scale", Formula(f"={st['noise_scale']}"), Formula(f"={st['u_noise_scale']}"), "1"])
+        cached.append({"value": float(js["noise_scale"]["estimate"]), "u": float(js["noise_scale"]["u"])})
     for j, (e, l) in enumerate(diag.sel_labels):
         if e == "alignment":
             continue
         b = gls["b"].cell(j, 0)
         u = cell(gls["b_row"] + j, gls["u_col"], "GLS")
         rows.append([e if l == e else f"{e} {l}", Formula(f"={b}"), Formula(f"={u}"),
-                     _display_unit(fx.BY_NAME[e].unit)])
+                     "µm" if e == "outlier" else _display_unit(fx.BY_NAME[e].unit)])
         cached.append({"value": float(diag.beta[j]), "u": float(math.sqrt(max(diag.cov_beta[j, j], 0.0)))})
     book.results(["quantity", "value", "u", "unit"], rows, [
         "chi2_before ... rms_after_um as in diagnosis.json; then one row per estimated effect parameter",

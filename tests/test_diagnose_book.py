@@ -33,7 +33,20 @@ CASES = {
                {"probe_qualification", "squareness_xy"}),
     "points 2-D": ("holeplate", {"grid": 2, "passes": 2}, PAIR[:1], {"probe_radius": 2.0, "offset_drift": [3.0, -2.0, 0.0]},
                    (19.0, 23.0), {"probe_radius", "offset_drift"}),
+    # second edition (docs/recordings.md section 7): a gross outlier left out; inflated noise
+    "lengths, an outlier": ("iso10360", {"repeats": 1}, ONE, {}, None, set()),
+    "lengths, inflated noise": ("iso10360", {"repeats": 3}, ONE, {}, None, set()),
 }
+
+
+def _outlier(rec):
+    rec.measured_mm[11] += 0.009        # 9 µm on one record
+    return rec
+
+
+SECOND = {"lengths, an outlier": (MPE1, _outlier),
+          "lengths, inflated noise": (pc.Parameters(**{k: v * (1.8 if k.startswith("sigma") else 1.0)
+                                                       for k, v in MPE1.__dict__.items()}), None)}
 
 
 def _build(tmp_path, case, monkeypatch):
@@ -43,7 +56,10 @@ def _build(tmp_path, case, monkeypatch):
         import numpy as np
 
         T = 20.0 + 3.0 * np.sin(np.pi * L.time_s / L.time_s.max())
-    rec = sm.simulate(L, MPE1, planted, seed=17, temperature_C=T)
+    params, tweak = SECOND.get(case, (MPE1, None))
+    rec = sm.simulate(L, params, planted, seed=17, temperature_C=T)
+    if tweak:
+        rec = tweak(rec)
     path = tmp_path / "rec.csv"
     write_recordings(rec, path)
     if "whitened" in case:
@@ -67,8 +83,13 @@ def books(tmp_path_factory):
 
 def expected_rows(result):
     exp = {k: result[k] for k in ("chi2_before", "dof_before", "p_before", "chi2_after", "dof_after",
-                                  "rms_before_um", "rms_after_um")}
+                                  "rms_before_um", "rms_after_um", "p_after")}
+    exp["p_targeted"] = result["p_targeted"] if result["p_targeted"] is not None else 1.0
     unc = {}
+    if result["noise_scale"]:
+        exp["noise_scale"], unc["noise_scale"] = result["noise_scale"]["estimate"], result["noise_scale"]["u"]
+    for o in result["outliers"] or []:
+        exp[f"outlier {o['id']}"], unc[f"outlier {o['id']}"] = o["estimate_um"], o["u_um"]
     for e in result["effects"]:
         if isinstance(e["estimate"], list):
             labels = ([f"{pp['probe']}.d{a}" for pp in e["per_probe"] for a in "xyz"]
@@ -115,3 +136,13 @@ def test_the_json_written_is_the_contract(books):
     on_disk = json.loads((book.parent / "diagnosis.json").read_text())
     assert on_disk == json.loads(json.dumps(result))
     assert on_disk["kind"] == "length" and on_disk["records"] == 35
+
+
+def test_the_outlier_is_left_out_in_the_workbook_too(books):
+    result, _ = books["lengths, an outlier"]
+    assert [o["id"] for o in result["outliers"]] and result["effects"] == [] and result["explained"]
+
+
+def test_inflated_noise_gives_the_noise_scale_in_the_workbook(books):
+    result, _ = books["lengths, inflated noise"]
+    assert result["noise_scale"] and result["effects"] == [] and not result["explained"]

@@ -27,6 +27,11 @@ Then (docs/recordings.md section 3):
 4. the refit with the chosen effects: estimates, standard uncertainties (GLS covariance),
    chi-square and RMS before and after.
 
+Second edition (docs/recordings.md section 7, docs/diagnose.md section 6): two gates (omnibus or
+targeted, alpha/2 each), single-record outliers as candidates of the search (left out by their
+own mean-shift columns), ``p_after``/``explained`` and where the rest concentrates, and the noise
+level (the search repeated with F-tests when the refit is not explained).
+
 numpy only; the chi-square tail is the regularized incomplete gamma function (series and
 continued fraction), in logarithms so that p-values far below 1e-308 still rank.
 """
@@ -104,6 +109,69 @@ def chi2_logsf(x: float, df: float) -> float:
 def chi2_sf(x: float, df: float) -> float:
     """P(X > x) for X ~ chi2(df) (0.0 below 1e-308)."""
     return math.exp(chi2_logsf(x, df))
+
+
+def _betacf(a: float, b: float, x: float) -> float:
+    """Continued fraction of the incomplete beta function (modified Lentz)."""
+    tiny, eps = 1e-300, 1e-16
+    qab, qap, qam = a + b, a + 1.0, a - 1.0
+    c, d = 1.0, 1.0 - qab * x / qap
+    d = 1.0 / (d if abs(d) > tiny else tiny)
+    h = d
+    for m in range(1, 100000):
+        m2 = 2 * m
+        aa = m * (b - m) * x / ((qam + m2) * (a + m2))
+        d = 1.0 + aa * d
+        d = 1.0 / (d if abs(d) > tiny else tiny)
+        c = 1.0 + aa / c
+        c = c if abs(c) > tiny else tiny
+        h *= d * c
+        aa = -(a + m) * (qab + m) * x / ((a + m2) * (qap + m2))
+        d = 1.0 + aa * d
+        d = 1.0 / (d if abs(d) > tiny else tiny)
+        c = 1.0 + aa / c
+        c = c if abs(c) > tiny else tiny
+        delta = d * c
+        h *= delta
+        if abs(delta - 1.0) < eps:
+            break
+    return h
+
+
+def _log_betainc(a: float, b: float, x: float) -> float:
+    """log I_x(a, b), the regularized incomplete beta function."""
+    if x <= 0.0:
+        return -math.inf
+    if x >= 1.0:
+        return 0.0
+    log_front = a * math.log(x) + b * math.log1p(-x) - (math.lgamma(a) + math.lgamma(b) - math.lgamma(a + b))
+    if x < (a + 1.0) / (a + b + 2.0):
+        return log_front + math.log(_betacf(a, b, x)) - math.log(a)
+    v = math.exp(log_front + math.log(_betacf(b, a, 1.0 - x)) - math.log(b))
+    return math.log1p(-v) if v < 1.0 else -math.inf
+
+
+def f_logcdf(F: float, d1: float, d2: float) -> float:
+    """Natural log of P(X <= F), X ~ F(d1, d2)."""
+    if d1 <= 0 or d2 <= 0:
+        raise ModelError("the F distribution needs positive degrees of freedom")
+    if F <= 0.0:
+        return -math.inf
+    if not math.isfinite(F):
+        return 0.0
+    return _log_betainc(0.5 * d1, 0.5 * d2, d1 * F / (d1 * F + d2))
+
+
+def f_logsf(F: float, d1: float, d2: float) -> float:
+    """Natural log of P(X > F), X ~ F(d1, d2) (the test of an effect when the scale of the
+    covariance is estimated from the residual: docs/recordings.md section 7, noise level)."""
+    if d1 <= 0 or d2 <= 0:
+        raise ModelError("the F distribution needs positive degrees of freedom")
+    if not math.isfinite(F):
+        return -math.inf
+    if F <= 0.0:
+        return 0.0
+    return _log_betainc(0.5 * d2, 0.5 * d1, d2 / (d2 + d1 * F))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -531,6 +599,23 @@ class Diagnosis:
     groups: list[dict]
     located: list[dict]
     summary: str = ""
+    # second edition (docs/recordings.md section 7)
+    logp_targeted: float = 0.0        # log of the Bonferroni-adjusted targeted p-value
+    gate: str | None = None           # "omnibus", "targeted", "both" or None
+    targeted_K: int = 0               # candidates of the targeted test
+    logp_after: float = 0.0
+    outlier_search: bool = False
+    outliers_not_isolated: bool = False
+    outliers: list[dict] = field(default_factory=list)
+    noise_scale: dict | None = None
+    groups_scaled: list[dict] = field(default_factory=list)
+    groups_after: list[dict] = field(default_factory=list)   # only when not explained
+    with_outliers: dict | None = None
+
+    @property
+    def explained(self) -> bool:
+        """The remaining chi-square after the refit passes: p_after >= alpha (section 7)."""
+        return bool(self.logp_after >= math.log(self.alpha))
 
     # -- derived ---------------------------------------------------------------------------
     @property
@@ -652,7 +737,6 @@ def diagnose_prepared(prep: Prepared, alpha: float = 0.01) -> Diagnosis:
     if dof_before < 1:
         raise ModelError("no degrees of freedom left after the alignment: more records are needed")
     logp_before = chi2_logsf(chi2_before, dof_before)
-    mismatch = bool(logp_before < math.log(alpha))
 
     # -- candidates: applicability, sensitivity, identifiability against the baseline --------
     cands: dict[str, Candidate] = {}
@@ -699,78 +783,63 @@ def diagnose_prepared(prep: Prepared, alpha: float = 0.01) -> Diagnosis:
                 cb.status, cb.aliased_with = "aliased", a
                 cb.reason = alias_reason(prep, b, a, rho)
 
-    chosen: list[str] = []
-    steps: list[list[dict]] = []
-    Q = Q0
-    resid = y0
-    if mismatch:
-        for step in range(1, MAX_STEPS + 1):
-            contenders = [n for n in identifiable if cands[n].status in ("untested", "tested")]
-            rows = []
-            best = None
-            for name in contenders:
-                c = cands[name]
-                Xk = white[name][:, c.kept]
-                # aliasing with a chosen effect: projected on the complement of the alignment
-                # and the other chosen effects (docs/recordings.md section 6)
-                alias = _alias_with_chosen(Q0, white, cands, chosen, name)
-                if alias is not None:
-                    other, rho = alias
-                    c.status, c.aliased_with = "aliased", other
-                    c.reason = alias_reason(prep, name, other, rho)
-                    continue
-                Z = _out(Q, Xk)
-                Qz, kz = _orth(Z, np.linalg.norm(_out(Q0, Xk), axis=0))
-                if not kz:
-                    c.status, c.aliased_with = "aliased", " + ".join(chosen)
-                    c.reason = alias_reason(prep, name, " + ".join(chosen), 1.0)
-                    continue
-                dchi = float(np.sum((Qz.T @ resid) ** 2))
-                df = len(kz)
-                logp = chi2_logsf(dchi, df)
-                rows.append({"name": name, "df": df, "delta_chi2": dchi, "logp": logp, "kz": kz, "Qz": Qz})
-            if not rows:
-                break
-            K = len(rows)
-            for row in rows:
-                row["log_p_adjusted"] = min(0.0, row["logp"] + math.log(K))
-                c = cands[row["name"]]
-                c.status, c.step = "tested", step
-                c.delta_chi2, c.df, c.logp = row["delta_chi2"], row["df"], row["logp"]
-                c.p_adjusted = math.exp(row["log_p_adjusted"])
-            order = {n: i for i, n in enumerate(fx.NAMES)}
-            best = min(rows, key=lambda r: (r["logp"], -r["delta_chi2"], order[r["name"]]))
-            # exact aliases given what is chosen already: the first in the table of section 4
-            ties = [r for r in rows if order[r["name"]] < order[best["name"]]
-                    and _cancorr(r["Qz"], best["Qz"]) > EXACT_ALIAS]
-            if ties:
-                best = min(ties, key=lambda r: order[r["name"]])
-            steps.append([{k: v for k, v in r.items() if k not in ("kz", "Qz")} for r in rows])
-            if best["log_p_adjusted"] >= math.log(alpha):
-                break
-            c = cands[best["name"]]
-            c.status = "chosen"
-            c.kept = [c.kept[j] for j in best["kz"]]
-            chosen.append(best["name"])
-            Q = np.column_stack([Q, best["Qz"]])
-            resid = _out(best["Qz"], resid)
-            if W.rank - Q.shape[1] < 1:
-                break
-        for name in identifiable:
-            if cands[name].status == "untested":
-                cands[name].status = "not tested"
+    # -- the targeted gate (docs/recordings.md section 7): every identifiable candidate of the
+    # first step, Bonferroni over them; omnibus and targeted share alpha (alpha/2 each) ---------
+    first = _effect_rows(prep, W, Q0, Q0, y0, white, cands, identifiable, [], scaled=False)
+    if first:
+        K1 = len(first)
+        logp_targeted = min(0.0, min(r["logp"] for r in first) + math.log(K1))
+    else:
+        logp_targeted = 0.0
+    half = math.log(GATE_SHARE * alpha)
+    omnibus, targeted = logp_before < half, logp_targeted < half
+    gate = "both" if omnibus and targeted else "omnibus" if omnibus else "targeted" if targeted else None
+    mismatch = gate is not None
 
-    # -- refit: GLS with the alignment and the chosen effects ------------------------------
-    X_parts = [prep.A[:, keptA]]
-    labels = [("alignment", prep.A_labels[j]) for j in keptA]
-    for name in chosen:
-        c = cands[name]
-        X_parts.append(c.cols.X[:, c.kept])
-        labels += [(name, c.cols.labels[j]) for j in c.kept]
-    X_sel = np.column_stack(X_parts) if X_parts else np.zeros((len(prep.r_um), 0))
-    beta, cov, chi2_after = _gls(W, X_sel, prep.r_um)
+    outlier_search = mismatch and outliers_searchable(prep, W)
+    overflow = False
+    noise = None
+    kept_answer = None
+    groups_scaled: list[dict] = []
+    if mismatch:
+        srch = _search(prep, W, Q0, y0, white, cands, identifiable, alpha, outliers=outlier_search)
+        overflow = srch.overflow
+        if overflow:
+            srch = _search(prep, W, Q0, y0, white, cands, identifiable, alpha, outliers=False)
+        fit = _refit(prep, W, keptA, srch)
+        if fit[2] < math.log(alpha):
+            # not explained: is the rest uniformly larger than the simulation allows, with no
+            # structure any candidate or group explains?  The same search with the scale of the
+            # covariance estimated (F-tests), then the groups against the scaled covariance
+            sc = _search(prep, W, Q0, y0, white, cands, identifiable, alpha, outliers=outlier_search,
+                         scaled=True)
+            if sc.overflow:
+                sc = _search(prep, W, Q0, y0, white, cands, identifiable, alpha, outliers=False, scaled=True)
+            sfit = _refit(prep, W, keptA, sc)
+            beta_s, cov_s, chi2_s, dof_s = sfit[3], sfit[4], sfit[0], sfit[1]
+            if dof_s >= 1:
+                s2 = chi2_s / dof_s
+                groups_scaled = _groups_of(prep, W, sfit[5], beta_s, cov_s, labels_coef(prep, W, keptA, sc),
+                                           alpha, scale2=s2, dof_scale=dof_s)
+                if s2 > 1.0 and not any(g["flagged"] for g in groups_scaled):
+                    noise = {"estimate": math.sqrt(s2), "u": math.sqrt(s2 / (2.0 * dof_s)),
+                             "chi2": chi2_s, "dof": dof_s}
+                    srch, fit = sc, sfit
+        if srch.outliers:
+            alt = _search(prep, W, Q0, y0, white, cands, identifiable, alpha, outliers=False,
+                          scaled=noise is not None)
+            afit = _refit(prep, W, keptA, alt)
+            kept_answer = {"effects": list(alt.chosen), "chi2_after": afit[0], "dof_after": afit[1],
+                           "p_after": math.exp(afit[2]), "explained": bool(afit[2] >= math.log(alpha))}
+    else:
+        srch = _Search({n: _copy_candidate(c) for n, c in cands.items()}, [], [], [], [], Q0, y0)
+        for name in identifiable:
+            srch.cands[name].status = "not tested"
+    cands, chosen, steps = srch.cands, srch.chosen, srch.steps
+
+    # -- refit: GLS with the alignment, the chosen effects and the outliers left out ----------
+    chi2_after, dof_after, logp_after, beta, cov, X_sel, labels = _refit(prep, W, keptA, srch)
     beta0, cov0, _ = _gls(W, prep.A[:, keptA], prep.r_um)
-    dof_after = W.rank - X_sel.shape[1]
     resid_before = prep.r_um - prep.A[:, keptA] @ beta0
     resid_after = prep.r_um - X_sel @ beta
     # standard uncertainty of each residual under the baseline (alignment projected out)
@@ -785,10 +854,299 @@ def diagnose_prepared(prep: Prepared, alpha: float = 0.01) -> Diagnosis:
                      chi2_after=chi2_after, dof_after=dof_after, z_before=resid_before / u_obs,
                      z_after=resid_after / u_obs, u_obs=u_obs, resid_before=resid_before,
                      resid_after=resid_after, groups=[], located=[])
+    diag.logp_targeted, diag.gate, diag.targeted_K = logp_targeted, gate, len(first)
+    diag.logp_after = logp_after
+    diag.outlier_search = outlier_search
+    diag.outliers_not_isolated = overflow
+    diag.outliers = _outlier_report(diag, srch)
+    diag.noise_scale = noise
+    diag.groups_scaled = groups_scaled
+    diag.with_outliers = kept_answer
     diag.groups = locate_groups(diag)
+    diag.groups_after = (_groups_of(prep, W, X_sel, beta, cov, labels_coef(prep, W, keptA, srch), alpha,
+                                    z=diag.z_after) if mismatch and not diag.explained else [])
     diag.located = locate_records(diag)
     diag.summary = summary_text(diag)
     return diag
+
+
+GATE_SHARE = 0.5           # each of the two gates judged at alpha/2 (docs/recordings.md section 7)
+MAX_OUTLIER_SHARE = 0.03   # isolated outliers: at most this share of the records (and at least 2);
+                           # when more look gross, it is a structure and no record is called an outlier
+OUTLIER_MAX_OBS = 4000     # the outlier search needs the dense whitener (n_obs^2 numbers)
+
+
+def outliers_searchable(prep: Prepared, W) -> bool:
+    """Single-record outliers are searched with the dense whitener (W as a matrix)."""
+    return isinstance(W, Whitener) and W.W.shape[1] <= OUTLIER_MAX_OBS
+
+
+@dataclass
+class _Search:
+    cands: dict[str, Candidate]
+    chosen: list[str]
+    steps: list[list[dict]]
+    outliers: list[int]              # record indices, in the order flagged
+    outlier_rows: list[dict]         # their statistics when flagged
+    Q: np.ndarray
+    resid: np.ndarray
+    outlier_cols: list[tuple[int, list[int]]] = field(default_factory=list)  # (record, kept rows)
+    overflow: bool = False           # more records than MAX_OUTLIER_SHARE looked gross: structure
+
+
+def _copy_candidate(c: Candidate) -> Candidate:
+    from dataclasses import replace
+
+    return replace(c, kept=list(c.kept))
+
+
+def _test_logp(dchi: float, df: int, rest: float, nu: int, scaled: bool) -> float | None:
+    """log p of adding df columns that lower chi-square by dchi: chi-square with C known, or the
+    F-test with the scale of C estimated from the rest (nu - df degrees of freedom)."""
+    if not scaled:
+        return chi2_logsf(dchi, df)
+    d2 = nu - df
+    if d2 < 1:
+        return None
+    rest_after = max(rest - dchi, 1e-300)
+    return f_logsf((dchi / df) / (rest_after / d2), df, d2)
+
+
+def _effect_rows(prep, W, Q0, Q, resid, white, cands, identifiable, chosen, scaled=False, mutate=False):
+    """The candidates of one step: Δχ², df, log p for every contender (``mutate``: mark aliased)."""
+    rows = []
+    nu = W.rank - Q.shape[1]
+    rest = float(resid @ resid)
+    for name in identifiable:
+        c = cands[name]
+        if c.status not in ("untested", "tested"):
+            continue
+        Xk = white[name][:, c.kept]
+        if chosen:
+            alias = _alias_with_chosen(Q0, white, cands, chosen, name)
+            if alias is not None:
+                if mutate:
+                    other, rho = alias
+                    c.status, c.aliased_with = "aliased", other
+                    c.reason = alias_reason(prep, name, other, rho)
+                continue
+        Z = _out(Q, Xk)
+        Qz, kz = _orth(Z, np.linalg.norm(_out(Q0, Xk), axis=0))
+        if not kz:
+            if mutate:
+                c.status, c.aliased_with = "aliased", " + ".join(chosen)
+                c.reason = alias_reason(prep, name, " + ".join(chosen), 1.0)
+            continue
+        dchi = float(np.sum((Qz.T @ resid) ** 2))
+        df = len(kz)
+        logp = _test_logp(dchi, df, rest, nu, scaled)
+        if logp is None:
+            continue
+        rows.append({"name": name, "df": df, "delta_chi2": dchi, "logp": logp, "kz": kz, "Qz": Qz})
+    return rows
+
+
+def _record_obs(prep: Prepared) -> list[np.ndarray]:
+    n = prep.rec.n
+    order = np.argsort(prep.obs_record, kind="stable")
+    bounds = np.searchsorted(prep.obs_record[order], np.arange(n + 1))
+    return [order[bounds[a]:bounds[a + 1]] for a in range(n)]
+
+
+def _outlier_rows(prep, W, Q, resid, skip, scaled=False):
+    """Likelihood-ratio test of a gross error in every single record (a point: its coordinates):
+    the drop of chi-square when that record's own mean-shift columns are added (the record left
+    out), with C known or (``scaled``) as an F-test.  Bonferroni over the records tested.  A
+    column whose whitened remainder after Q is below 1e-3 of its norm is not testable."""
+    Wm = W.W
+    nu = W.rank - Q.shape[1]
+    rest = float(resid @ resid)
+    n = prep.rec.n
+    d = len(prep.r_um) // n                      # observations per record (1, 2 or 3)
+    todo = np.array([a for a in range(n) if a not in skip], dtype=int)
+    rows = []
+    chunk = max(1, 768 // d)
+    for q0 in range(0, len(todo), chunk):
+        recs = todo[q0:q0 + chunk]
+        cols = (recs[:, None] * d + np.arange(d)[None, :]).reshape(-1)   # obs of record a: d*a + axis
+        Wc = Wm[:, cols]
+        Z = _out(Q, Wc)
+        ok = np.linalg.norm(Z, axis=0) > 1e-3 * np.linalg.norm(Wc, axis=0)
+        Z = Z * ok
+        b = (Z.T @ resid).reshape(len(recs), d)
+        Zr = Z.reshape(Z.shape[0], len(recs), d)
+        G = np.einsum("kia,kib->iab", Zr, Zr)
+        lam, V = np.linalg.eigh(G)
+        keep = lam > 1e-9 * np.maximum(lam.max(axis=1, keepdims=True), 1e-300)
+        proj = np.einsum("iab,ia->ib", V, b)
+        dchis = np.sum(np.where(keep, proj**2 / np.where(keep, lam, 1.0), 0.0), axis=1)
+        dfs = keep.sum(axis=1)
+        for t, a in enumerate(recs):
+            df = int(dfs[t])
+            if df == 0:
+                continue
+            dchi = float(dchis[t])
+            logp = _test_logp(dchi, df, rest, nu, scaled)
+            if logp is None:
+                continue
+            rows.append({"record": int(a), "df": df, "delta_chi2": dchi, "logp": logp, "chunk": (Zr, t),
+                         "rows": [int(d * a + j) for j in range(d) if ok.reshape(len(recs), d)[t, j]]})
+    K = max(len(rows), 1)
+    for r in rows:
+        r["log_p_adjusted"] = min(0.0, r["logp"] + math.log(K))
+    best = min(rows, key=lambda r: (r["log_p_adjusted"], r["record"])) if rows else None
+    if best is not None:        # the orthonormal columns of the best one only
+        Zr, t = best["chunk"]
+        best["Qz"], _ = _orth(Zr[:, t, :])
+    for r in rows:
+        r.pop("chunk")
+    return rows
+
+
+def _search(prep, W, Q0, y0, white, cands_in, identifiable, alpha, *, outliers=False, scaled=False):
+    """Forward selection (docs/recordings.md section 3.3 and section 7): in every step the best
+    candidate effect (Bonferroni over the candidates of that step) and, with ``outliers``, the
+    record whose gross error would lower chi-square most (Bonferroni over the records); the one
+    with the smaller adjusted p-value is taken while that is below alpha.  ``scaled``: F-tests
+    with the scale of the covariance estimated from what remains (the noise-level answer)."""
+    cands = {n: _copy_candidate(c) for n, c in cands_in.items()}
+    S = _Search(cands, [], [], [], [], Q0, y0)
+    order = {n: i for i, n in enumerate(fx.NAMES)}
+    max_out = max(2, math.ceil(MAX_OUTLIER_SHARE * prep.rec.n))
+    for step in range(1, MAX_STEPS + 1):
+        rows = _effect_rows(prep, W, Q0, S.Q, S.resid, white, cands, identifiable, S.chosen, scaled,
+                            mutate=True)
+        out_rows = (_outlier_rows(prep, W, S.Q, S.resid, set(S.outliers), scaled)
+                    if outliers and not S.overflow else [])
+        if not rows and not out_rows:
+            break
+        best = None
+        if rows:
+            K = len(rows)
+            for row in rows:
+                row["log_p_adjusted"] = min(0.0, row["logp"] + math.log(K))
+                c = cands[row["name"]]
+                c.status, c.step = "tested", step
+                c.delta_chi2, c.df, c.logp = row["delta_chi2"], row["df"], row["logp"]
+                c.p_adjusted = math.exp(row["log_p_adjusted"])
+            best = min(rows, key=lambda r: (r["logp"], -r["delta_chi2"], order[r["name"]]))
+            # exact aliases given what is chosen already: the first in the table of section 4
+            ties = [r for r in rows if order[r["name"]] < order[best["name"]]
+                    and _cancorr(r["Qz"], best["Qz"]) > EXACT_ALIAS]
+            if ties:
+                best = min(ties, key=lambda r: order[r["name"]])
+            S.steps.append([{k: v for k, v in r.items() if k not in ("kz", "Qz")} for r in rows])
+        best_out = min(out_rows, key=lambda r: (r["log_p_adjusted"], r["record"])) if out_rows else None
+        wants_out = best_out is not None and best_out["log_p_adjusted"] < math.log(alpha) and (
+            best is None or best_out["log_p_adjusted"] <= best["log_p_adjusted"])
+        if wants_out and len(S.outliers) >= max_out:
+            # more gross records than isolated outliers can be: a structure, not outliers
+            S.overflow, wants_out = True, False
+            break
+        if wants_out:
+            # outliers before physics: the record is left out of the rest of the search
+            S.outliers.append(best_out["record"])
+            S.outlier_rows.append({k: v for k, v in best_out.items() if k != "Qz"} | {"step": step})
+            best_out["rows"] = [q for q in best_out["rows"]]
+            S.outlier_cols.append((best_out["record"], best_out["rows"]))
+            S.Q = np.column_stack([S.Q, best_out["Qz"]])
+            S.resid = _out(best_out["Qz"], S.resid)
+        elif best is not None and best["log_p_adjusted"] < math.log(alpha):
+            if S.outliers and not S.chosen and not _still_mismatch(W, S, best, alpha, scaled):
+                break     # the outliers explain the mismatch: no gate opens for physics
+            c = cands[best["name"]]
+            c.status = "chosen"
+            c.kept = [c.kept[j] for j in best["kz"]]
+            S.chosen.append(best["name"])
+            S.Q = np.column_stack([S.Q, best["Qz"]])
+            S.resid = _out(best["Qz"], S.resid)
+        else:
+            break
+        if W.rank - S.Q.shape[1] < 2:
+            break
+    for name in identifiable:
+        if cands[name].status == "untested":
+            cands[name].status = "not tested"
+    return S
+
+
+def _still_mismatch(W, S: _Search, best: dict, alpha: float, scaled: bool) -> bool:
+    """With the outliers left out, do the records still disagree by the two gates (omnibus on
+    what remains, or the best candidate of this step, alpha/2 each)?  (Scaled search: the
+    targeted gate only, the omnibus has no meaning when the scale is estimated.)"""
+    half = math.log(GATE_SHARE * alpha)
+    if best["log_p_adjusted"] < half:
+        return True
+    nu = W.rank - S.Q.shape[1]
+    return (not scaled) and nu > 0 and chi2_logsf(float(S.resid @ S.resid), nu) < half
+
+
+def _refit(prep, W, keptA, S: _Search):
+    """GLS with the alignment, the chosen effects and the outliers' mean-shift columns:
+    (chi2, dof, log p, beta, cov, X_sel, labels)."""
+    X_parts = [prep.A[:, keptA]]
+    labels = [("alignment", prep.A_labels[j]) for j in keptA]
+    for name in S.chosen:
+        c = S.cands[name]
+        X_parts.append(c.cols.X[:, c.kept])
+        labels += [(name, c.cols.labels[j]) for j in c.kept]
+    n_obs = len(prep.r_um)
+    for a, rows in S.outlier_cols:
+        E = np.zeros((n_obs, len(rows)))
+        E[rows, np.arange(len(rows))] = 1.0
+        X_parts.append(E)
+        rid = prep.rec.ids[a]
+        if prep.design.kind == "length":
+            labels.append(("outlier", rid))
+        else:
+            labels += [("outlier", f"{rid}.{fx.AXES[int(prep.obs_axis[q])]}") for q in rows]
+    X_sel = np.column_stack(X_parts) if X_parts else np.zeros((n_obs, 0))
+    beta, cov, chi2 = _gls(W, X_sel, prep.r_um)
+    dof = W.rank - X_sel.shape[1]
+    logp = chi2_logsf(chi2, dof) if dof > 0 else 0.0
+    return chi2, dof, logp, beta, cov, X_sel, labels
+
+
+def labels_coef(prep, W, keptA, S: _Search):
+    """X_sel of :func:`_refit` as combinations of the structured whitener's columns (None: dense)."""
+    if not is_structured(prep):
+        return None
+    c = W.B.shape[1]
+    cols = [1 + j for j in keptA]
+    for name in S.chosen:
+        cols += [W.where[name] + j for j in S.cands[name].kept]
+    M = np.zeros((c, len(cols)))
+    M[cols, np.arange(len(cols))] = 1.0
+    return M
+
+
+def _outlier_report(diag: Diagnosis, S: _Search) -> list[dict]:
+    """``outliers`` of diagnosis.json: id, residual (after the baseline), z and the adjusted
+    p-value of the record's likelihood-ratio test when it was flagged, and the gross error
+    estimated by the refit (µm; a point: per coordinate)."""
+    prep = diag.prep
+    out = []
+    obs = _record_obs(prep)
+    for a, row in zip(S.outliers, S.outlier_rows):
+        rows = [q for q, (e, _) in enumerate(diag.sel_labels) if e == "outlier"
+                and diag.sel_labels[q][1].split(".")[0] == prep.rec.ids[a]]
+        if prep.design.kind == "point":
+            rows = [q for q, (e, l) in enumerate(diag.sel_labels) if e == "outlier" and
+                    l.rsplit(".", 1)[0] == prep.rec.ids[a]]
+        e = diag.resid_before[obs[a]]
+        est = [float(diag.beta[q]) for q in rows]
+        unc = [float(math.sqrt(max(diag.cov_beta[q, q], 0.0))) for q in rows]
+        item = {"id": prep.rec.ids[a], "residual_um": float(e[0]) if len(e) == 1 else float(np.linalg.norm(e)),
+                "z": math.copysign(math.sqrt(row["delta_chi2"]), float(e[0])) if len(e) == 1
+                else math.sqrt(row["delta_chi2"]),
+                "p_adjusted": math.exp(row["log_p_adjusted"]), "p_value": math.exp(row["logp"]),
+                "df": row["df"], "step": row["step"],
+                "estimate_um": est[0] if len(est) == 1 and prep.design.kind == "length" else est,
+                "u_um": unc[0] if len(unc) == 1 and prep.design.kind == "length" else unc}
+        if prep.design.kind == "point":
+            item["axes"] = [diag.sel_labels[q][1].rsplit(".", 1)[1] for q in rows]
+        out.append(item)
+    return out
 
 
 def _gls(W: Whitener, X: np.ndarray, r: np.ndarray):
@@ -904,6 +1262,52 @@ def locate_records(diag: Diagnosis, top: int = 10) -> list[dict]:
             for i in order]
 
 
+def _groups_of(prep: Prepared, W, X: np.ndarray, beta: np.ndarray, cov: np.ndarray, X_coef, alpha: float,
+               *, scale2: float = 1.0, dof_scale: int | None = None, z: np.ndarray | None = None) -> list[dict]:
+    """Chi-square of the records of every group (section 3.2 groupings) for the residual
+    e = r - X beta of a GLS fit, with the covariance of that residual, C - X cov X'.  With
+    ``dof_scale``: judged against the covariance scaled by ``scale2`` (estimated on dof_scale
+    degrees of freedom), an F-test; flagged when p < alpha / (number of groups)."""
+    labels = _group_labels(prep)
+    structured = is_structured(prep)
+    e = prep.r_um - X @ beta if X.shape[1] else prep.r_um.copy()
+    if structured:
+        e_coef = np.zeros(W.B.shape[1])
+        e_coef[0] = 1.0
+        if X.shape[1]:
+            e_coef = e_coef - X_coef @ beta
+    else:
+        Ce = prep.C - X @ cov @ X.T if X.shape[1] else prep.C
+    rows = []
+    for by, lab in labels.items():
+        lab_obs = [lab[a] for a in prep.obs_record]
+        for g in dict.fromkeys(lab):
+            idx = np.array([q for q, v in enumerate(lab_obs) if v == g])
+            if structured:
+                chi2, dof = W.group_chi2((by, g), e_coef, cov, X_coef), len(idx)
+            else:
+                chi2, dof = _psd_chi2(e[idx], Ce[np.ix_(idx, idx)])
+            if dof == 0:
+                continue
+            if dof_scale:
+                # uniform inflation: neither larger nor smaller than the common scale (two-sided)
+                F = chi2 / dof / scale2
+                logp = min(0.0, math.log(2.0) + min(f_logsf(F, dof, dof_scale), f_logcdf(F, dof, dof_scale)))
+            else:
+                logp = chi2_logsf(chi2, dof)
+            item = {"by": by, "group": g, "records": int(len(set(prep.obs_record[idx]))),
+                    "chi2": chi2, "dof": dof, "logp": logp}
+            if z is not None:
+                item["rms_z"] = float(np.sqrt(np.mean(z[idx] ** 2)))
+            rows.append(item)
+    K = max(len(rows), 1)
+    for r in rows:
+        r["p_value"] = math.exp(r["logp"])
+        r["flagged"] = bool(r["logp"] + math.log(K) < math.log(alpha))
+    rows.sort(key=lambda r: r["logp"])
+    return rows
+
+
 def locate_groups(diag: Diagnosis) -> list[dict]:
     """Chi-square of the records of every group (docs/recordings.md section 3.2), with the baseline-adjusted
     covariance; flagged when p < alpha / (number of groups tested)."""
@@ -976,6 +1380,29 @@ def effect_estimates(diag: Diagnosis, name: str) -> dict:
     return out
 
 
+def unexplained_rest(diag: Diagnosis, top: int = 5) -> dict | None:
+    """Where the chi-square that remains after the refit concentrates (None when explained):
+    the groups of section 3.2 by their chi-square after the refit (with the refit's residual
+    covariance C - X cov X'), largest first, and the records with the largest |z| after."""
+    if not diag.mismatch or diag.explained:
+        return None
+    groups = [{k: v for k, v in g.items() if k != "logp"} for g in diag.groups_after[:top]]
+    z = diag.z_after
+    prep = diag.prep
+    if prep.design.kind == "length":
+        order = np.argsort(-np.abs(z), kind="stable")[:top]
+        recs = [{"id": prep.rec.ids[a], "residual_um": float(diag.resid_after[a]), "z": float(z[a])}
+                for a in order]
+    else:
+        dims = prep.design.dims
+        zz = np.sqrt(np.sum(z.reshape(prep.rec.n, dims) ** 2, axis=1))
+        order = np.argsort(-zz, kind="stable")[:top]
+        e = diag.resid_after.reshape(prep.rec.n, dims)
+        recs = [{"id": prep.rec.ids[i], "residual_um": float(np.linalg.norm(e[i])), "z": float(zz[i])}
+                for i in order]
+    return {"chi2_after": diag.chi2_after, "dof_after": diag.dof_after, "groups": groups, "records": recs}
+
+
 def _finite_or_none(v: float | None):
     if v is None or not math.isfinite(v):
         return None
@@ -1007,6 +1434,15 @@ def diagnosis_json(diag: Diagnosis) -> dict:
             out["not_identifiable"].append(item)
     # extensions (spec: new keys welcome)
     out["p_after"] = math.exp(chi2_logsf(diag.chi2_after, diag.dof_after)) if diag.dof_after > 0 else None
+    # second edition (docs/recordings.md section 7)
+    out["p_targeted"] = math.exp(diag.logp_targeted) if diag.targeted_K else None
+    out["gate"] = diag.gate
+    out["explained"] = diag.explained
+    out["outliers"] = diag.outliers if (diag.outlier_search or not diag.mismatch) else None
+    out["outliers_not_isolated"] = diag.outliers_not_isolated
+    out["with_outliers"] = diag.with_outliers
+    out["noise_scale"] = diag.noise_scale
+    out["unexplained"] = unexplained_rest(diag)
     out["log10_p_before"] = diag.logp_before / math.log(10)
     out["covariance_rank"] = diag.whitener.rank
     if is_structured(diag.prep):
@@ -1118,8 +1554,20 @@ def summary_text(diag: Diagnosis) -> str:
     if not diag.mismatch:
         return (f"the records agree with the simulation (chi2/dof {r:.2f}, p = "
                 f"{math.exp(diag.logp_before):.2g}); no effect is needed")
-    head = f"the records disagree with the simulation (chi2/dof {r:.2f})"
-    if not diag.chosen:
+    head = f"the records disagree with the simulation (chi2/dof {r:.2f}"
+    if diag.gate == "targeted":
+        head += f"; the omnibus test alone would pass, the targeted test fires: p = {math.exp(diag.logp_targeted):.2g}"
+    head += ")"
+    pieces = []
+    for o in diag.outliers:
+        pieces.append(f"record {o['id']} is a gross outlier (residual {o['residual_um']:.3g} µm, "
+                      f"z = {o['z']:.1f}, adjusted p = {o['p_adjusted']:.2g}) and is left out of the effect search")
+    if diag.noise_scale:
+        ns = diag.noise_scale
+        pieces.append(f"the residuals are uniformly larger than the simulation allows, with no structure a "
+                      f"candidate or group explains: the declared uncertainties are too small by a factor "
+                      f"{_fmt_pm(ns['estimate'], ns['u'])}" + ("" if diag.chosen else "; no physical effect is chosen"))
+    if not diag.chosen and not pieces:
         loc = diag.located[0] if diag.located else None
         tail = f"; the largest is {loc['id']} (z = {loc['z']:.1f})" if loc else ""
         return (head + "; none of the candidate effects explains it significantly: look at the records "
@@ -1141,8 +1589,23 @@ def summary_text(diag: Diagnosis) -> str:
         parts.append(f"{share * 100:.0f} % of the excess is explained by {eff.plain} of {val}"
                      + (f", {seen}" if seen else ""))
     after = diag.chi2_after / max(diag.dof_after, 1)
-    text = head + "; " + "; then ".join(parts) + \
-        f"; after adding {'it' if len(diag.chosen) == 1 else 'them'} chi2/dof is {after:.2f}"
+    text = head + "; " + "; ".join(pieces + (["; then ".join(parts)] if parts else []))
+    if diag.chosen or diag.outliers:
+        what = ("it" if len(diag.chosen) + len(diag.outliers) == 1 else "them")
+        text += f"; after {f'leaving {what} out' if not diag.chosen else f'adding {what}'} chi2/dof is {after:.2f}"
+    if not diag.explained and not diag.noise_scale:
+        rest = unexplained_rest(diag)
+        where = ""
+        if rest and rest["groups"] and rest["groups"][0]["flagged"]:
+            g = rest["groups"][0]
+            where = f"; the rest concentrates in {g['by']} {g['group']} (chi2 {g['chi2']:.1f} on {g['dof']} dof)"
+        elif rest and rest["records"]:
+            where = f"; no group stands out, the largest is {rest['records'][0]['id']} (z = {rest['records'][0]['z']:.1f})"
+        text += (f". This is not the whole story: what remains still fails (p_after = "
+                 f"{math.exp(diag.logp_after):.2g}){where}")
+    if diag.with_outliers is not None and diag.with_outliers["effects"] != diag.chosen:
+        kept = diag.with_outliers["effects"]
+        text += (". With the outliers kept the search would choose " + (", ".join(kept) if kept else "nothing"))
     groups: dict[tuple[str, str], list[str]] = {}
     for c in diag.candidates.values():
         if c.status == "aliased" and c.aliased_with in diag.chosen:
