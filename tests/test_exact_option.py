@@ -109,3 +109,14 @@ def test_diagnose_reports_the_structured_error_bound_and_exact_drops_it(tmp_path
     assert 0 < a["chi2_relative_error_bound"] <= 1e-8 and a["covariance_error_bound_um2"] > 0
     assert "approximation" not in exact
     assert approx["chi2_before"] == pytest.approx(exact["chi2_before"], rel=1e-8)
+
+
+def test_the_dense_memory_estimate_covers_the_measured_peaks():
+    """The guard in front of the dense path (also `diagnose --exact`) does not underestimate
+    the peaks measured by bench/bench_million.py equal: 2,777 MB at 2,000 point records and
+    15,319 MB at 5,000 (ru_maxrss, interpreter included)."""
+    from xlfuncs.memory import diagnose_bytes
+
+    assert diagnose_bytes("point", 2_000) >= 2_777 * 2**20
+    assert diagnose_bytes("point", 5_000) >= 15_319 * 2**20
+    assert diagnose_bytes("point", 5_000) <= 1.3 * 15_319 * 2**20     # and is no wild overestimate
