@@ -226,13 +226,17 @@ def load_task(task_path: Path):
 
 
 def build_task(task_path: Path, out_dir: Path, *, plots: bool = True, force: bool = False,
-               cache: str = "results") -> tuple[dict, list[Path]]:
+               cache: str = "results", exact: bool = False) -> tuple[dict, list[Path]]:
     """Build one task into ``out_dir``: workbook, JSON and plots, all or nothing.
 
     ``force``: replace outputs someone edited (keeping backups); ``cache``: which formula cells
-    get cached values for programs that do not calculate (see :mod:`generator.cache`)."""
+    get cached values for programs that do not calculate (see :mod:`generator.cache`);
+    ``exact``: no approximation even for large tasks (the job's ``force_exact``, if it has one:
+    a feature task's V_A; the other kinds are always exact)."""
     task_path = Path(task_path)
     kind, mod, doc, task = load_task(task_path)
+    if exact and hasattr(mod, "force_exact"):
+        mod.force_exact(task)
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)   # numpy's; a non-finite result is caught below

@@ -35,7 +35,7 @@ def cmd_build(args) -> int:
 
         require_libreoffice()   # before anything is written
     results, files = build_task(Path(args.task), Path(args.out), plots=not args.no_plots,
-                                force=args.force, cache=args.cache)
+                                force=args.force, cache=args.cache, exact=args.exact)
     if args.pdf:
         from .pdf import print_books
 
@@ -233,6 +233,9 @@ def parser() -> argparse.ArgumentParser:
                    help="cached values for programs that do not calculate: the Results sheet from the "
                         "JSON (default: results), every formula cell as the `formulas` engine computes it "
                         "(all; slow for big workbooks), or none")
+    s.add_argument("--exact", action="store_true",
+                   help="no approximation: a feature task's V_A by the exact O(m^2) sum even above "
+                        "100,000 points (default: the task's [feature] va_method, auto)")
     s.set_defaults(func=cmd_build)
 
     s = add_command(sub, "recalc", "recompute a workbook headlessly and print its Results",

@@ -59,6 +59,10 @@ def register(sub) -> None:
     s.add_argument("--no-workbook", action="store_true", help="skip the workbook (default: write it)")
     s.add_argument("--force", action="store_true",
                    help="replace outputs edited since cmmwb wrote them, keeping a backup (default: refuse)")
+    s.add_argument("--exact", action="store_true",
+                   help="the dense record covariance (exact, memory ~ n^2) even for large point records "
+                        "(default: above %d observations the structured operator, error bound in the "
+                        "JSON's approximation)" % dg.STRUCTURED_MIN_OBS)
     s.set_defaults(func=cmd_diagnose)
 
     s = add_command(sub, "simulate", "write recordings of a realistic layout with planted effects",
@@ -132,8 +136,9 @@ def _read(path: Path):
 
 def run_diagnose(rec_path: Path, model: dg.Model, out_dir: Path, *, alpha: float = 0.01, plots: bool = True,
                  workbook: bool = True, source: str = "", rec=None, task_label: str = "",
-                 force: bool = False) -> tuple[dict, list[Path]]:
-    """Diagnose ``rec_path`` into ``out_dir`` (all or nothing); returns the JSON and the files."""
+                 force: bool = False, exact: bool = False) -> tuple[dict, list[Path]]:
+    """Diagnose ``rec_path`` into ``out_dir`` (all or nothing); returns the JSON and the files.
+    ``exact``: the dense record covariance whatever the size (no structured approximation)."""
     from .build import Staging as _Staging
     from .diagnose_book import write_book, write_plots
 
@@ -141,13 +146,14 @@ def run_diagnose(rec_path: Path, model: dg.Model, out_dir: Path, *, alpha: float
     if not (0.0 < alpha < 1.0):
         raise InputError(f"--alpha must be between 0 and 1, got {alpha!r}")
     rec = _read(rec_path) if rec is None else rec
+    structured = dg.uses_structured(rec, model, False if exact else None)
     try:
         check_diagnose_fits(rec.kind, rec.n, 2 if getattr(rec, "planar", False) else 3,
-                            structured=dg.uses_structured(rec, model))
+                            structured=structured)
     except ResourceError as e:
         raise InputError(str(e), file=rec_path) from None
     try:
-        diag = dg.diagnose(rec, model, alpha)
+        diag = dg.diagnose(rec, model, alpha, structured=structured)
     except RecordingsError as e:
         raise InputError(e.message, file=rec_path, where=e.where) from None
     except ModelError as e:
@@ -170,7 +176,7 @@ def cmd_diagnose(args) -> int:
     model, label = load_model(args.task, args.sigma_um)
     result, files = run_diagnose(Path(args.recordings), model, Path(args.out), alpha=args.alpha,
                                  plots=not args.no_plots, workbook=not args.no_workbook, task_label=label,
-                                 force=args.force)
+                                 force=args.force, exact=args.exact)
     print(result["summary"])
     for f in files:
         print(f"  -> {f}")

@@ -84,7 +84,7 @@ def write_feature_book(task: Task, results: dict, path, *, native_max_points: in
     jac = _write_jacobian(book, f, local, labels)
     hs = _write_H(book, f, jac, labels)
     gx = _write_G(book, f, jac, hs)
-    va = _write_V_A(book, f, unc, gx, V)
+    va = _write_V_A(book, f, unc, gx, V, task.va_method)
     rows = _write_budget(book, f, va, fitref)
     if task.planning is not None:
         _write_planning(book, task, results)
@@ -155,7 +155,7 @@ def _instructions(book: Book, task: Task, f, native: bool, limit: int) -> None:
         book.para(
             f"4. This task has {f.m} points, more than the {limit} for which the 3m x 3m V_X matrices are "
             "laid out as native formulas: the V_X sheets are omitted and V_A of the factors PQ, S, ET, ER and "
-            f"P on 'V_A' are VALUES computed when the workbook was built by {propagation_method(f.m)} "
+            f"P on 'V_A' are VALUES computed when the workbook was built by {propagation_method(f.m, task.va_method)} "
             f"(cmmwb {__version__}), marked grey with a note; they do not follow edits of the inputs. J, H, "
             "G and the R factor remain formulas.",
             f"5. '{LIVE}' holds the same numbers as formulas of the cmmwb Excel add-in (xlwings user-defined "
@@ -464,7 +464,7 @@ def gn_step_block(n: int) -> Block:
     return Block("H", 3 + n + 2 + n + 2, 2, n, 1)
 
 
-def _write_V_A(book: Book, f, unc, G: Block, V) -> dict:
+def _write_V_A(book: Book, f, unc, G: Block, V, va_method: str = "auto") -> dict:
     ws = book.sheet("V_A")
     n, g = f.n, len(f.names)
     names, lnames = list(f.names), list(f.local_names)
@@ -513,7 +513,7 @@ def _write_V_A(book: Book, f, unc, G: Block, V) -> dict:
                                 computed=True)
             book.note(ws.cell(row=top, column=vb.column),
                       f"VALUES, not formulas: V_A,{fac} = G_A|X V_{fac} G_A|X^T computed at build "
-                      f"time by {propagation_method(f.m)} (cmmwb {__version__}); V_X "
+                      f"time by {propagation_method(f.m, va_method)} (cmmwb {__version__}); V_X "
                       f"({3 * f.m} x {3 * f.m}) is too large for native formulas. In units of 1e-12 "
                       f"(mm^2 -> nm^2, rad^2 -> (µrad)^2), scaled back on the left. Live: the same "
                       f"cells on sheet {LIVE} (add-in function cmm_feature_va)")

@@ -6,7 +6,8 @@ Task file::
 
     [task]      kind = "feature", name, notes
     [feature]   type (line | plane | circle | sphere | cylinder | cone), circle_plane,
-                axis_hint, reference_mm, weights = {point id = w}, max_iter
+                axis_hint, reference_mm, weights = {point id = w}, max_iter,
+                va_method (auto | exact | lowrank: how V_A of large clouds is computed)
     [points]    file = "points.csv"          (id,x,y,z,nx,ny,nz,probe)   -- or --
     [sampling]  pattern = "cylinder_patch", geometry keys, counts, center_mm, axis, ref_dir, probe
     [planning]  pattern, sweep, values, geometry keys, m_points   (optional)
@@ -131,6 +132,7 @@ class Task:
     sampling: dict | None = None
     planning: Planning | None = None
     notes: list[str] = field(default_factory=list)
+    va_method: str = "auto"           # [feature] va_method, or "exact" by cmmwb build --exact
     _fit: object = None
     _unc: object = None
 
@@ -199,7 +201,7 @@ def load(path: Path, doc: dict) -> Task:
 
     f = table(path, doc, "feature")
     check_keys(path, f, "feature", {"type", "circle_plane", "axis_hint", "reference_mm",
-                                    "weights", "max_iter"})
+                                    "weights", "max_iter", "va_method"})
     element = string(path, f, "feature", "type")
     if element not in ft.ELEMENTS:
         raise InputError(f"unknown feature type {element!r}; expected one of "
@@ -217,6 +219,10 @@ def load(path: Path, doc: dict) -> Task:
     axis_hint = _unit_vector(path, f, "feature", "axis_hint") if "axis_hint" in f else None
     reference = vector3(path, f, "[feature]", "reference_mm") if "reference_mm" in f else None
     max_iter = _integer(path, f, "feature", "max_iter", 100)
+    method = string(path, f, "feature", "va_method", "auto")
+    if method not in VA_METHODS:
+        raise InputError(f"must be one of {', '.join(VA_METHODS)}, got {method!r}", file=path,
+                         where="[feature] va_method")
 
     has_points, has_sampling = "points" in doc, "sampling" in doc
     if has_points == has_sampling:
@@ -254,7 +260,7 @@ def load(path: Path, doc: dict) -> Task:
     planning = _read_planning(path, doc, element, circle_plane, sampling, cloud.m) \
         if "planning" in doc else None
     return Task(path, name, element, circle_plane, cloud, params, weights, axis_hint, reference,
-                max_iter, source, sampling, planning, list(notes))
+                max_iter, source, sampling, planning, list(notes), method)
 
 
 def _weight(path, w: dict, lab: str) -> float:
@@ -392,16 +398,26 @@ def _safe_rows(path, plan: Planning):
 DENSE_MAX_POINTS = 300
 #: beyond this many points the GP factors (ET, ER, P) of V_A go through the controlled low-rank
 #: factor of xlfuncs.lowrank (time linear in m; results carry "approximation" with its error
-#: bound); CMMWB_VA_METHOD=exact forces the exact O(m^2) blocked sum, =lowrank the factor at
-#: any size
+#: bound); "exact" (task key [feature] va_method, cmmwb build --exact, or CMMWB_VA_METHOD)
+#: forces the exact O(m^2) blocked sum, "lowrank" the factor at any size
 LOWRANK_MIN_POINTS = 100_000
 VA_METHOD_ENV = "CMMWB_VA_METHOD"
+VA_METHODS = ("auto", "exact", "lowrank")
 
 
-def va_method(m: int) -> str:
-    """"exact" or "lowrank" for V_A of m points (see LOWRANK_MIN_POINTS)."""
+def force_exact(task: Task) -> None:
+    """``cmmwb build --exact``: V_A by the exact method whatever the task or environment say."""
+    task.va_method = "exact"
+
+
+def va_method(m: int, requested: str = "auto") -> str:
+    """"exact" or "lowrank" for V_A of m points: ``requested`` (the task's ``[feature]
+    va_method`` or ``build --exact``) unless "auto", then the environment variable
+    CMMWB_VA_METHOD unless unset or "auto", then by size (see LOWRANK_MIN_POINTS)."""
     import os
 
+    if requested in ("exact", "lowrank"):
+        return requested
     choice = os.environ.get(VA_METHOD_ENV, "").strip().lower()
     if choice in ("exact", "lowrank"):
         return choice
@@ -410,13 +426,13 @@ def va_method(m: int) -> str:
     return "lowrank" if m > LOWRANK_MIN_POINTS else "exact"
 
 
-def propagation_method(m: int) -> str:
+def propagation_method(m: int, requested: str = "auto") -> str:
     """The core function :func:`fitted` uses for V_A = G V_X G^T of m points, as the workbook
     notes name it (the grey V_A values above the native-formula limit)."""
     if m <= DENSE_MAX_POINTS:
         return ("xlfuncs.features.propagate of the dense V_X of xlfuncs.pointcloud.V_X_components "
                 f"({3 * m} x {3 * m})")
-    if va_method(m) == "lowrank":
+    if va_method(m, requested) == "lowrank":
         return ("xlfuncs.blocked.propagate_cloud with the low-rank GP factors of xlfuncs.lowrank "
                 "(error bound in the results' approximation)")
     return "xlfuncs.blocked.propagate_cloud (G V_X G^T in row blocks, V_X never formed)"
@@ -438,7 +454,7 @@ def fitted(task: Task):
             else:  # V_X would not fit in memory: G V_X G^T in row blocks (xlfuncs.blocked)
                 task._unc = bl.propagate_cloud(f, task.cloud, task.params, backend=get_backend(),
                                                progress=bl.ProgressBar(f"V_A of {task.cloud.m} points"),
-                                               method=va_method(task.cloud.m))
+                                               method=va_method(task.cloud.m, task.va_method))
         except ModelError as e:
             raise InputError(str(e), file=task.path, where="[parameters]") from None
         task._fit = f
@@ -604,6 +620,8 @@ type = "cylinder"               # line | plane | circle | sphere | cylinder | co
 # reference_mm = [0, 0, 0]      # locating point = point of the axis nearest to this point
 #                               # (default: centroid of the points); a cone's r0 is taken there
 # weights = { X3 = 0.5, X7 = 0 } # w_i of Forbes 2022 eq. (11) by point id (default 1)
+# va_method = "auto"            # V_A of large clouds: auto (exact up to 100,000 points, then the
+#                               # low-rank GP factors with an error bound in the JSON) | exact | lowrank
 
 # The points: either a file ...
 # [points]

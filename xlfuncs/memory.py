@@ -21,7 +21,11 @@ from .errors import ModelError
 #: n x n matrices alive at the peak of a length-record diagnosis (6 factors, sum, factor, spare)
 LENGTH_MATRICES = 10
 #: (dims n) x (dims n) matrices alive at the peak of a point-record diagnosis, besides V_X
-POINT_MATRICES = 6
+#: (measured with V_X: 2,777 MB at 2,000 records, 15,319 MB at 5,000, about 9.7 and 8.9 doubles
+#: per (3n)^2 entry, bench/results/million_equal.md; 6 underestimated by 30 %)
+POINT_MATRICES = 9
+#: dense point-record diagnosis: the interpreter, numpy and the records besides the matrices
+POINT_BASE_BYTES = 256 * 2**20
 #: structured point-record diagnosis: a fixed part and bytes per record (measured ~6 KB, with margin)
 STRUCTURED_BASE_BYTES = 512 * 2**20
 STRUCTURED_BYTES_PER_RECORD = 8 * 2**10
@@ -39,7 +43,7 @@ def diagnose_bytes(kind: str, n_records: int, dims: int = 3, structured: bool = 
         return STRUCTURED_BASE_BYTES + STRUCTURED_BYTES_PER_RECORD * n
     if kind == "length":
         return 8 * LENGTH_MATRICES * n * n
-    return 8 * ((3 * n) ** 2 + POINT_MATRICES * (dims * n) ** 2)
+    return POINT_BASE_BYTES + 8 * ((3 * n) ** 2 + POINT_MATRICES * (dims * n) ** 2)
 
 
 def available_bytes() -> int:
@@ -84,8 +88,9 @@ def check_diagnose_fits(kind: str, n_records: int, dims: int = 3, available: int
     if structured and kind != "length":
         fits = max((have - STRUCTURED_BASE_BYTES) // STRUCTURED_BYTES_PER_RECORD, 0)
     else:
-        per_n2 = diagnose_bytes(kind, 1, dims)          # the estimate is a multiple of n^2
-        fits = max(int(math.isqrt(max(have, 0) // per_n2)), 0)
+        base = diagnose_bytes(kind, 0, dims)            # the estimate is base + per_n2 n^2
+        per_n2 = diagnose_bytes(kind, 1, dims) - base
+        fits = max(int(math.isqrt(max(have - base, 0) // per_n2)), 0)
     raise ResourceError(f"diagnosing {n_records:,} {kind} records needs about {_gib(need)} of memory, "
                         f"{_gib(have)} are available: at most about {fits:,} records fit; split the "
                         "recordings into smaller files (e.g. by group) and diagnose each")
