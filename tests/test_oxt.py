@@ -78,19 +78,20 @@ def installed_extension(tmp_path_factory):
     return cache, profile
 
 
-def _relink_and_recalc(book: Path, ext, out_json: Path, *settings: str) -> dict:
+def _relink_and_recalc(book: Path, ext, out_json: Path, *settings: str, relink: bool = True) -> dict:
     import json
     import subprocess
     cache, profile = ext
     cmd = [LO_PYTHON, str(RELINK), str(book), "--json", str(out_json), "--cache", str(cache),
-           "--profile", str(profile), *(f"--set={s}" for s in settings)]
+           "--profile", str(profile), *(f"--set={s}" for s in settings)] + ([] if relink else ["--no-relink"])
     run = subprocess.run(cmd, capture_output=True, text=True, timeout=590)
     assert run.returncode == 0, run.stderr
     return json.loads(out_json.read_text())
 
 
 @pytest.mark.libreoffice
-def test_live_addin_sheet_follows_an_edited_input_in_libreoffice(tmp_path, installed_extension):
+@pytest.mark.parametrize("extra_points", [130, 1880])  # m = 250 and the m = 2000 book of the docs
+def test_live_addin_sheet_follows_an_edited_input_in_libreoffice(tmp_path, installed_extension, extra_points):
     from test_large_workbook import evaluate_addin_formulas, write_large_task
     import openpyxl
     from conftest import close
@@ -98,7 +99,7 @@ def test_live_addin_sheet_follows_an_edited_input_in_libreoffice(tmp_path, insta
     from generator.cli import build_task
     from generator.vx_sheets import NATIVE_MAX_POINTS
 
-    m = NATIVE_MAX_POINTS + 130
+    m = NATIVE_MAX_POINTS + extra_points
     build_task(write_large_task(tmp_path, m, "plate"), tmp_path / "out", plots=False)
     book = tmp_path / "out" / "plate.xlsx"
     inputs = openpyxl.load_workbook(book)["Inputs"]
@@ -121,3 +122,43 @@ def test_live_addin_sheet_follows_an_edited_input_in_libreoffice(tmp_path, insta
     for r in range(2, m + 2):
         for col in "CDEFGHIJK":
             assert close(live[f"{col}{r}"], gp[f"{col}{r}"] * 1.75 ** 2, rel=1e-9, floor=1e-15), f"{col}{r}"
+
+
+def _small_large_book(folder: Path) -> Path:
+    from test_large_workbook import write_large_task
+    from generator.cli import build_task
+    from generator.vx_sheets import NATIVE_MAX_POINTS
+    build_task(write_large_task(folder, NATIVE_MAX_POINTS + 10, "plate"), folder / "out", plots=False)
+    return folder / "out" / "plate.xlsx"
+
+
+@pytest.mark.libreoffice
+def test_relink_saves_an_ods_whose_live_addin_computes_on_opening(tmp_path, installed_extension):
+    from test_large_workbook import evaluate_addin_formulas
+    from conftest import close
+    from generator import large_book
+    cache, profile = installed_extension
+    book = _small_large_book(tmp_path)
+    ods = tmp_path / "plate.ods"
+    assert main(["addin", "relink", str(book), "--out", str(ods), "--profile", str(profile),
+                 "--cache", str(cache)]) == 0
+    with zipfile.ZipFile(ods) as zf:
+        content = zf.read("content.xml").decode()
+    assert content.count('formula="of:=ORG.CMMWB.CALC.CMMWBADDIN.') == 4 and 'of:=cmm_' not in content
+    # opened as saved (no relinking), the add-in cells compute the core's numbers
+    values = _relink_and_recalc(ods, installed_extension, tmp_path / "values.json", relink=False)["values"]
+    expected = evaluate_addin_formulas(book, values)
+    live = values[large_book.LIVE]
+    assert expected and all(close(live.get(k), e, rel=1e-9, floor=1e-15) for k, e in expected.items())
+
+
+@pytest.mark.libreoffice
+def test_relink_without_the_extension_names_the_problem_and_writes_nothing(tmp_path, capsys):
+    if not _lo_python_ready():
+        pytest.skip("needs LibreOffice's Python with uno and numpy")
+    book = _small_large_book(tmp_path)
+    ods = tmp_path / "plate.ods"
+    assert main(["addin", "relink", str(book), "--out", str(ods), "--profile", str(tmp_path / "empty")]) == 2
+    assert not ods.exists()
+    err = capsys.readouterr().err
+    assert "plate.xlsx" in err and "extension is not installed" in err

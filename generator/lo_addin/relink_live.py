@@ -14,6 +14,7 @@ environment::
 
     /usr/bin/python3 relink_live.py BOOK.xlsx --out BOOK.ods [--profile DIR] [--cache DIR]
     /usr/bin/python3 relink_live.py BOOK.xlsx --json OUT.json [--set sigma_ET_um=0.3] ...
+    /usr/bin/python3 relink_live.py BOOK.ods --no-relink --json OUT.json ...
 
 ``--profile`` is the LibreOffice user profile (default: the user's own, where ``unopkg add``
 installs), ``--cache`` the ``UNO_SHARED_PACKAGES_CACHE`` of a private ``unopkg add --shared``.
@@ -81,6 +82,9 @@ def relink(doc) -> int:
     blocks = live_blocks(sheet)
     for rng, formula in blocks:
         rng.setArrayFormula(_calc_separators(formula))
+        if "ORG.CMMWB.CALC." not in rng.getCellByPosition(0, 0).getFormula().upper():
+            raise SystemExit(f"{LIVE}: {formula[:40]}... does not resolve to the cmmwb add-in: the extension "
+                             "is not installed in this LibreOffice profile (unopkg add cmmwb.oxt)")
     return len(blocks)
 
 
@@ -148,6 +152,8 @@ def main(argv=None) -> int:
     ap.add_argument("--json", help="write {sheet: {cell: value}} after recalculation to this file")
     ap.add_argument("--profile")
     ap.add_argument("--cache")
+    ap.add_argument("--no-relink", action="store_true",
+                    help="only recalculate (for a book already relinked, e.g. the saved .ods)")
     ap.add_argument("--set", action="append", default=[], metavar="NAME=VALUE")
     a = ap.parse_args(argv)
     book = Path(a.book).resolve()
@@ -161,7 +167,7 @@ def main(argv=None) -> int:
         doc = desktop.loadComponentFromURL(book.as_uri(), "_blank", 0, (_pv("Hidden", True),))
         timing["load_s"] = time.perf_counter() - t0
         t0 = time.perf_counter()
-        n = relink(doc)
+        n = 0 if a.no_relink else relink(doc)
         for item in a.set:
             name, value = item.split("=", 1)
             set_parameter(doc, name.strip(), float(value))
