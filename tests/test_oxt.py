@@ -162,3 +162,34 @@ def test_relink_without_the_extension_names_the_problem_and_writes_nothing(tmp_p
     assert not ods.exists()
     err = capsys.readouterr().err
     assert "plate.xlsx" in err and "extension is not installed" in err
+
+
+@pytest.mark.libreoffice
+def test_live_addin_of_a_feature_workbook_computes_in_libreoffice(tmp_path, installed_extension):
+    """The large feature workbook (120-point bore, protected sheets, optional arguments): every
+    Live_addin cell after an edit of sigma_ET_um equals the core for the edited inputs."""
+    from test_large_feature_workbook import evaluate_live, write_bore_task
+    import openpyxl
+    from conftest import close
+    from generator import large_book
+    from generator.cli import build_task
+
+    build_task(write_bore_task(tmp_path), tmp_path / "out", plots=False)
+    book = tmp_path / "out" / "bore120.xlsx"
+    inputs = openpyxl.load_workbook(book)["Inputs"]
+    row = next(r for r in range(1, 40) if inputs.cell(r, 1).value == "sigma_ET_um")
+    sigma_after = 1.75 * inputs.cell(row, 2).value
+
+    got = _relink_and_recalc(book, installed_extension, tmp_path / "values.json", f"sigma_ET_um={sigma_after!r}")
+    values = got["values"]
+    assert values["Inputs"][f"B{row}"] == sigma_after
+    live = values[large_book.LIVE]
+    expected = evaluate_live(book, values)
+    numbers = [abs(e) for e in expected.values() if isinstance(e, float)]
+    floor = 1e-15 * max(numbers)  # structural zeros: rounding noise of the largest entry
+    assert len(numbers) > 100
+    for cell, e in expected.items():
+        if isinstance(e, str):
+            assert live.get(cell) == e, cell
+        else:
+            assert close(live.get(cell), float(e), rel=1e-9, floor=floor), f"{cell}: {live.get(cell)!r} != {e!r}"

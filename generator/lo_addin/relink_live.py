@@ -79,12 +79,19 @@ def relink(doc) -> int:
     """Enter every array formula of ``Live_addin`` again so that Calc binds the names to the
     add-in; returns the number of formulas."""
     sheet = doc.Sheets.getByName(LIVE)
+    protected = sheet.isProtected()
+    if protected:  # cmmwb protects its sheets without password; a protected range ignores setArrayFormula
+        sheet.unprotect("")
+        if sheet.isProtected():
+            raise SystemExit(f"{LIVE}: the sheet is protected with a password; unprotect it first")
     blocks = live_blocks(sheet)
     for rng, formula in blocks:
         rng.setArrayFormula(_calc_separators(formula))
-        if "ORG.CMMWB.CALC." not in rng.getCellByPosition(0, 0).getFormula().upper():
+        if "cmm_" in formula.lower() and "ORG.CMMWB.CALC." not in rng.getCellByPosition(0, 0).getFormula().upper():
             raise SystemExit(f"{LIVE}: {formula[:40]}... does not resolve to the cmmwb add-in: the extension "
                              "is not installed in this LibreOffice profile (unopkg add cmmwb.oxt)")
+    if protected:
+        sheet.protect("")
     return len(blocks)
 
 
