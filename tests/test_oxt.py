@@ -69,10 +69,10 @@ def installed_extension(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("lo_ext")
     assert main(["addin", "build-oxt", "--out", str(tmp / "cmmwb.oxt")]) == 0
     cache, profile = tmp / "cache", tmp / "profile"
-    # unopkg reports "failed" for the Python component registered before the type library is
-    # active (docs/addins.md); 'unopkg list' is the check that every part is registered
     env = [f"-env:UNO_SHARED_PACKAGES_CACHE={cache.as_uri()}", f"-env:UserInstallation={profile.as_uri()}"]
-    subprocess.run(["unopkg", "add", "--shared", *env, str(tmp / "cmmwb.oxt")], capture_output=True, timeout=300)
+    added = subprocess.run(["unopkg", "add", "--shared", *env, str(tmp / "cmmwb.oxt")], capture_output=True,
+                           text=True, timeout=300)
+    assert added.returncode == 0, added.stderr
     listed = subprocess.run(["unopkg", "list", "--shared", *env], capture_output=True, text=True, timeout=300)
     assert "org.cmmwb.calc" in listed.stdout and "cmmwb_calc.py" in listed.stdout
     return cache, profile
