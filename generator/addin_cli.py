@@ -55,21 +55,38 @@ def cmd_relink(args) -> int:
 
 
 def register(sub) -> None:
-    s = sub.add_parser("addin", help="the spreadsheet add-ins (see docs/addins.md)")
-    verbs = s.add_subparsers(dest="addin_command", required=True)
-    b = verbs.add_parser("build-oxt", help="write the LibreOffice Calc add-in extension (.oxt); "
-                                           "install it with: unopkg add FILE.oxt")
-    b.add_argument("--out", required=True, help="extension file to write, e.g. cmmwb.oxt")
-    b.add_argument("--force", action="store_true", help="overwrite an existing file")
+    from .cli import add_command
+
+    s = add_command(sub, "addin", "the spreadsheet add-ins (see docs/addins.md)",
+                    "The optional add-ins that compute the Gaussian-process blocks of large workbooks: "
+                    "the LibreOffice Calc extension and the relinking of a large workbook so its "
+                    "Live_addin sheet computes in Calc. Excel uses xlwings instead (docs/addins.md).",
+                    ("cmmwb addin build-oxt --out cmmwb.oxt && unopkg add cmmwb.oxt",
+                     "cmmwb addin relink plate.xlsx --out plate.ods"))
+    verbs = s.add_subparsers(dest="addin_command", required=True, metavar="VERB")
+    b = add_command(verbs, "build-oxt", "write the LibreOffice Calc add-in extension (.oxt)",
+                    "Writes the LibreOffice Calc add-in (the functions of the Live_addin sheet) as an "
+                    "extension file; install it with 'unopkg add FILE.oxt' (needs LibreOffice's "
+                    "Python script provider and python3-numpy).",
+                    ("cmmwb addin build-oxt --out cmmwb.oxt", "unopkg add cmmwb.oxt"))
+    b.add_argument("--out", required=True, metavar="FILE.oxt",
+                   help="extension file to write, e.g. cmmwb.oxt (required)")
+    b.add_argument("--force", action="store_true", help="overwrite an existing file (default: refuse)")
     b.set_defaults(func=cmd_build_oxt)
-    r = verbs.add_parser("relink", help="save a large workbook as .ods whose Live_addin formulas compute "
-                                        "in LibreOffice with the installed add-in (docs/addins.md)")
+    r = add_command(verbs, "relink", "save a large workbook as .ods whose Live_addin computes in Calc",
+                    "Opens a large workbook written by cmmwb build in LibreOffice, re-enters its "
+                    "Live_addin formulas so they bind to the installed cmmwb extension, recalculates "
+                    "and saves it as .ods (LibreOffice 7.4 does not bind add-in names read from "
+                    ".xlsx). Needs soffice and LibreOffice's Python with uno.",
+                    ("cmmwb addin relink plate.xlsx --out plate.ods",
+                     "cmmwb addin relink plate.xlsx --out plate.ods --profile ~/.config/libreoffice/4"))
     r.add_argument("book", help="large workbook (.xlsx) written by cmmwb build")
-    r.add_argument("--out", required=True, help="LibreOffice workbook to write, e.g. plate.ods")
-    r.add_argument("--force", action="store_true", help="overwrite an existing file")
-    r.add_argument("--profile", help="LibreOffice user profile folder that has the extension "
-                                     "(default: your own profile)")
-    r.add_argument("--cache", help="UNO_SHARED_PACKAGES_CACHE folder of a private "
-                                   "'unopkg add --shared' installation")
-    r.add_argument("--lo-python", help=f"LibreOffice's Python (default {LO_PYTHON})")
+    r.add_argument("--out", required=True, metavar="FILE.ods",
+                   help="LibreOffice workbook to write, e.g. plate.ods (required)")
+    r.add_argument("--force", action="store_true", help="overwrite an existing file (default: refuse)")
+    r.add_argument("--profile", metavar="DIR", help="LibreOffice user profile folder that has the "
+                                                    "extension (default: your own profile)")
+    r.add_argument("--cache", metavar="DIR", help="UNO_SHARED_PACKAGES_CACHE folder of a private "
+                                                  "'unopkg add --shared' installation (default: none)")
+    r.add_argument("--lo-python", metavar="PYTHON", help=f"LibreOffice's Python (default {LO_PYTHON})")
     r.set_defaults(func=cmd_relink)
