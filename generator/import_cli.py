@@ -23,17 +23,21 @@ def register(sub) -> None:
     s = add_command(sub, "import", "QIF measured points (or Q-DAS AQDEF values) -> task file + points CSV",
                     "Reads the measured points of a QIF results file (ISO 23952: points, normals, probe "
                     "and nominal where given) into a pointcloud or feature task with its points table, "
-                    "units converted to mm and stated in the task notes; what the file holds but cmmwb "
-                    "does not use is named, never dropped silently. Details: docs/import.md.",
+                    "or (--out FILE.csv) into point recordings for cmmwb diagnose, each point against "
+                    "its closest point on the file's nominal element; units converted to mm and stated; "
+                    "what the file holds but cmmwb does not use is named, never dropped silently. "
+                    "Details: docs/import.md.",
                     ("cmmwb import part.qif --out bore.toml --feature BORE_1 && cmmwb build bore.toml --out bore",
-                     "cmmwb import part.qif --out gauge.toml --feature SPH_1 --feature SPH_2   # a pointcloud task"))
+                     "cmmwb import part.qif --out gauge.toml --feature SPH_1 --feature SPH_2   # a pointcloud task",
+                     "cmmwb import part.qif --out part.csv && cmmwb diagnose part.csv --task bore.toml --out diag"))
     s.add_argument("file", metavar="FILE",
                    help="a QIF file (.qif) or an AQDEF file (.dfq, .dfd with its .dfx)")
     s.add_argument("--out", required=True, help="task file to write (.toml; the points go to the .csv "
                                                 "of the same name) or recordings (.csv)")
     s.add_argument("--feature", action="append", metavar="NAME",
                    help="feature to import (FeatureName or id; repeat for a pointcloud task of several; "
-                        "required: without it the command lists the file's features)")
+                        "required for a task: without it the command lists the file's features; for "
+                        "recordings default: every feature with a nominal plane, circle, cylinder or sphere)")
     s.add_argument("--kind", choices=("feature", "pointcloud"),
                    help="task kind (default: feature for one --feature, pointcloud for several)")
     s.add_argument("--normals", choices=("file", "from-feature"), default="file",

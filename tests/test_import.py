@@ -40,16 +40,19 @@ def test_circle_from_qif_builds_and_its_radius_matches_the_file(tmp_path):
     assert 0 < results["feature"]["u"]["r0_mm"] < 1e-3
 
 
-def test_cylinder_normals_point_away_from_the_axis_when_external(tmp_path):
+def test_cylinder_side_comes_from_the_tip_centres_when_the_file_does_not_say(tmp_path):
+    # CYL_1's definition says NOT_APPLICABLE, but its tip centres lie at 12.56 mm = D/2 - r
+    # (D = 30 mm, r = 2.5 mm): a bore, so the outward normals point towards the axis
     doc = qif.read_qif(SAMPLE)
     f = doc.feature("CYL_1")
-    X = doc.points_of(f).X_mm
-    N, sentence = qif.normals_from_feature(doc, f, X)
-    a = f.geometry["Direction"] / np.linalg.norm(f.geometry["Direction"])
-    r = X - f.geometry["AxisPoint"]
+    ps = doc.points_of(f)
+    N, sentence = qif.normals_from_feature(doc, f, ps)
+    a = f.geometry["Direction"]
+    r = ps.X_mm - f.geometry["AxisPoint"]
     r -= np.outer(r @ a, a)
     assert np.allclose(np.linalg.norm(N, axis=1), 1, atol=1e-12)
-    assert np.all(np.einsum("ij,ij->i", N, r) > 0) and "EXTERNAL" in sentence
+    assert np.all(np.einsum("ij,ij->i", N, r) < 0)
+    assert "INTERNAL: the file does not say, the tip centres lie at D/2 - the probe radius" in sentence
 
 
 def test_points_without_normals_need_an_explicit_choice(tmp_path):
@@ -58,9 +61,54 @@ def test_points_without_normals_need_an_explicit_choice(tmp_path):
     assert not any(tmp_path.iterdir())
 
 
-def test_point_recordings_need_nominal_points(tmp_path, capsys):
-    assert main(["import", str(SAMPLE), "--feature", "CIRCLE1", "--out", str(tmp_path / "r.csv")]) == 2
-    assert "need the nominal of every measured point" in capsys.readouterr().err
+def read_recordings(path):
+    import csv
+
+    rows = list(csv.DictReader(line for line in path.open() if not line.startswith("#")))
+    return {r["id"]: r for r in rows}
+
+
+def test_point_recordings_put_each_point_against_its_nominal_element(tmp_path):
+    files, report = run_import(SAMPLE, tmp_path / "rec.csv")
+    rec = read_recordings(files[0])
+    # every feature with a nominal plane, circle or cylinder; the points (POINT1 ...) are named
+    groups = {r["group"] for r in rec.values()}
+    assert groups == {"DATUMA", "DATUMB", "CIRCLE1", "CIRCLE2", "CYL_1"} and len(rec) == 681
+    assert any("POINT1" in line and "not imported as recordings" in line for line in report)
+    r_probe = 2.49978271104
+    c1 = [r for r in rec.values() if r["group"] == "CIRCLE1"]
+    X_nom = np.array([[float(r[k]) for k in ("x_nom", "y_nom", "z_nom")] for r in c1])
+    X = np.array([[float(r[k]) for k in ("x", "y", "z")] for r in c1])
+    N = np.array([[float(r[k]) for k in ("nx", "ny", "nz")] for r in c1])
+    # nominal circle: centre (-33.05, -4.35), D = 12 mm, INTERNAL, axis -z; tip centres at 6 - r
+    radial = X_nom[:, :2] - [-33.05, -4.35]
+    assert np.allclose(np.linalg.norm(radial, axis=1), 6 - r_probe, rtol=0, atol=1e-12)
+    assert np.array_equal(X_nom[:, 2], X[:, 2])                      # compared in the circle's plane
+    assert np.allclose(N[:, :2], -radial / (6 - r_probe), atol=1e-12)  # a hole: towards the axis
+    # the measured point lies on the line through its nominal point along the normal
+    d = X - X_nom
+    assert np.allclose(d - np.einsum("ij,ij->i", d, N)[:, None] * N, 0, atol=1e-12)
+    # the nominal plane z = 0 (normal +z) offset by the probe radius
+    assert float(rec["DATUMA_1"]["z_nom"]) == pytest.approx(r_probe, abs=1e-12)
+
+
+def test_imported_recordings_diagnose_and_a_part_deviation_stays_unexplained(tmp_path):
+    # CIRCLE1 is 96 µm larger than its 12 mm nominal and off its nominal position by about
+    # 0.15 mm: the part's own deviations, which no machine effect models; the locator must say so
+    run_import(SAMPLE, tmp_path / "rec.csv", features=["CIRCLE1", "DATUMA"])
+    run_import(SAMPLE, tmp_path / "machine.toml", features=["CIRCLE1"], normals="from-feature")
+    assert main(["diagnose", str(tmp_path / "rec.csv"), "--task", str(tmp_path / "machine.toml"),
+                 "--out", str(tmp_path / "d"), "--no-plots", "--no-workbook"]) == 0
+    d = json.loads((tmp_path / "d" / "diagnosis.json").read_text())
+    assert d["records"] == 225 and d["p_before"] < 1e-10
+    assert d["explained"] is False and d["p_after"] < 1e-10
+
+
+def test_point_recordings_of_a_feature_without_a_nominal_element_are_refused(tmp_path, capsys):
+    assert main(["import", str(SAMPLE), "--feature", "POINT1", "--out", str(tmp_path / "r.csv")]) == 2
+    err = capsys.readouterr().err
+    assert "POINT1 is a point: nominal points are computed on nominal plane, circle, cylinder, sphere" in err
+    assert not any(tmp_path.iterdir())
 
 
 def test_inch_files_are_converted_to_mm(tmp_path):

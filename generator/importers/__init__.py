@@ -45,10 +45,8 @@ def run_import(src: Path, out: Path, *, features: list[str] | None = None, kind:
               "frame: the file's primary coordinate system (sets in other frames are refused)"]
     report += [f"not imported: {s}" for s in doc.not_read]
     if out.suffix.lower() == ".csv":
-        raise InputError("point recordings (recordings.md 1b: x_nom,y_nom,z_nom,x,y,z,...) need the "
-                         "nominal of every measured point; this QIF file gives measured points and "
-                         "nominal features (elements), not nominal points -- import it as a task "
-                         "(--out TASK.toml) instead", file=src)
+        files, lines = _write_recordings(doc, src, out, features, force)
+        return files, report + lines
     if out.suffix.lower() != ".toml":
         raise InputError("--out must be a task file (.toml) or recordings (.csv)", file=out)
     if not features:
@@ -70,7 +68,7 @@ def run_import(src: Path, out: Path, *, features: list[str] | None = None, kind:
                                  "model needs them (Forbes 2025 eq. (26)); give --normals from-feature to "
                                  "take them from the measured element (stated in the task notes)",
                                  file=src, where=ps.where)
-            n, sentence = qif.normals_from_feature(doc, f, ps.X_mm)
+            n, sentence = qif.normals_from_feature(doc, f, ps)
             notes.append(sentence)
         if ps.compensated is False:
             notes.append(f"{f.name}: Compensated = false, the coordinates are stylus-tip centres"
@@ -89,6 +87,52 @@ def run_import(src: Path, out: Path, *, features: list[str] | None = None, kind:
                          f"{', '.join(qif.ELEMENTS.values())}", file=src)
     files = _write_task(out, kind, feat, X, N, labels, notes, force)
     return files, report + notes[1:]
+
+
+def _write_recordings(doc, src: Path, out: Path, features: list[str] | None,
+                      force: bool) -> tuple[list[Path], list[str]]:
+    """Point recordings (docs/recordings.md 1b) of the chosen features (default: every feature
+    with a nominal plane, circle, cylinder or sphere): measured points against their closest
+    points on the nominal elements (:func:`qif.nominal_points`), one ``group`` per feature."""
+    from . import qif
+
+    if features:
+        chosen = [doc.feature(k) for k in features]
+    else:
+        chosen = [f for f in doc.features if f.kind in qif.PROJECTABLE and f.nominal]
+        if not chosen:
+            raise InputError("no feature with a nominal plane, circle, cylinder or sphere to compute "
+                             "nominal points on", file=src)
+    lines = [f"nominal points: the closest points on the file's nominal elements "
+             f"(FeatureNominal + the Diameter of its definition), {len(chosen)} features"]
+    skipped = [f.name for f in doc.features if f not in chosen]
+    if skipped and not features:
+        lines.append("not imported as recordings (no nominal plane, circle, cylinder or sphere): "
+                     + ", ".join(skipped))
+    if out.exists() and not force:
+        raise InputError("exists already (use --force to overwrite)", file=out)
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    buf.write(f"# imported by cmmwb import from {_comment(src.name)} (QIF {doc.version}): coordinates in mm "
+              f"(converted from {_comment(doc.unit_name)})\n"
+              "# nominal points are the closest points on the nominal elements; nx ny nz their outward "
+              "normals; group is the feature\n")
+    w.writerow(["id", "x_nom", "y_nom", "z_nom", "x", "y", "z", "nx", "ny", "nz", "group"])
+    for f in chosen:
+        ps = doc.points_of(f)
+        X_nom, N, sentence = qif.nominal_points(doc, f, ps)
+        lines.append(sentence)
+        for k, (xn, x, n) in enumerate(zip(X_nom, ps.X_mm, N)):
+            w.writerow([f"{_label(f.name)}_{k + 1}", *(f"{v:.17g}" for v in xn), *(f"{v:.17g}" for v in x),
+                        *(f"{v:.17g}" for v in n), _label(f.name)])
+    with replacing(out) as tmp:
+        tmp.write_text(buf.getvalue(), encoding="utf-8")
+    return [out], lines
+
+
+def _comment(text: str) -> str:
+    """Text safe inside a one-line CSV comment."""
+    return " ".join(text.replace(",", " ").split())
 
 
 def _count(doc, f) -> int:

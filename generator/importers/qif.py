@@ -58,6 +58,8 @@ class Feature:
     set_ids: list[tuple[str, tuple[int, int] | None]]
     geometry: dict                   # measured geometry in mm (Location, Normal, Axis, ...)
     internal: bool | None            # InternalExternal of the nominal: True INTERNAL
+    nominal_id: str | None = None    # id of its FeatureNominal
+    nominal: dict = field(default_factory=dict)  # nominal geometry in mm (Location, Normal, Axis, Diameter)
 
 
 @dataclass
@@ -168,16 +170,26 @@ def read_qif(path: str | Path) -> QifDocument:
     items: dict[str, tuple[str, str | None]] = {}
     nominal_def: dict[str, str] = {}
     definitions: dict[str, bool | None] = {}
+    diameters: dict[str, float] = {}
+    nominal_geometry: dict[str, dict] = {}
     for el in root.iter():
         tag = _local(el.tag)
         if tag.endswith("FeatureDefinition") and el.get("id"):
             ie = _child(el, "InternalExternal")
             definitions[el.get("id")] = None if ie is None else {"INTERNAL": True, "EXTERNAL": False}.get(
                 (ie.text or "").strip())
+            dia = _child(el, "Diameter")
+            if dia is not None:
+                d = _numbers(path, dia.text, f"{tag} id={el.get('id')}/Diameter")
+                if d.size != 1 or d[0] <= 0:
+                    raise InputError("Diameter must be one positive number", file=path,
+                                     where=f"{tag} id={el.get('id')}")
+                diameters[el.get("id")] = float(d[0]) * mm
         elif tag.endswith("FeatureNominal") and el.get("id"):
             d = _child(el, "FeatureDefinitionId")
             if d is not None:
                 nominal_def[el.get("id")] = (d.text or "").strip()
+            nominal_geometry[el.get("id")] = _geometry(path, el, f"{tag} id={el.get('id')}", mm)
         elif tag.endswith("FeatureItem") and el.get("id"):
             name = _child(el, "FeatureName")
             nom = _child(el, "FeatureNominalId")
@@ -191,12 +203,18 @@ def read_qif(path: str | Path) -> QifDocument:
             _read_set(doc, el)
         elif (tag.endswith("FeatureMeasurement") or tag.endswith("FeatureActual")) and el.get("id"):
             _read_feature(doc, el, tag, items, nominal_def, definitions)
+    for f in doc.features:  # the nominal element of each measured feature, with its diameter
+        if f.nominal_id in nominal_geometry:
+            f.nominal = dict(nominal_geometry[f.nominal_id])
+            dia = diameters.get(nominal_def.get(f.nominal_id, ""))
+            if dia is not None:
+                f.nominal["Diameter"] = dia
     if not doc.sets:
         raise InputError("no measured points (no MeasuredPointSet and no PointList/MeasurePoint): "
                          "cmmwb imports measured point sets; this file holds "
                          + (", ".join(sorted({_local(c.tag) for c in root})) or "nothing"), file=path)
-    doc.not_read.append("plans, characteristics, statistics and nominal features other than "
-                        "InternalExternal are not read (cmmwb needs the points)")
+    doc.not_read.append("plans, characteristics and statistics are not read (cmmwb needs the points and "
+                        "the nominal elements)")
     return doc
 
 
@@ -295,44 +313,159 @@ def _read_feature(doc: QifDocument, el, tag: str, items, nominal_def, definition
                                     "constructed from other features' points; not imported")
                 set_ids = []
                 break
+    geometry = _geometry(path, el, where, doc.mm_per_unit)
+    if set_ids:
+        feature = Feature(kind, fid, name, set_ids, geometry, internal)
+        feature.nominal_id = nominal
+        doc.features.append(feature)
+
+
+def _geometry(path: Path, el, where: str, mm: float) -> dict:
+    """Location, Normal, Direction and Axis (AxisPoint, Direction) of a feature element, in mm."""
     geometry = {}
     for key in ("Location", "Normal", "Direction"):
-        v = _vec(path, el, key, where, doc.mm_per_unit if key == "Location" else 1.0)
+        v = _vec(path, el, key, where, mm if key == "Location" else 1.0)
         if v is not None:
             geometry[key] = v
     axis = _child(el, "Axis")
     if axis is not None:
-        geometry["AxisPoint"] = _vec(path, axis, "AxisPoint", where, doc.mm_per_unit)
+        geometry["AxisPoint"] = _vec(path, axis, "AxisPoint", where, mm)
         geometry["Direction"] = _vec(path, axis, "Direction", where)
-    if set_ids:
-        doc.features.append(Feature(kind, fid, name, set_ids, geometry, internal))
+    for key in ("Normal", "Direction"):
+        if key in geometry and geometry[key] is not None:
+            norm = float(np.linalg.norm(geometry[key]))
+            if not norm > 0:
+                raise InputError(f"{key} is the zero vector", file=path, where=where)
+            geometry[key] = geometry[key] / norm
+    return geometry
 
 
-def normals_from_feature(doc: QifDocument, f: Feature, X: np.ndarray) -> tuple[np.ndarray, str]:
+def normals_from_feature(doc: QifDocument, f: Feature, ps: PointSet) -> tuple[np.ndarray, str]:
     """Outward unit normals of the points from the measured element, and the sentence that
-    says so.  INTERNAL features (holes) point towards the axis/centre."""
-    g, where = f.geometry, f"{f.kind}Feature id={f.id} ({f.name})"
-    sign = -1.0 if f.internal else 1.0
-    side = ("INTERNAL: towards the axis" if f.internal else
-            "EXTERNAL: away from the axis" if f.internal is False else
-            "InternalExternal not given: taken as EXTERNAL, away from the axis")
+    says so.  INTERNAL features (holes) point towards the axis/centre; where the file does not
+    say, the side comes from the tip-centre radii against the nominal diameter (:func:`_side`),
+    else the feature is taken as EXTERNAL and the sentence says so."""
+    g, where, X = f.geometry, f"{f.kind}Feature id={f.id} ({f.name})", ps.X_mm
     if f.kind == "Plane" and "Normal" in g:
         N = np.tile(g["Normal"] / np.linalg.norm(g["Normal"]), (len(X), 1))
         return N, f"normals = the measured plane normal of {where} (the file gives no point normals)"
-    if f.kind in ("Circle", "Cylinder", "Cone"):
+    if f.kind in ("Circle", "Cylinder", "Cone", "Sphere"):
         c = g.get("Location", g.get("AxisPoint"))
-        a = g.get("Normal", g.get("Direction"))
-        if c is not None and a is not None:
-            a = a / np.linalg.norm(a)
+        a = None if f.kind == "Sphere" else g.get("Normal", g.get("Direction"))
+        if c is not None and (a is not None or f.kind == "Sphere"):
             r = X - c
-            r -= np.outer(r @ a, a)
-            N = sign * r / np.linalg.norm(r, axis=1)[:, None]
-            return N, (f"normals = radial directions from the measured axis of {where} ({side}); the file "
-                       "gives no point normals")
-    if f.kind == "Sphere" and "Location" in g:
-        r = X - g["Location"]
-        return sign * r / np.linalg.norm(r, axis=1)[:, None], \
-            f"normals = radial directions from the measured centre of {where} ({side})"
+            if a is not None:
+                a = a / np.linalg.norm(a)
+                r -= np.outer(r @ a, a)
+            dist = np.linalg.norm(r, axis=1)
+            u = r / dist[:, None]
+            diameter = f.nominal.get("Diameter") if f.kind != "Cone" else None
+            offset = ps.probe_radius_mm if ps.compensated is False and ps.probe_radius_mm else 0.0
+            internal, side = _side(f, None, dist, u, None if diameter is None else diameter / 2, offset)
+            if internal is None:
+                internal, side = False, "InternalExternal not given: taken as EXTERNAL"
+            side += ": towards the axis" if internal else ": away from the axis"
+            centre = "centre" if f.kind == "Sphere" else "axis"
+            return (-u if internal else u), (f"normals = radial directions from the measured {centre} of "
+                                             f"{where} ({side}); the file gives no point normals")
     raise InputError(f"the file gives no normals for the points of {f.name}, and a {f.kind.lower()} "
                      "gives none from its geometry; the point-cloud model needs the outward normal of "
                      "every point (Forbes 2025 eq. (26))", file=doc.path, where=where)
+
+
+def _side(f: Feature, ps: PointSet | None, dist: np.ndarray, u: np.ndarray, R: float | None,
+          offset: float) -> tuple[bool | None, str]:
+    """INTERNAL (True) or EXTERNAL (False) and the words that say why: the file's
+    ``InternalExternal``; where it says neither, the tip-centre radii ``dist`` (D/2 - r for a
+    hole, D/2 + r for a shaft, given the nominal diameter D = 2R and probe radius r = ``offset``)
+    or the file's point normals (towards or away from the axis; ``u`` the unit radial
+    directions); (None, "") when nothing tells."""
+    if f.internal is not None:
+        return f.internal, "INTERNAL" if f.internal else "EXTERNAL"
+    if offset and R is not None:
+        internal = bool(np.median(np.abs(dist - (R - offset))) < np.median(np.abs(dist - (R + offset))))
+        why = (f"the tip centres lie at D/2 {'-' if internal else '+'} the probe radius "
+               f"(nominal D = {2 * R:.6g} mm)")
+    elif ps is not None and ps.N is not None and len(ps.N) == len(u):
+        internal = bool(np.mean(np.sum(ps.N * u, axis=1)) < 0)
+        why = f"the file's point normals point {'towards' if internal else 'away from'} the axis"
+    else:
+        return None, ""
+    return internal, f"{'INTERNAL' if internal else 'EXTERNAL'}: the file does not say, {why}"
+
+
+#: nominal elements whose closest points cmmwb computes (nominal_points)
+PROJECTABLE = ("Plane", "Circle", "Cylinder", "Sphere")
+
+
+def nominal_points(doc: QifDocument, f: Feature, ps: PointSet) -> tuple[np.ndarray, np.ndarray, str]:
+    """Nominal point and outward nominal normal of every measured point of ``f``: its closest
+    point on the file's nominal element (``<Kind>FeatureNominal`` with the ``Diameter`` of its
+    definition), and the sentence that says so.
+
+    Plane: the foot of the perpendicular; circle and cylinder: the point of the nominal cylinder
+    surface (radius D/2) at the same axial position and angle (a circle is compared in its plane,
+    as CMM software reports it); sphere: the radial point at D/2.  When the points are stylus-tip
+    centres (``Compensated`` = false) the nominal surface is offset by the probe radius along
+    its outward normal (tip centres of a hole lie at D/2 - r, of a shaft at D/2 + r).  The
+    outward normal points out of the material: away from the axis for EXTERNAL, towards it for
+    INTERNAL; where the file says neither, the side is taken from where the points lie and the
+    sentence says so."""
+    g, where = f.nominal, f"{f.kind}FeatureMeasurement id={f.id} ({f.name})"
+    if f.kind not in PROJECTABLE:
+        raise InputError(f"{f.name} is a {f.kind.lower()}: nominal points are computed on nominal "
+                         f"{', '.join(k.lower() for k in PROJECTABLE)} only", file=doc.path, where=where)
+    if not g:
+        raise InputError(f"{f.name} has no nominal element (FeatureItem/FeatureNominalId) to compute "
+                         "nominal points on", file=doc.path, where=where)
+    X = ps.X_mm
+    offset, what = 0.0, "surface points"
+    if ps.compensated is False:
+        if ps.probe_radius_mm is None:
+            raise InputError(f"the points of {f.name} are stylus-tip centres (Compensated = false) "
+                             "without ProbeRadius: the nominal tip-centre surface cannot be placed",
+                             file=doc.path, where=ps.where)
+        offset, what = ps.probe_radius_mm, f"stylus-tip centres, probe radius {ps.probe_radius_mm:.6g} mm"
+    if f.kind == "Plane":
+        if "Location" not in g or "Normal" not in g:
+            raise InputError(f"the nominal plane of {f.name} lacks Location or Normal", file=doc.path,
+                             where=where)
+        n = g["Normal"]
+        X_nom = X - np.outer((X - g["Location"]) @ n - offset, n)
+        return X_nom, np.tile(n, (len(X), 1)), (
+            f"{f.name}: nominal points = feet of the perpendiculars on the nominal plane"
+            + (f" offset by {offset:.6g} mm along its normal" if offset else "") + f" ({what})")
+    if "Diameter" not in g:
+        raise InputError(f"the nominal {f.kind.lower()} of {f.name} has no Diameter in its definition",
+                         file=doc.path, where=where)
+    R = g["Diameter"] / 2
+    c = g.get("Location", g.get("AxisPoint"))
+    if c is None:
+        raise InputError(f"the nominal {f.kind.lower()} of {f.name} lacks its centre/axis point",
+                         file=doc.path, where=where)
+    r = X - c
+    if f.kind != "Sphere":
+        a = g.get("Normal", g.get("Direction"))
+        if a is None:
+            raise InputError(f"the nominal {f.kind.lower()} of {f.name} lacks its axis direction",
+                             file=doc.path, where=where)
+        along = np.outer(r @ a, a)
+        r = r - along
+    else:
+        along = np.zeros_like(X)
+    dist = np.linalg.norm(r, axis=1)
+    if np.any(dist < 1e-9 * max(R, 1.0)):
+        raise InputError(f"a point of {f.name} lies on the nominal axis/centre: no closest point",
+                         file=doc.path, where=ps.where)
+    u = r / dist[:, None]
+    internal, side = _side(f, ps, dist, u, R, offset)
+    if internal is None:
+        raise InputError(f"the file does not say whether {f.name} is INTERNAL or EXTERNAL "
+                         "(InternalExternal), and its surface points have no normals to tell; "
+                         "cmmwb cannot place the outward normals", file=doc.path, where=where)
+    rho = R - offset if internal else R + offset
+    X_nom = c + along + rho * u
+    N = -u if internal else u
+    return X_nom, N, (f"{f.name}: nominal points = the nominal {f.kind.lower()} (D = {2 * R:.6g} mm, {side}) "
+                      f"at radius {rho:.6g} mm, closest to each point"
+                      + (" at the same axial position" if f.kind != "Sphere" else "") + f" ({what})")
