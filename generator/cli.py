@@ -350,7 +350,17 @@ def _silence_stdout() -> None:
 
 def _quiet_unraisable(unraisable) -> None:
     """An OSError in a destructor (``ZipFile.__del__`` after a full disk) has already been reported
-    as a message; it must not print a traceback too."""
+    as a message; it must not print a traceback too.  A Ctrl-C that landed in a callback whose
+    exceptions Python ignores (a weakref callback of the import machinery, a destructor) would be
+    lost: it is delivered again, so it surfaces in the command and ends it as 'interrupted'."""
     if isinstance(unraisable.exc_value, OSError):
+        return
+    if isinstance(unraisable.exc_value, KeyboardInterrupt):
+        import threading
+
+        # a real SIGINT to the main thread, sent from another thread so that it arrives after this
+        # hook has returned (raised in here it would be ignored as well) and wakes a blocking call
+        main_thread = threading.main_thread().ident
+        threading.Timer(0.01, signal.pthread_kill, (main_thread, signal.SIGINT)).start()
         return
     sys.__unraisablehook__(unraisable)
