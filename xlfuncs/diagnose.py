@@ -867,9 +867,12 @@ def diagnose_prepared(prep: Prepared, alpha: float = 0.01) -> Diagnosis:
     diag.groups_after = (_groups_of(prep, W, X_sel, beta, cov, labels_coef(prep, W, keptA, srch), alpha,
                                     z=diag.z_after) if mismatch and not diag.explained else [])
     diag.located = locate_records(diag)
-    if mismatch and not diag.explained and noise is None:
+    if mismatch and not diag.explained:
         from . import discrepancy as disc   # section 7: the discrepancy, last, only when not explained
-        diag.discrepancy = disc.fit(prep, W, X_sel, beta, alpha, chi2_after, dof_after, chi2_logsf, _gls)
+        diag.discrepancy = disc.fit(prep, W, X_sel, beta, alpha, chi2_after, dof_after, chi2_logsf, _gls,
+                                    f_logsf if noise is not None else None)
+        if noise is not None and diag.discrepancy and diag.discrepancy["chosen"]:
+            diag.noise_scale = None        # a smooth structure, not a uniformly larger noise
     diag.summary = summary_text(diag)
     return diag
 

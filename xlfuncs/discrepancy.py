@@ -79,10 +79,12 @@ def columns(design, obs_record: np.ndarray, obs_axis: np.ndarray, K: int):
 
 
 def fit(prep, W, X_sel: np.ndarray, beta_sel: np.ndarray, alpha: float, chi2_named: float, dof_named: int,
-        logsf, gls) -> dict | None:
+        logsf, gls, f_logsf=None) -> dict | None:
     """Try the field after the named effects; the report of section 7 or None when no degree can
     be fitted.  ``logsf(x, df)`` is the chi-square log survival function, ``gls`` the locator's
-    GLS (beta, cov, chi2)."""
+    GLS (beta, cov, chi2).  With ``f_logsf(F, d1, d2)`` given (the residuals are uniformly larger
+    than declared, section 7 "noise level"), the field is judged by the F-test, the scale of the
+    covariance estimated from what remains with the field: structure, not a larger noise."""
     D = prep.design
     tried = []
     for K in DEGREES:
@@ -104,7 +106,12 @@ def fit(prep, W, X_sel: np.ndarray, beta_sel: np.ndarray, alpha: float, chi2_nam
         X = np.hstack([X_sel, G[:, keep]])
         beta, cov, chi2 = gls(W, X, prep.r_um)
         dchi = max(chi2_named - chi2, 0.0)
-        tried.append({"K": K, "df": df, "dchi": dchi, "logp": logsf(dchi, df), "chi2": chi2,
+        dof_with = W.rank - X.shape[1]
+        if f_logsf is not None:
+            logp = f_logsf((dchi / df) / (chi2 / dof_with), df, dof_with) if chi2 > 0 else -math.inf
+        else:
+            logp = logsf(dchi, df)
+        tried.append({"K": K, "df": df, "dchi": dchi, "logp": logp, "chi2": chi2,
                       "beta": beta, "cov": cov, "X": X, "keep": keep, "F": F, "ncomp": ncomp, "G": G})
     if not tried:
         return None
@@ -114,7 +121,7 @@ def fit(prep, W, X_sel: np.ndarray, beta_sel: np.ndarray, alpha: float, chi2_nam
     dof_after = W.rank - best["X"].shape[1]
     logp_after = logsf(best["chi2"], dof_after) if dof_after > 0 else 0.0
     resid = prep.r_um - best["X"] @ best["beta"]
-    out = {"chosen": bool(chosen), "degree": best["K"], "degrees_tried": [t["K"] for t in tried],
+    out = {"chosen": bool(chosen), "test": "F" if f_logsf is not None else "chi2", "degree": best["K"], "degrees_tried": [t["K"] for t in tried],
            "df": best["df"], "delta_chi2": best["dchi"], "p_value": math.exp(best["logp"]),
            "p_adjusted": math.exp(logp_adj), "log10_p_value": best["logp"] / math.log(10),
            "chi2_after": best["chi2"], "dof_after": dof_after, "p_after": math.exp(logp_after),
