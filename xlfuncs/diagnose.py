@@ -874,6 +874,10 @@ def diagnose_prepared(prep: Prepared, alpha: float = 0.01) -> Diagnosis:
         if noise is not None and diag.discrepancy and diag.discrepancy["chosen"]:
             diag.noise_scale = None        # a smooth structure, not a uniformly larger noise
     diag.summary = summary_text(diag)
+    if diag.discrepancy:
+        head = diag.summary.rstrip()
+        diag.summary = (head + ("" if head.endswith(".") or not head else ".") + " "
+                        + disc.sentence(diag.discrepancy)).strip()
     return diag
 
 

@@ -183,3 +183,17 @@ def _where(prep, best: dict, X_sel: np.ndarray, beta_sel: np.ndarray) -> dict:
             "note": "field over the ram position u = x - p of total degree 2..K (Legendre products), "
                     "its linear part left to the named effects; sizes are the change the field brings "
                     "to the fitted records (a length sees the change of the field along its direction)"}
+
+
+def sentence(d: dict | None) -> str:
+    """One sentence for the summary (empty when the field was not tried)."""
+    if not d:
+        return ""
+    if not d["chosen"]:
+        return (f"A smooth discrepancy field over the ram position (degree up to {d['degree']}) does not "
+                f"improve the fit significantly (adjusted p = {d['p_adjusted']:.2g}).")
+    return (f"No named effect explains the rest; a smooth discrepancy field over the ram position (degree "
+            f"{d['degree']}, {d['df']} parameters, adjusted p = {d['p_adjusted']:.2g}) changes the fit most "
+            f"along {d['axis']}, by {d['size_um']:.2g} um at record {d['record']}; with it chi2 = "
+            f"{d['chi2_after']:.1f} on {d['dof_after']} dof (p = {d['p_after']:.2g}, "
+            f"{'explained' if d['explained'] else 'still not explained'}).")
