@@ -9,7 +9,7 @@ from xlfuncs import diagnose as dg
 from xlfuncs import simulate as sm
 
 from test_diagnose_core import MPE1
-from test_diagnose_second import iso, u_effect
+from test_diagnose_second import ONE, iso, u_effect
 
 
 def bumped(seed: int, height_um: float = 6.0, width_mm: float = 150.0):
@@ -53,3 +53,22 @@ def test_pure_noise_has_no_discrepancy():
     L, model = iso()
     j = dg.diagnose(sm.simulate(L, MPE1, {}, seed=4), model).to_json()
     assert j["mismatch"] is False and j["discrepancy"] is None
+
+
+def test_a_sinusoid_across_x_and_y_on_a_ball_plate_is_the_discrepancy_and_not_a_noise_level():
+    """Point records: the y coordinate moved by 3 sin(2 pi (u_x/500 + u_y/700)) µm.  With no
+    named effect the rest looks like a larger noise; the field, judged by the F-test, is a
+    structure: chosen, the noise scale withdrawn, the rest explained, the size about 3 µm in y."""
+    L = sm.layout("ballplate", ONE)
+    rec = sm.simulate(L, MPE1, {}, seed=5)
+
+    def wave(U):
+        d = np.zeros_like(U)
+        d[:, 1] = 3.0 * np.sin(2 * np.pi * (U[:, 0] / 500.0 + U[:, 1] / 700.0))
+        return d
+
+    j = dg.diagnose(sm.plant_field(rec, wave), dg.Model(MPE1, ONE, True)).to_json()
+    d = j["discrepancy"]
+    assert j["mismatch"] is True and j["explained"] is False and j["effects"] == []
+    assert d["chosen"] is True and d["test"] == "F" and j["noise_scale"] is None
+    assert d["explained"] is True and d["axis"] == "y" and 2.5 < d["size_um"] < 3.5
