@@ -122,6 +122,12 @@ def test_a_failed_build_removes_only_the_empty_folders_it_created(tmp_path):
     assert list(tmp_path.iterdir()) == []
 
 
+def sigint_as_at_a_terminal():
+    """The child gets SIGINT's default disposition: a suite started in the background (where the
+    shell ignores SIGINT, and children inherit that) must test what a user at a terminal gets."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def test_ctrl_c_during_a_build_leaves_the_folder_as_it_was(tmp_path):
     assert interrupt_a_build(tmp_path) == 130
 
@@ -140,7 +146,8 @@ def interrupt_a_build(tmp_path, delay_s: float = 0.0) -> int:
     (tmp_path / "small.csv").write_text(POINTCLOUD_CSV)
     out = tmp_path / "out"
     proc = subprocess.Popen([sys.executable, "-m", "generator", "build", str(tmp_path / "small.toml"),
-                             "--out", str(out)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                             "--out", str(out)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            preexec_fn=sigint_as_at_a_terminal)
     deadline = time.monotonic() + 60
     while time.monotonic() < deadline and proc.poll() is None:
         if out.is_dir() and any(p.name.startswith(".cmmwb-") for p in out.iterdir()):
@@ -179,7 +186,8 @@ def test_ctrl_c_landing_where_python_ignores_exceptions_still_interrupts(tmp_pat
             print("interrupted")
     """)
     t0 = time.monotonic()
-    run = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=60)
+    run = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=60,
+                         preexec_fn=sigint_as_at_a_terminal)
     assert run.stdout.strip() == "interrupted" and run.stderr == "", (run.stdout, run.stderr)
     assert time.monotonic() - t0 < 15
 
