@@ -697,6 +697,25 @@ _CANDIDATE_FORMATS = {"step": "0", "df": "0", "delta_chi2": "0.000", "p_value": 
                       "p_adjusted": "0.00E+00"}
 
 
+def _discrepancy_rows(book: Book, ws, r: int, d: dict) -> int:
+    """The discrepancy candidate of docs/recordings.md section 7 (tried last, when the named effects
+    leave the refit unexplained): the core's numbers, as the search log shows the other candidates."""
+    verdict = "chosen" if d["chosen"] else "not significant"
+    book.text(ws, r, 1, f"discrepancy ({verdict}): a smooth field over the ram position, degree 2..{d['degree']} "
+                        f"(degrees tried {d['degrees_tried']}, {d['test']} test, Bonferroni over the degrees); "
+                        f"largest change {d['size_um']:.3g} µm along {d['axis']} at record {d['record']}")
+    r += 1
+    keys = ("df", "delta_chi2", "p_value", "p_adjusted", "chi2_after", "dof_after", "p_after", "size_um",
+            "rms_after_um")
+    book.header(ws, r, 1, list(keys))
+    r += 1
+    for k, key in enumerate(keys):
+        ws.cell(row=r, column=1 + k).value = d[key]
+        ws.cell(row=r, column=1 + k).number_format = {"df": "0", "dof_after": "0", "p_value": "0.00E+00",
+                                                      "p_adjusted": "0.00E+00", "p_after": "0.00E+00"}.get(key, "0.000")
+    return r + 2
+
+
 def _candidates(book: Book, diag: Diagnosis) -> None:
     ws = book.sheet("Candidates")
     j = diag.to_json()
@@ -734,6 +753,8 @@ def _candidates(book: Book, diag: Diagnosis) -> None:
         book.text(ws, r, 1, f"noise level: the declared uncertainties are too small by {ns['estimate']:.4g} "
                             f"(u = {ns['u']:.2g}); no structure a candidate or group explains")
         r += 1
+    if j.get("discrepancy"):
+        r = _discrepancy_rows(book, ws, r, j["discrepancy"])
     if j["outliers"]:
         book.text(ws, r, 1, "outliers left out of the effect search (likelihood-ratio test of one record, "
                             "Bonferroni over the records)")

@@ -36,6 +36,8 @@ CASES = {
     # second edition (docs/recordings.md section 7): a gross outlier left out; inflated noise
     "lengths, an outlier": ("iso10360", {"repeats": 1}, ONE, {}, None, set()),
     "lengths, inflated noise": ("iso10360", {"repeats": 3}, ONE, {}, None, set()),
+    # an out-of-library bump: not explained, the discrepancy candidate shown (section 7)
+    "lengths, a bump": ("iso10360", {"repeats": 3}, ONE, {}, None, set()),
 }
 
 
@@ -44,7 +46,15 @@ def _outlier(rec):
     return rec
 
 
-SECOND = {"lengths, an outlier": (MPE1, _outlier),
+def _bump(rec):
+    import numpy as np
+
+    return sm.plant_field(rec, lambda U: np.column_stack(
+        [4.0 * np.exp(-0.5 * ((U[:, 0] - 650.0) / 100.0) ** 2), 0 * U[:, 0], 0 * U[:, 0]]))
+
+
+SECOND = {"lengths, a bump": (MPE1, _bump),
+          "lengths, an outlier": (MPE1, _outlier),
           "lengths, inflated noise": (pc.Parameters(**{k: v * (1.8 if k.startswith("sigma") else 1.0)
                                                        for k, v in MPE1.__dict__.items()}), None)}
 
@@ -146,3 +156,17 @@ def test_the_outlier_is_left_out_in_the_workbook_too(books):
 def test_inflated_noise_gives_the_noise_scale_in_the_workbook(books):
     result, _ = books["lengths, inflated noise"]
     assert result["noise_scale"] and result["effects"] == [] and not result["explained"]
+
+
+def test_the_discrepancy_is_shown_in_the_search_log(books):
+    import openpyxl
+
+    result, book = books["lengths, a bump"]
+    d = result["discrepancy"]
+    assert result["explained"] is False and d["chosen"] is True
+    ws = openpyxl.load_workbook(book)["Candidates"]
+    rows = [[c.value for c in r] for r in ws.iter_rows()]
+    at = next(i for i, r in enumerate(rows) if isinstance(r[0], str) and r[0].startswith("discrepancy (chosen)"))
+    head, vals = rows[at + 1], rows[at + 2]
+    for key in ("p_adjusted", "chi2_after", "size_um"):        # xlsx keeps 15-17 digits
+        assert close(vals[head.index(key)], d[key]), key

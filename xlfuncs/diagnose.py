@@ -611,6 +611,7 @@ class Diagnosis:
     groups_scaled: list[dict] = field(default_factory=list)
     groups_after: list[dict] = field(default_factory=list)   # only when not explained
     with_outliers: dict | None = None
+    discrepancy: dict | None = None   # the last candidate, when not explained (xlfuncs/discrepancy.py)
 
     @property
     def explained(self) -> bool:
@@ -866,7 +867,17 @@ def diagnose_prepared(prep: Prepared, alpha: float = 0.01) -> Diagnosis:
     diag.groups_after = (_groups_of(prep, W, X_sel, beta, cov, labels_coef(prep, W, keptA, srch), alpha,
                                     z=diag.z_after) if mismatch and not diag.explained else [])
     diag.located = locate_records(diag)
+    if mismatch and not diag.explained:
+        from . import discrepancy as disc   # section 7: the discrepancy, last, only when not explained
+        diag.discrepancy = disc.fit(prep, W, X_sel, beta, alpha, chi2_after, dof_after, chi2_logsf, _gls,
+                                    f_logsf if noise is not None else None)
+        if noise is not None and diag.discrepancy and diag.discrepancy["chosen"]:
+            diag.noise_scale = None        # a smooth structure, not a uniformly larger noise
     diag.summary = summary_text(diag)
+    if diag.discrepancy:
+        head = diag.summary.rstrip()
+        diag.summary = (head + ("" if head.endswith(".") or not head else ".") + " "
+                        + disc.sentence(diag.discrepancy)).strip()
     return diag
 
 
@@ -1443,6 +1454,7 @@ def diagnosis_json(diag: Diagnosis) -> dict:
     out["with_outliers"] = diag.with_outliers
     out["noise_scale"] = diag.noise_scale
     out["unexplained"] = unexplained_rest(diag)
+    out["discrepancy"] = diag.discrepancy
     out["log10_p_before"] = diag.logp_before / math.log(10)
     out["covariance_rank"] = diag.whitener.rank
     if is_structured(diag.prep):

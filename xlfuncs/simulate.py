@@ -482,3 +482,24 @@ def simulate(L: Layout, params: pc.Parameters, planted: dict | None = None, seed
     return PointRecords(kind="point", ids=tuple(L.ids), lines=tuple(range(2, n + 2)),
                         temperature_C=T_rec, time_s=t_rec.copy(), group=tuple(L.group),
                         X_nom_mm=Xn, X_mm=Xm, N=L.N, P_mm=P, probe=tuple(pid[k] for k in L.k))
+
+
+def plant_field(rec, delta_um):
+    """Records with an out-of-library error added: a displacement field ``delta_um(U)`` (µm, n x 3)
+    of the ram position U = x - p (mm), as the second edition's ``discrepancy`` candidate sees it
+    (docs/recordings.md section 7).  A length sees n_a . (delta(end 2) - delta(end 1)); a point
+    moves by delta (in the plane only for planar records)."""
+    from dataclasses import replace
+
+    if rec.kind == "length":
+        d = rec.X2_mm - rec.X1_mm
+        na = d / np.linalg.norm(d, axis=1)[:, None]
+        P1 = rec.P1_mm if rec.P1_mm is not None else np.zeros_like(rec.X1_mm)
+        P2 = rec.P2_mm if rec.P2_mm is not None else np.zeros_like(rec.X2_mm)
+        err = np.einsum("ij,ij->i", na, delta_um(rec.X2_mm - P2) - delta_um(rec.X1_mm - P1))
+        return replace(rec, measured_mm=rec.measured_mm + 1e-3 * err)
+    P = rec.P_mm if rec.P_mm is not None else np.zeros_like(rec.X_mm)
+    dX = 1e-3 * delta_um(rec.X_mm - P)
+    if rec.planar:
+        dX[:, 2] = 0.0
+    return replace(rec, X_mm=rec.X_mm + dX)
