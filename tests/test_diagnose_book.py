@@ -99,7 +99,11 @@ def expected_rows(result):
     if result["noise_scale"]:
         exp["noise_scale"], unc["noise_scale"] = result["noise_scale"]["estimate"], result["noise_scale"]["u"]
     for o in result["outliers"] or []:
-        exp[f"outlier {o['id']}"], unc[f"outlier {o['id']}"] = o["estimate_um"], o["u_um"]
+        if isinstance(o["estimate_um"], list):        # a point: one mean shift per coordinate
+            for a, v, u in zip(o["axes"], o["estimate_um"], o["u_um"]):
+                exp[f"outlier {o['id']}.{a}"], unc[f"outlier {o['id']}.{a}"] = v, u
+        else:
+            exp[f"outlier {o['id']}"], unc[f"outlier {o['id']}"] = o["estimate_um"], o["u_um"]
     for e in result["effects"]:
         if isinstance(e["estimate"], list):
             labels = ([f"{pp['probe']}.d{a}" for pp in e["per_probe"] for a in "xyz"]

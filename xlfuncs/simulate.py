@@ -282,18 +282,30 @@ def _gp(points: np.ndarray, sigma: float, lam: float, rng, size: int = 1) -> np.
     m = len(points)
     if sigma <= 0 or m == 0:
         return np.zeros((m, size))
+    z = rng.standard_normal((m, size))
     if m > GP_DENSE_MAX:   # a draw from the Nystrom factor K ~ L L^T of xlfuncs.lowrank
         from . import lowrank as lr
 
         fac, _trace = lr.controlled_factor(points, 1.0 / lam**2)
-        z = rng.standard_normal((fac.rank, size))
-        return sigma * np.concatenate([fac.rows(points[i0:i0 + 8192]).T @ z
-                                       for i0 in range(0, m, 8192)])
+        blocks = range(0, m, 8192)
+        Lt = [fac.rows(points[i0:i0 + 8192]) for i0 in blocks]          # r x block each
+        # (L L^T)^(1/2) z = L (L^T L)^(-1/2) L^T z: the same for any L' = L Q, so the draw does
+        # not depend on which pivots (ties on a regular grid) the BLAS kernel led to
+        y = sum(Lb @ z[i0:i0 + 8192] for Lb, i0 in zip(Lt, blocks))
+        w, V = np.linalg.eigh(sum(Lb @ Lb.T for Lb in Lt))
+        keep = w > 1e-12 * w[-1]
+        y = V[:, keep] @ ((V[:, keep].T @ y) / np.sqrt(w[keep])[:, None])
+        return sigma * np.concatenate([Lb.T @ y for Lb in Lt])
     D2 = np.sum((points[:, None, :] - points[None, :, :]) ** 2, axis=-1) if m <= 1500 else \
         np.maximum(np.sum(points**2, 1)[:, None] + np.sum(points**2, 1)[None, :] - 2 * points @ points.T, 0)
     K = sigma**2 * np.exp(-D2 / lam**2)
     w, V = np.linalg.eigh(K)
-    return V @ (np.sqrt(np.maximum(w, 0.0))[:, None] * rng.standard_normal((m, size)))
+    # the symmetric square root K^(1/2) z, not V diag(w)^(1/2) z: eigenvectors of a degenerate
+    # eigenvalue (a symmetric grid has many) are any basis of their space and the BLAS kernel
+    # picks it, while K^(1/2) is unique, so a seeded draw is the same on every CPU; eigenvalues
+    # below 1e-13 of the largest are rounding (error ~ 1e-16 x the largest) and are dropped
+    keep = w > 1e-13 * w[-1]
+    return V[:, keep] @ (np.sqrt(w[keep])[:, None] * (V[:, keep].T @ z))
 
 
 def model_errors(X: np.ndarray, N: np.ndarray | None, k: np.ndarray, probes, params: pc.Parameters,
