@@ -4,9 +4,12 @@ planted on ISO 10360 lengths, step-gauge lengths and a ball plate, with the simu
 
 Measured, over the sets where the mismatch is detected:
 
-* ``named explains``: ``explained`` true with a named effect chosen (a named linear effect claimed
-  as the cause of an out-of-library error; the remaining chi-square then passes by chance or the
-  named effect mimics the field) -- the target is never;
+* ``claimed while failing``: ``explained`` true while the remaining chi-square fails (p_after <
+  alpha) -- the target is never (``explained`` is defined as p_after >= alpha, so this checks
+  the definition holds in every answer);
+* ``named explains``: ``explained`` true with a named effect chosen and the remaining chi-square
+  passing: on these records the named linear effect mimics the field well enough that the records
+  cannot tell them apart (reported, no target);
 * ``honest``: the answer is ``explained: false`` (the "not explained" answer, where the rest
   concentrates) or the ``discrepancy`` is chosen -- the target is >= 95 %;
 * ``discrepancy chosen`` and ``discrepancy explains`` (p_after with the field >= alpha).
@@ -95,7 +98,7 @@ def run_set(layout: str, kind: str, seed: int) -> dict:
     return {"layout": layout, "kind": kind, "seed": seed, "desc": desc, "mismatch": j["mismatch"],
             "effects": [e["name"] for e in j["effects"]], "explained": j["explained"],
             "noise_scale": j["noise_scale"] is not None,
-            "disc_chosen": bool(d and d["chosen"]), "disc_explains": bool(d and d["chosen"] and d["explained"]),
+            "p_after": j["p_after"], "disc_chosen": bool(d and d["chosen"]), "disc_explains": bool(d and d["chosen"] and d["explained"]),
             "disc_axis": d and d["axis"], "chi2_after": j["chi2_after"], "dof_after": j["dof_after"],
             "disc_chi2": d and d["chi2_after"]}
 
@@ -131,12 +134,15 @@ def main(argv=None) -> int:
         lines.append(f"| {name} | " + " | ".join(cells) + " |")
 
     row("mismatch detected (of all sets)", det, res)
-    row("named effect claimed to explain (target: never)", named_expl, det)
+    row("`explained: true` while the remaining chi-square fails, p_after < alpha (target: never)",
+        [r for r in det if r["explained"] and r["p_after"] < ALPHA], det)
+    row("a named effect explains, the remaining chi-square passes (the records cannot tell it from the field)",
+        named_expl, det)
     row("honest: not explained, or the discrepancy chosen (target >= 95 %)", honest, det)
     row("discrepancy chosen", [r for r in det if r["disc_chosen"]], det)
     row("discrepancy explains (p_after with it >= alpha)", [r for r in det if r["disc_explains"]], det)
     row("noise_scale answered", [r for r in det if r["noise_scale"]], det)
-    lines += ["", "Sets where a named effect was claimed to explain:", ""]
+    lines += ["", "Sets where a named effect explains (remaining chi-square passes):", ""]
     lines += [f"- {r['layout']} seed {r['seed']}: {r['desc']} -> {r['effects']}" for r in named_expl] or ["- none"]
     lines += ["", "Detected sets not answered honestly:", ""]
     lines += [f"- {r['layout']} seed {r['seed']}: {r['desc']} -> {r['effects']}, explained {r['explained']}"

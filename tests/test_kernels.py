@@ -33,12 +33,31 @@ print(json.dumps({"arch": arch, "X_mm": rec.X_mm.tolist(), "chi2_before": j["chi
 """
 
 
-def _run(coretype: str | None) -> dict:
+MC_SCRIPT = r"""
+import json
+import numpy as np
+import threadpoolctl
+from xlfuncs import montecarlo as mc, pointcloud as pc
+params = pc.Parameters(sigma_R_um=0.2, sigma_S_ppm=0.7, sigma_Sa_ppm=0.7, sigma_Q_ppm=0.7, sigma_PQ_um=0.2,
+                       sigma_ET_um=0.2, lambda_ET_mm=200.0, sigma_ER_urad=4.0, lambda_ER_mm=400.0,
+                       sigma_P0_um=0.1, sigma_P_um=0.1, lambda_P=0.5)
+g = np.arange(6) * 60.0                      # a 6 x 6 grid of points: degenerate kernel spectra
+X = np.array([[x, y, 0.0] for x in g for y in g])
+N = np.tile([0.0, 0.0, 1.0], (len(X), 1))
+cloud = pc.PointCloud(X, N, np.zeros(len(X), dtype=int), (pc.Probe("P1", (0.0, 0.0, -50.0)),),
+                      tuple(f"Q{i}" for i in range(len(X))))
+d = mc.PointCloudSampler(cloud, params).draw(3, np.random.default_rng(11))
+arch = sorted({str(i.get("architecture")) for i in threadpoolctl.threadpool_info()})
+print(json.dumps({"arch": arch, "draws": {f: v.tolist() for f, v in d.items()}}))
+"""
+
+
+def _run(coretype: str | None, script: str = SCRIPT) -> dict:
     env = dict(os.environ)
     env.pop("OPENBLAS_CORETYPE", None)
     if coretype:
         env["OPENBLAS_CORETYPE"] = coretype
-    out = subprocess.run([sys.executable, "-c", SCRIPT], env=env, capture_output=True, text=True,
+    out = subprocess.run([sys.executable, "-c", script], env=env, capture_output=True, text=True,
                          timeout=300, check=True)
     return json.loads(out.stdout)
 
@@ -50,6 +69,15 @@ def test_a_seeded_ball_plate_simulation_is_the_same_under_two_blas_kernels():
     Xa, Xb = np.array(a["X_mm"]), np.array(b["X_mm"])
     assert np.max(np.abs(Xa - Xb)) * 1000 < 1e-9, "records differ in µm"
     assert a["chi2_before"] == pytest.approx(b["chi2_before"], rel=1e-9)
+
+
+def test_seeded_monte_carlo_draws_are_the_same_under_two_blas_kernels():
+    a, b = _run(None, MC_SCRIPT), _run("Prescott", MC_SCRIPT)
+    if a["arch"] == b["arch"] or a["arch"] == ["None"]:
+        pytest.skip(f"one BLAS kernel only here ({a['arch']})")
+    for f in a["draws"]:
+        da, db = np.array(a["draws"][f]), np.array(b["draws"][f])
+        assert np.max(np.abs(da - db)) <= 1e-9 * max(np.max(np.abs(da)), 1e-12), f
 
 
 def test_a_gaussian_process_draw_is_the_symmetric_square_root_whatever_the_eigenbasis():

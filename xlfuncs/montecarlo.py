@@ -46,24 +46,36 @@ MAX_POINTS = 3000
 # drawing the influence factors
 # ---------------------------------------------------------------------------------------------
 
-def kernel_factor(K: np.ndarray, rank_tol: float = 1e-15) -> np.ndarray:
+def kernel_factor(K: np.ndarray, rank_tol: float = 1e-13) -> np.ndarray:
     """L (n x r) with L L^T = K for a symmetric positive semi-definite kernel matrix K, from its
-    eigen-decomposition; eigenvalues below ``rank_tol`` times the largest are dropped."""
+    eigen-decomposition; eigenvalues below ``rank_tol`` times the largest are dropped (below 1e-13
+    an eigenvalue is rounding, ~1e-16 of the largest, and its eigenvector differs from CPU to CPU)."""
+    return kernel_basis(K, rank_tol)[0]
+
+
+def kernel_basis(K: np.ndarray, rank_tol: float = 1e-13) -> tuple[np.ndarray, np.ndarray]:
+    """(L, Q^T): L = Q diag(w)^(1/2) as in :func:`kernel_factor` and the r x n matrix Q^T of its
+    eigenvectors.  A draw L (Q^T z), z of length n, is K^(1/2) z: unique, whatever basis the BLAS
+    kernel chose for a degenerate eigenvalue (a regular grid has many), so a seeded Monte Carlo
+    gives the same numbers on every CPU; L z' with z' of length r would not."""
     if K.size == 0:
-        return np.zeros((K.shape[0], 0))
+        return np.zeros((K.shape[0], 0)), np.zeros((0, K.shape[0]))
     w, Q = np.linalg.eigh(K)
     keep = w > rank_tol * max(w[-1], 0.0)
-    return Q[:, keep] * np.sqrt(w[keep])
+    return Q[:, keep] * np.sqrt(w[keep]), Q[:, keep].T.copy()
 
 
 class PointCloudSampler:
     """Draws of the six influence factors of a point cloud as coordinate perturbations (µm).
 
     ``maps[f]`` is A_f (3m x r_f) with delta_f = A_f z_f, or a number s for R (delta = s z).
+    ``inputs[f]`` says how z_f is drawn: segments (n, reps, T) of standard normals (n x reps),
+    mapped by T (r x n, the kernel's eigenvectors) where a Gaussian-process factor is low rank
+    (:func:`kernel_basis`), their columns in the order of A_f.
     """
 
     def __init__(self, cloud: pc.PointCloud, params: pc.Parameters, factors: Sequence[str] = FACTORS,
-                 rank_tol: float = 1e-15):
+                 rank_tol: float = 1e-13):
         m = cloud.m
         if m > MAX_POINTS:
             raise ModelError(f"the Monte Carlo comparison handles up to {MAX_POINTS} points, got {m}")
@@ -75,6 +87,7 @@ class PointCloudSampler:
         k = cloud.probe_index
         U, N = cloud.ram_mm, cloud.N
         maps: dict[str, np.ndarray | float] = {}
+        inputs: dict[str, list] = {}
         if "R" in factors:
             maps["R"] = float(params.sigma_R_um)
         if "PQ" in factors:
@@ -82,26 +95,30 @@ class PointCloudSampler:
             A = np.zeros((m, 3, nP, 3))
             A[np.arange(m), :, k, :] = pa["sigma_PQ_um"][:, None, None] * np.eye(3)
             maps["PQ"] = A.reshape(3 * m, 3 * nP)
+            inputs["PQ"] = [(3 * nP, 1, None)]
         if "S" in factors:
             maps["S"] = pc.G_X_S(cloud) * np.sqrt(pc.V_S_diag_um_per_mm2(params)) if m else np.zeros((0, 7))
+            inputs["S"] = [(7, 1, None)]
         D2 = None
         if ("ET" in factors and params.sigma_ET_um > 0) or ("ER" in factors and params.sigma_ER_urad > 0):
             D2 = pc._sq_dists(U, U)
         if "ET" in factors:
             if params.sigma_ET_um > 0:
-                L = kernel_factor(np.exp(-D2 / params.lambda_ET_mm**2), rank_tol)
+                L, T = kernel_basis(np.exp(-D2 / params.lambda_ET_mm**2), rank_tol)
                 maps["ET"] = params.sigma_ET_um * np.einsum("ir,ac->iarc", L, np.eye(3)).reshape(3 * m, -1)
+                inputs["ET"] = [(m, 3, T)]
             else:
                 maps["ET"] = np.zeros((3 * m, 0))
         if "ER" in factors:
             if params.sigma_ER_urad > 0:
-                L = kernel_factor(np.exp(-D2 / params.lambda_ER_mm**2), rank_tol)
+                L, T = kernel_basis(np.exp(-D2 / params.lambda_ER_mm**2), rank_tol)
                 GR = np.array([pc.skew_G(p) for p in cloud.offsets_mm]).reshape(m, 3, 3)
                 maps["ER"] = params.sigma_ER_urad * MILLI * np.einsum("iac,ir->iarc", GR, L).reshape(3 * m, -1)
+                inputs["ER"] = [(m, 3, T)]
             else:
                 maps["ER"] = np.zeros((3 * m, 0))
         if "P" in factors:
-            cols = []
+            cols, segs = [], []
             s0, sp, lam = pa["sigma_P0_um"], pa["sigma_P_um"], pa["lambda_P"]
             for q in range(len(cloud.probes)):
                 idx = np.flatnonzero(k == q)
@@ -110,14 +127,17 @@ class PointCloudSampler:
                 c0 = np.zeros((m, 1))
                 c0[idx, 0] = s0[idx]
                 cols.append(c0)
+                segs.append((1, 1, None))
                 if sp[idx[0]] > 0:
-                    L = kernel_factor(np.exp(-pc._sq_dists(N[idx], N[idx]) / lam[idx[0]] ** 2), rank_tol)
+                    L, T = kernel_basis(np.exp(-pc._sq_dists(N[idx], N[idx]) / lam[idx[0]] ** 2), rank_tol)
                     cP = np.zeros((m, L.shape[1]))
                     cP[idx] = sp[idx[0]] * L
                     cols.append(cP)
+                    segs.append((len(idx), 1, T))
             C = np.hstack(cols) if cols else np.zeros((m, 0))
             maps["P"] = np.einsum("ia,ir->iar", N, C).reshape(3 * m, -1)
-        self.maps = maps
+            inputs["P"] = segs
+        self.maps, self.inputs = maps, inputs
 
     def covariance(self, f: str) -> np.ndarray:
         """A_f A_f^T: the V_X,f that the draws of factor f follow (µm²)."""
@@ -137,8 +157,18 @@ class PointCloudSampler:
             elif A.shape[1] == 0:
                 out[f] = np.zeros((M, m, 3))
             else:
-                out[f] = (rng.standard_normal((M, A.shape[1])) @ A.T).reshape(M, m, 3)
+                out[f] = (self._coefficients(f, M, rng) @ A.T).reshape(M, m, 3)
         return out
+
+    def _coefficients(self, f: str, M: int, rng: np.random.Generator) -> np.ndarray:
+        """z_f (M x r_f) of every draw, segment by segment (see ``inputs``)."""
+        parts = []
+        for n, reps, T in self.inputs[f]:
+            z = rng.standard_normal((M, n, reps))
+            if T is not None:
+                z = np.einsum("rn,Mnc->Mrc", T, z)
+            parts.append(z.reshape(M, -1))
+        return np.concatenate(parts, axis=1)
 
 
 # ---------------------------------------------------------------------------------------------
