@@ -728,7 +728,7 @@ def _candidates(book: Book, diag: Diagnosis) -> None:
         book.text(ws, r, 2, c["status"])
         for k, key in enumerate(("step", "df", "delta_chi2", "p_value", "p_adjusted")):
             v = c[key]
-            if v is not None and (key != "df" or c["status"] in ("chosen", "tested")):
+            if v is not None and (key != "df" or c["status"] in ("chosen", "indicated", "tested")):
                 cell_ = ws.cell(row=r, column=3 + k)
                 cell_.value = float(v) if isinstance(v, float) else v
                 cell_.number_format = _CANDIDATE_FORMATS[key]
@@ -748,6 +748,12 @@ def _candidates(book: Book, diag: Diagnosis) -> None:
                         f"explained: {'yes' if j['explained'] else 'no'} (p_after = {j['p_after']:.3g})"
               if j["p_after"] is not None else f"gate: {j['gate'] or 'none'}")
     r += 1
+    book.text(ws, r, 1, f"an effect is named (chosen) at p_adjusted < {j['alpha_name']:.3g}; between that and "
+                        f"alpha = {j['alpha']:.3g} it is only indicated, not applied (docs/recordings.md section 7)")
+    r += 1
+    for ind in j["indicated"]:
+        book.text(ws, r, 1, f"indicated: {ind['name']} (p_adjusted = {ind['p_adjusted']:.3g}); see its row above")
+        r += 1
     if j["noise_scale"]:
         ns = j["noise_scale"]
         book.text(ws, r, 1, f"noise level: the declared uncertainties are too small by {ns['estimate']:.4g} "

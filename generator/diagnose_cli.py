@@ -55,6 +55,9 @@ def register(sub) -> None:
                    help="instead of --task: a simulation with only repeatability sigma_R_um = S (µm)")
     s.add_argument("--out", required=True, metavar="DIR", help="output folder (created if missing)")
     s.add_argument("--alpha", type=float, default=0.01, help="significance level (default: 0.01)")
+    s.add_argument("--alpha-name", type=float, default=None, metavar="P",
+                   help="adjusted p-value below which an effect is named as the cause (default: alpha/100); "
+                        "between it and alpha the best effect is only 'indicated'")
     s.add_argument("--no-plots", action="store_true", help="skip the PNG plots (default: write them)")
     s.add_argument("--no-workbook", action="store_true", help="skip the workbook (default: write it)")
     s.add_argument("--force", action="store_true",
@@ -136,7 +139,8 @@ def _read(path: Path):
 
 def run_diagnose(rec_path: Path, model: dg.Model, out_dir: Path, *, alpha: float = 0.01, plots: bool = True,
                  workbook: bool = True, source: str = "", rec=None, task_label: str = "",
-                 force: bool = False, exact: bool = False) -> tuple[dict, list[Path]]:
+                 force: bool = False, exact: bool = False, alpha_name: float | None = None
+                 ) -> tuple[dict, list[Path]]:
     """Diagnose ``rec_path`` into ``out_dir`` (all or nothing); returns the JSON and the files.
     ``exact``: the dense record covariance whatever the size (no structured approximation)."""
     from .build import Staging as _Staging
@@ -145,6 +149,8 @@ def run_diagnose(rec_path: Path, model: dg.Model, out_dir: Path, *, alpha: float
     rec_path = Path(rec_path)
     if not (0.0 < alpha < 1.0):
         raise InputError(f"--alpha must be between 0 and 1, got {alpha!r}")
+    if alpha_name is not None and not (0.0 < alpha_name <= alpha):
+        raise InputError(f"--alpha-name must be above 0 and at most --alpha ({alpha:g}), got {alpha_name!r}")
     rec = _read(rec_path) if rec is None else rec
     structured = dg.uses_structured(rec, model, False if exact else None)
     try:
@@ -153,7 +159,7 @@ def run_diagnose(rec_path: Path, model: dg.Model, out_dir: Path, *, alpha: float
     except ResourceError as e:
         raise InputError(str(e), file=rec_path) from None
     try:
-        diag = dg.diagnose(rec, model, alpha, structured=structured)
+        diag = dg.diagnose(rec, model, alpha, structured=structured, alpha_name=alpha_name)
     except RecordingsError as e:
         raise InputError(e.message, file=rec_path, where=e.where) from None
     except ModelError as e:
@@ -176,7 +182,7 @@ def cmd_diagnose(args) -> int:
     model, label = load_model(args.task, args.sigma_um)
     result, files = run_diagnose(Path(args.recordings), model, Path(args.out), alpha=args.alpha,
                                  plots=not args.no_plots, workbook=not args.no_workbook, task_label=label,
-                                 force=args.force, exact=args.exact)
+                                 force=args.force, exact=args.exact, alpha_name=args.alpha_name)
     print(result["summary"])
     for f in files:
         print(f"  -> {f}")

@@ -103,3 +103,10 @@ def test_demo_finds_the_concealed_effect_and_reports_the_aliased_one(tmp_path, c
     assert p.returncode == 0, p.stderr
     again = json.loads((case / "again" / "diagnosis.json").read_text())
     assert again["effects"][0]["estimate"] == pytest.approx(concealed["effects"][0]["estimate"], rel=1e-9)
+
+
+def test_diagnose_refuses_an_alpha_name_above_alpha(tmp_path):
+    assert run("simulate", "--layout", "iso10360", "--out", "rec.csv", cwd=tmp_path).returncode == 0
+    p = run("diagnose", "rec.csv", "--sigma-um", "0.3", "--alpha-name", "0.05", "--out", "diag", cwd=tmp_path)
+    assert p.returncode == 2 and "--alpha-name" in p.stderr and "0.05" in p.stderr
+    assert not (tmp_path / "diag").exists()

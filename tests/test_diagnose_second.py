@@ -78,15 +78,22 @@ def test_explained_is_the_remaining_chi_square_passing():
     assert j["explained"] is True and j["unexplained"] is None
 
 
-def test_an_error_outside_the_library_is_not_called_explained_and_is_located():
-    """A periodic scale error along x (1.5 µm, pitch 53 mm: not in the linear library): the
-    nearest linear effect takes part of it, and the answer says the rest still fails and where."""
+def periodic_x_lengths():
+    """ISO 10360-2 lengths (three repeats, one probe) with a periodic scale error along x of
+    1.5 µm amplitude and 53 mm pitch, outside the linear library."""
     L, model = iso()
     rec = sm.simulate(L, MPE1, {}, seed=5)
     na = rec.X2_mm - rec.X1_mm
     na /= np.linalg.norm(na, axis=1)[:, None]
     f = lambda x: 1.5 * np.sin(2 * np.pi * x / 53.0)
     rec.measured_mm += na[:, 0] * (f(rec.X2_mm[:, 0]) - f(rec.X1_mm[:, 0])) / 1000.0
+    return rec, model
+
+
+def test_an_error_outside_the_library_is_not_called_explained_and_is_located():
+    """A periodic scale error along x (1.5 µm, pitch 53 mm: not in the linear library): the
+    nearest linear effect takes part of it, and the answer says the rest still fails and where."""
+    rec, model = periodic_x_lengths()
     j = dg.diagnose(rec, model).to_json()
     assert j["mismatch"] is True and j["effects"]
     assert j["explained"] is False and j["p_after"] < 0.01 and j["noise_scale"] is None
@@ -124,12 +131,7 @@ def test_a_gross_point_outlier_is_named_with_its_coordinates():
 def test_many_gross_looking_records_are_a_structure_not_outliers():
     """The periodic error of the test above makes a dozen lengths look gross one by one: more than
     isolated outliers can be, so none is called an outlier and the effects are searched on all."""
-    L, model = iso()
-    rec = sm.simulate(L, MPE1, {}, seed=5)
-    na = rec.X2_mm - rec.X1_mm
-    na /= np.linalg.norm(na, axis=1)[:, None]
-    f = lambda x: 1.5 * np.sin(2 * np.pi * x / 53.0)
-    rec.measured_mm += na[:, 0] * (f(rec.X2_mm[:, 0]) - f(rec.X1_mm[:, 0])) / 1000.0
+    rec, model = periodic_x_lengths()
     j = dg.diagnose(rec, model).to_json()
     assert j["outliers"] == [] and j["outliers_not_isolated"] is True and j["with_outliers"] is None
 
@@ -172,3 +174,46 @@ def test_the_structured_path_gives_the_same_gates_and_skips_the_outlier_search()
     assert math.isclose(math.log(s["p_targeted"] or 1e-300), math.log(d["p_targeted"] or 1e-300), rel_tol=1e-6)
     assert s["outliers"] is None and isinstance(d["outliers"], list)
     assert s["explained"] == d["explained"]
+
+
+# -- naming a cause: adjusted p below alpha/100; between that and alpha only indicated -----------
+
+def weak_squareness():
+    """ISO 10360-2 lengths, one probe, a squareness of 6 µrad (about 4.7 of its u = 1.28 µrad):
+    the targeted gate fires (adjusted p = 0.0024) but the omnibus test passes."""
+    L, model = iso(repeats=1)
+    return sm.simulate(L, MPE1, {"squareness_xy": 6.0}, seed=1), model
+
+
+def test_an_effect_between_alpha_name_and_alpha_is_indicated_not_chosen():
+    rec, model = weak_squareness()
+    j = dg.diagnose(rec, model).to_json()
+    assert j["mismatch"] is True and j["gate"] == "targeted"
+    assert j["effects"] == [] and j["alpha_name"] == pytest.approx(1e-4)
+    (ind,) = j["indicated"]
+    assert ind["name"] == "squareness_xy" and 1e-4 <= ind["p_adjusted"] < 0.01
+    assert abs(ind["estimate"] - 6.0) < 3 * ind["u"] and ind["unit"] == "urad"
+    status = {c["name"]: c["status"] for c in j["candidates"]}
+    assert status["squareness_xy"] == "indicated"
+    assert "indicated" in j["summary"] and "not named" in j["summary"]
+
+
+def test_the_indicated_effect_is_not_applied_in_the_refit():
+    rec, model = weak_squareness()
+    j = dg.diagnose(rec, model).to_json()
+    assert j["chi2_after"] == pytest.approx(j["chi2_before"], rel=1e-12)
+
+
+def test_with_alpha_name_equal_to_alpha_the_same_effect_is_chosen():
+    rec, model = weak_squareness()
+    j = dg.diagnose(rec, model, alpha_name=0.01).to_json()
+    assert [e["name"] for e in j["effects"]] == ["squareness_xy"] and j["indicated"] == []
+    assert j["effects"][0]["estimate"] == pytest.approx(dg.diagnose(rec, model).to_json()["indicated"][0]["estimate"],
+                                                        rel=1e-9)
+
+
+@pytest.mark.parametrize("alpha_name", [0.0, 0.02, -1e-3])
+def test_alpha_name_outside_zero_to_alpha_is_refused(alpha_name):
+    rec, model = weak_squareness()
+    with pytest.raises(dg.ModelError, match="alpha_name"):
+        dg.diagnose(rec, model, alpha_name=alpha_name)

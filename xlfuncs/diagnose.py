@@ -564,7 +564,7 @@ class Candidate:
     kept: list[int] = field(default_factory=list)     # identifiable columns
     reason: str | None = None                         # not identifiable / aliased
     aliased_with: str | None = None
-    status: str = "untested"                          # chosen | tested | aliased | not identifiable
+    status: str = "untested"                          # chosen | indicated | tested | aliased | not identifiable
     step: int | None = None
     delta_chi2: float | None = None
     df: int = 0
@@ -612,6 +612,8 @@ class Diagnosis:
     groups_after: list[dict] = field(default_factory=list)   # only when not explained
     with_outliers: dict | None = None
     discrepancy: dict | None = None   # the last candidate, when not explained (xlfuncs/discrepancy.py)
+    alpha_name: float = 0.0           # adjusted p a cause must beat to be named (section 7)
+    indicated: list[dict] = field(default_factory=list)   # significant at alpha, not at alpha_name
 
     @property
     def explained(self) -> bool:
@@ -686,13 +688,29 @@ def _psd_chi2(e: np.ndarray, C: np.ndarray) -> tuple[float, int]:
 
 
 def diagnose(rec: LengthRecords | PointRecords, model: Model, alpha: float = 0.01,
-             structured: bool | None = None) -> Diagnosis:
+             structured: bool | None = None, alpha_name: float | None = None) -> Diagnosis:
     """The analysis of docs/recordings.md section 3 on validated recordings (``structured``: see
-    :func:`prepare`)."""
+    :func:`prepare`; ``alpha_name``: see :func:`diagnose_prepared`)."""
+    alpha_name = check_alphas(alpha, alpha_name)
+    prep = prepare(rec, model, structured)
+    return diagnose_prepared(prep, alpha, alpha_name)
+
+
+#: a cause is named when its adjusted p-value is below alpha x NAME_SHARE (docs/recordings.md
+#: section 7, "Naming a cause"): a mismatch is raised at alpha, a physical cause -- which sends
+#: someone to the machine -- is held to a risk a hundred times smaller
+NAME_SHARE = 0.01
+
+
+def check_alphas(alpha: float, alpha_name: float | None) -> float:
+    """Validate alpha and alpha_name (default alpha x NAME_SHARE); return alpha_name."""
     if not (0.0 < alpha < 1.0):
         raise ModelError(f"alpha must be between 0 and 1, got {alpha!r}")
-    prep = prepare(rec, model, structured)
-    return diagnose_prepared(prep, alpha)
+    if alpha_name is None:
+        return alpha * NAME_SHARE
+    if not (0.0 < alpha_name <= alpha):
+        raise ModelError(f"alpha_name must be above 0 and at most alpha ({alpha:g}), got {alpha_name!r}")
+    return float(alpha_name)
 
 
 def is_structured(prep: Prepared) -> bool:
@@ -726,7 +744,11 @@ def _structured_whitener(prep: Prepared, names=None):
     return W
 
 
-def diagnose_prepared(prep: Prepared, alpha: float = 0.01) -> Diagnosis:
+def diagnose_prepared(prep: Prepared, alpha: float = 0.01, alpha_name: float | None = None) -> Diagnosis:
+    """Gates at alpha/2 each; the first effect named at adjusted p < alpha_name (default alpha/100),
+    a best one between alpha_name and alpha reported as ``indicated``; further effects at alpha
+    (docs/recordings.md section 7)."""
+    alpha_name = check_alphas(alpha, alpha_name)
     W = _structured_whitener(prep) if is_structured(prep) else Whitener(prep.C)
     yw = W(prep.r_um)
     Aw = W(prep.A)
@@ -803,19 +825,19 @@ def diagnose_prepared(prep: Prepared, alpha: float = 0.01) -> Diagnosis:
     kept_answer = None
     groups_scaled: list[dict] = []
     if mismatch:
-        srch = _search(prep, W, Q0, y0, white, cands, identifiable, alpha, outliers=outlier_search)
+        srch = _search(prep, W, Q0, y0, white, cands, identifiable, alpha, alpha_name, outliers=outlier_search)
         overflow = srch.overflow
         if overflow:
-            srch = _search(prep, W, Q0, y0, white, cands, identifiable, alpha, outliers=False)
+            srch = _search(prep, W, Q0, y0, white, cands, identifiable, alpha, alpha_name, outliers=False)
         fit = _refit(prep, W, keptA, srch)
         if fit[2] < math.log(alpha):
             # not explained: is the rest uniformly larger than the simulation allows, with no
             # structure any candidate or group explains?  The same search with the scale of the
             # covariance estimated (F-tests), then the groups against the scaled covariance
-            sc = _search(prep, W, Q0, y0, white, cands, identifiable, alpha, outliers=outlier_search,
+            sc = _search(prep, W, Q0, y0, white, cands, identifiable, alpha, alpha_name, outliers=outlier_search,
                          scaled=True)
             if sc.overflow:
-                sc = _search(prep, W, Q0, y0, white, cands, identifiable, alpha, outliers=False, scaled=True)
+                sc = _search(prep, W, Q0, y0, white, cands, identifiable, alpha, alpha_name, outliers=False, scaled=True)
             sfit = _refit(prep, W, keptA, sc)
             beta_s, cov_s, chi2_s, dof_s = sfit[3], sfit[4], sfit[0], sfit[1]
             if dof_s >= 1:
@@ -827,7 +849,7 @@ def diagnose_prepared(prep: Prepared, alpha: float = 0.01) -> Diagnosis:
                              "chi2": chi2_s, "dof": dof_s}
                     srch, fit = sc, sfit
         if srch.outliers:
-            alt = _search(prep, W, Q0, y0, white, cands, identifiable, alpha, outliers=False,
+            alt = _search(prep, W, Q0, y0, white, cands, identifiable, alpha, alpha_name, outliers=False,
                           scaled=noise is not None)
             afit = _refit(prep, W, keptA, alt)
             kept_answer = {"effects": list(alt.chosen), "chi2_after": afit[0], "dof_after": afit[1],
@@ -863,6 +885,8 @@ def diagnose_prepared(prep: Prepared, alpha: float = 0.01) -> Diagnosis:
     diag.noise_scale = noise
     diag.groups_scaled = groups_scaled
     diag.with_outliers = kept_answer
+    diag.alpha_name = alpha_name
+    diag.indicated = _indicated_report(prep, W, keptA, srch)
     diag.groups = locate_groups(diag)
     diag.groups_after = (_groups_of(prep, W, X_sel, beta, cov, labels_coef(prep, W, keptA, srch), alpha,
                                     z=diag.z_after) if mismatch and not diag.explained else [])
@@ -903,6 +927,7 @@ class _Search:
     resid: np.ndarray
     outlier_cols: list[tuple[int, list[int]]] = field(default_factory=list)  # (record, kept rows)
     overflow: bool = False           # more records than MAX_OUTLIER_SHARE looked gross: structure
+    indicated: list[str] = field(default_factory=list)   # best effect between alpha_name and alpha
 
 
 def _copy_candidate(c: Candidate) -> Candidate:
@@ -1014,12 +1039,15 @@ def _outlier_rows(prep, W, Q, resid, skip, scaled=False):
     return rows
 
 
-def _search(prep, W, Q0, y0, white, cands_in, identifiable, alpha, *, outliers=False, scaled=False):
+def _search(prep, W, Q0, y0, white, cands_in, identifiable, alpha, alpha_name, *, outliers=False,
+            scaled=False):
     """Forward selection (docs/recordings.md section 3.3 and section 7): in every step the best
     candidate effect (Bonferroni over the candidates of that step) and, with ``outliers``, the
     record whose gross error would lower chi-square most (Bonferroni over the records); the one
-    with the smaller adjusted p-value is taken while that is below alpha.  ``scaled``: F-tests
-    with the scale of the covariance estimated from what remains (the noise-level answer)."""
+    with the smaller adjusted p-value is taken while that is below alpha -- the first effect only
+    below alpha_name: one between alpha_name and alpha is ``indicated`` and the search stops.
+    ``scaled``: F-tests with the scale of the covariance estimated from what remains (the
+    noise-level answer)."""
     cands = {n: _copy_candidate(c) for n, c in cands_in.items()}
     S = _Search(cands, [], [], [], [], Q0, y0)
     order = {n: i for i, n in enumerate(fx.NAMES)}
@@ -1066,6 +1094,14 @@ def _search(prep, W, Q0, y0, white, cands_in, identifiable, alpha, *, outliers=F
             if S.outliers and not S.chosen and not _still_mismatch(W, S, best, alpha, scaled):
                 break     # the outliers explain the mismatch: no gate opens for physics
             c = cands[best["name"]]
+            if not S.chosen and best["log_p_adjusted"] >= math.log(alpha_name):
+                # the first cause: significant, but not at the level a cause is named at --
+                # indicated, not chosen (once one is named the records do differ, and further
+                # effects are chosen at alpha as in section 3)
+                c.status = "indicated"
+                c.kept = [c.kept[j] for j in best["kz"]]
+                S.indicated.append(best["name"])
+                break
             c.status = "chosen"
             c.kept = [c.kept[j] for j in best["kz"]]
             S.chosen.append(best["name"])
@@ -1129,6 +1165,21 @@ def labels_coef(prep, W, keptA, S: _Search):
     M = np.zeros((c, len(cols)))
     M[cols, np.arange(len(cols))] = 1.0
     return M
+
+
+def _indicated_report(prep: Prepared, W, keptA, S: _Search) -> list[dict]:
+    """``indicated`` of diagnosis.json: the effect the search found significant at alpha but not
+    at alpha_name, with the estimate it would have in a refit with it (not applied)."""
+    from dataclasses import replace
+
+    out = []
+    for name in S.indicated:
+        c = S.cands[name]
+        _, _, _, beta, cov, _, labels = _refit(prep, W, keptA, replace(S, chosen=S.chosen + [name]))
+        out.append({"name": name, **_estimates(prep, c, labels, beta, cov), "unit": fx.BY_NAME[name].unit,
+                    "delta_chi2": c.delta_chi2, "p_value": math.exp(c.logp), "p_adjusted": c.p_adjusted,
+                    "df": c.df, "step": c.step})
+    return out
 
 
 def _outlier_report(diag: Diagnosis, S: _Search) -> list[dict]:
@@ -1289,27 +1340,38 @@ def _groups_of(prep: Prepared, W, X: np.ndarray, beta: np.ndarray, cov: np.ndarr
             e_coef = e_coef - X_coef @ beta
     else:
         Ce = prep.C - X @ cov @ X.T if X.shape[1] else prep.C
+    def chi2_of(by, g, idx):
+        if structured:
+            return W.group_chi2((by, g), e_coef, cov, X_coef), len(idx)
+        return _psd_chi2(e[idx], Ce[np.ix_(idx, idx)])
+
+    def logp_of(chi2, dof):
+        if not dof_scale:
+            return chi2_logsf(chi2, dof)
+        # uniform inflation: neither larger nor smaller than the common scale (two-sided)
+        F = chi2 / dof / scale2
+        return min(0.0, math.log(2.0) + min(f_logsf(F, dof, dof_scale), f_logcdf(F, dof, dof_scale)))
+
+    extra = None if z is None else (lambda idx: {"rms_z": float(np.sqrt(np.mean(z[idx] ** 2)))})
+    return _group_table(prep, labels, chi2_of, logp_of, extra, alpha)
+
+
+def _group_table(prep: Prepared, labels: dict, chi2_of, logp_of, extra, alpha: float) -> list[dict]:
+    """The rows of a group table: for every grouping and group, chi2_of(by, group, observation
+    indices) -> (chi2, dof), its log p by logp_of, ``extra(idx)`` fields; flagged when p < alpha /
+    (number of groups), sorted by p."""
     rows = []
     for by, lab in labels.items():
         lab_obs = [lab[a] for a in prep.obs_record]
         for g in dict.fromkeys(lab):
             idx = np.array([q for q, v in enumerate(lab_obs) if v == g])
-            if structured:
-                chi2, dof = W.group_chi2((by, g), e_coef, cov, X_coef), len(idx)
-            else:
-                chi2, dof = _psd_chi2(e[idx], Ce[np.ix_(idx, idx)])
+            chi2, dof = chi2_of(by, g, idx)
             if dof == 0:
                 continue
-            if dof_scale:
-                # uniform inflation: neither larger nor smaller than the common scale (two-sided)
-                F = chi2 / dof / scale2
-                logp = min(0.0, math.log(2.0) + min(f_logsf(F, dof, dof_scale), f_logcdf(F, dof, dof_scale)))
-            else:
-                logp = chi2_logsf(chi2, dof)
             item = {"by": by, "group": g, "records": int(len(set(prep.obs_record[idx]))),
-                    "chi2": chi2, "dof": dof, "logp": logp}
-            if z is not None:
-                item["rms_z"] = float(np.sqrt(np.mean(z[idx] ** 2)))
+                    "chi2": chi2, "dof": dof, "logp": logp_of(chi2, dof)}
+            if extra is not None:
+                item.update(extra(idx))
             rows.append(item)
     K = max(len(rows), 1)
     for r in rows:
@@ -1343,27 +1405,16 @@ def locate_groups(diag: Diagnosis) -> list[dict]:
         e_coef[0] = 1.0
         if p0:
             e_coef[1:1 + p0] = -_gls(W, A, prep.r_um)[0]
-    rows = []
-    for by, lab in labels.items():
-        lab_obs = [lab[a] for a in prep.obs_record]
-        for g in dict.fromkeys(lab):
-            idx = np.array([q for q, v in enumerate(lab_obs) if v == g])
-            if structured:
-                chi2, dof = W.group_chi2((by, g), e_coef, cov0, A_coef), len(idx)
-            else:
-                chi2, dof = _psd_chi2(e[idx], C[np.ix_(idx, idx)])
-            if dof == 0:
-                continue
-            z = diag.z_before[idx]
-            rows.append({"by": by, "group": g, "records": int(len(set(prep.obs_record[idx]))),
-                         "chi2": chi2, "dof": dof, "logp": chi2_logsf(chi2, dof),
-                         "mean_z": float(np.mean(z)), "rms_z": float(np.sqrt(np.mean(z**2)))})
-    K = max(len(rows), 1)
-    for r in rows:
-        r["p_value"] = math.exp(r["logp"])
-        r["flagged"] = bool(r["logp"] + math.log(K) < math.log(diag.alpha))
-    rows.sort(key=lambda r: r["logp"])
-    return rows
+    def chi2_of(by, g, idx):
+        if structured:
+            return W.group_chi2((by, g), e_coef, cov0, A_coef), len(idx)
+        return _psd_chi2(e[idx], C[np.ix_(idx, idx)])
+
+    def extra(idx):
+        z = diag.z_before[idx]
+        return {"mean_z": float(np.mean(z)), "rms_z": float(np.sqrt(np.mean(z**2)))}
+
+    return _group_table(prep, labels, chi2_of, chi2_logsf, extra, diag.alpha)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -1373,10 +1424,14 @@ def locate_groups(diag: Diagnosis) -> list[dict]:
 def effect_estimates(diag: Diagnosis, name: str) -> dict:
     """estimate/u of a chosen effect in its unit (vector effects: lists, None where a
     component is not identifiable; probe_qualification also per probe)."""
-    c = diag.candidates[name]
-    rows = diag.effect_rows(name)
-    est = {diag.sel_labels[q][1]: float(diag.beta[q]) for q in rows}
-    unc = {diag.sel_labels[q][1]: float(math.sqrt(max(diag.cov_beta[q, q], 0.0))) for q in rows}
+    return _estimates(diag.prep, diag.candidates[name], diag.sel_labels, diag.beta, diag.cov_beta)
+
+
+def _estimates(prep: Prepared, c: Candidate, sel_labels, beta, cov_beta) -> dict:
+    name = c.name
+    rows = [q for q, (e, _) in enumerate(sel_labels) if e == name]
+    est = {sel_labels[q][1]: float(beta[q]) for q in rows}
+    unc = {sel_labels[q][1]: float(math.sqrt(max(cov_beta[q, q], 0.0))) for q in rows}
     eff = fx.BY_NAME[name]
     if not eff.vector:
         return {"estimate": est[name], "u": unc[name]}
@@ -1384,7 +1439,7 @@ def effect_estimates(diag: Diagnosis, name: str) -> dict:
     out = {"estimate": [est.get(l) for l in labels], "u": [unc.get(l) for l in labels]}
     if name == "probe_qualification":
         per = []
-        for pid in diag.prep.design.probe_ids[1:]:
+        for pid in prep.design.probe_ids[1:]:
             ls = [f"{pid}.d{a}" for a in fx.AXES]
             per.append({"probe": pid, "estimate": [est.get(l) for l in ls], "u": [unc.get(l) for l in ls]})
         out["per_probe"] = per
@@ -1455,6 +1510,8 @@ def diagnosis_json(diag: Diagnosis) -> dict:
     out["noise_scale"] = diag.noise_scale
     out["unexplained"] = unexplained_rest(diag)
     out["discrepancy"] = diag.discrepancy
+    out["alpha_name"] = diag.alpha_name
+    out["indicated"] = diag.indicated
     out["log10_p_before"] = diag.logp_before / math.log(10)
     out["covariance_rank"] = diag.whitener.rank
     if is_structured(diag.prep):
@@ -1579,6 +1636,17 @@ def summary_text(diag: Diagnosis) -> str:
         pieces.append(f"the residuals are uniformly larger than the simulation allows, with no structure a "
                       f"candidate or group explains: the declared uncertainties are too small by a factor "
                       f"{_fmt_pm(ns['estimate'], ns['u'])}" + ("" if diag.chosen else "; no physical effect is chosen"))
+    for ind in diag.indicated:
+        eff = fx.BY_NAME[ind["name"]]
+        if eff.vector:
+            c = diag.candidates[ind["name"]]
+            val = "; ".join(f"{l} {_fmt_pm(e, u)}" for l, e, u in zip(c.cols.labels, ind["estimate"], ind["u"])
+                            if e is not None) + f" {PLAIN_UNITS[eff.unit]}"
+        else:
+            val = f"{_fmt_pm(ind['estimate'], ind['u'])} {PLAIN_UNITS[eff.unit]}"
+        pieces.append(f"{eff.plain} of {val} is indicated (adjusted p = {ind['p_adjusted']:.2g}) but not "
+                      f"named: a cause is named only at adjusted p < {diag.alpha_name:.2g}, so it is not "
+                      f"applied; more records that see it would tell")
     if not diag.chosen and not pieces:
         loc = diag.located[0] if diag.located else None
         tail = f"; the largest is {loc['id']} (z = {loc['z']:.1f})" if loc else ""

@@ -353,12 +353,10 @@ def normals_from_feature(doc: QifDocument, f: Feature, ps: PointSet) -> tuple[np
         c = g.get("Location", g.get("AxisPoint"))
         a = None if f.kind == "Sphere" else g.get("Normal", g.get("Direction"))
         if c is not None and (a is not None or f.kind == "Sphere"):
-            r = X - c
-            if a is not None:
-                a = a / np.linalg.norm(a)
-                r -= np.outer(r @ a, a)
-            dist = np.linalg.norm(r, axis=1)
-            u = r / dist[:, None]
+            _, dist, u = _radial(X, c, a)
+            if np.any(dist < 1e-9 * max(float(np.max(dist)), 1.0)):
+                raise InputError(f"a point of {f.name} lies on the measured axis/centre: its radial "
+                                 "normal is undefined", file=doc.path, where=ps.where)
             diameter = f.nominal.get("Diameter") if f.kind != "Cone" else None
             offset = ps.probe_radius_mm if ps.compensated is False and ps.probe_radius_mm else 0.0
             internal, side = _side(f, None, dist, u, None if diameter is None else diameter / 2, offset)
@@ -371,6 +369,18 @@ def normals_from_feature(doc: QifDocument, f: Feature, ps: PointSet) -> tuple[np
     raise InputError(f"the file gives no normals for the points of {f.name}, and a {f.kind.lower()} "
                      "gives none from its geometry; the point-cloud model needs the outward normal of "
                      "every point (Forbes 2025 eq. (26))", file=doc.path, where=where)
+
+
+def _radial(X: np.ndarray, centre: np.ndarray, axis: np.ndarray | None):
+    """(along, dist, u) of points X about an axis through ``centre`` with unit direction ``axis``
+    (None: about the point ``centre``, a sphere): the axial part of X - centre, the radial
+    distances and the unit radial directions."""
+    r = X - centre
+    along = np.zeros_like(r) if axis is None else np.outer(r @ axis, axis)
+    r = r - along
+    dist = np.linalg.norm(r, axis=1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return along, dist, r / dist[:, None]
 
 
 def _side(f: Feature, ps: PointSet | None, dist: np.ndarray, u: np.ndarray, R: float | None,
@@ -443,21 +453,16 @@ def nominal_points(doc: QifDocument, f: Feature, ps: PointSet) -> tuple[np.ndarr
     if c is None:
         raise InputError(f"the nominal {f.kind.lower()} of {f.name} lacks its centre/axis point",
                          file=doc.path, where=where)
-    r = X - c
+    a = None
     if f.kind != "Sphere":
         a = g.get("Normal", g.get("Direction"))
         if a is None:
             raise InputError(f"the nominal {f.kind.lower()} of {f.name} lacks its axis direction",
                              file=doc.path, where=where)
-        along = np.outer(r @ a, a)
-        r = r - along
-    else:
-        along = np.zeros_like(X)
-    dist = np.linalg.norm(r, axis=1)
+    along, dist, u = _radial(X, c, a)
     if np.any(dist < 1e-9 * max(R, 1.0)):
         raise InputError(f"a point of {f.name} lies on the nominal axis/centre: no closest point",
                          file=doc.path, where=ps.where)
-    u = r / dist[:, None]
     internal, side = _side(f, ps, dist, u, R, offset)
     if internal is None:
         raise InputError(f"the file does not say whether {f.name} is INTERNAL or EXTERNAL "
