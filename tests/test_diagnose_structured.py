@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from xlfuncs import diagnose as dg
+from xlfuncs.locator import model as locator_model
 from xlfuncs import pointcloud as pc
 from xlfuncs import simulate as sm
 
@@ -107,7 +108,7 @@ def test_the_workbook_of_a_structured_diagnosis_agrees_with_its_json(tmp_path, m
     from test_diagnose_book import expected_rows
     from xlfuncs.recordings import write_recordings
 
-    monkeypatch.setattr(dg, "STRUCTURED_MIN_OBS", 0)
+    monkeypatch.setattr(locator_model, "STRUCTURED_MIN_OBS", 0)
     monkeypatch.setattr(diagnose_book, "NATIVE_MAX_OBS", 20)
     rec = sm.simulate(sm.scan(PAIR, points=200), MPE1, {"scale": 10.0, "probe_radius": 3.0}, seed=3)
     write_recordings(rec, tmp_path / "rec.csv")

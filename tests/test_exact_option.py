@@ -11,6 +11,7 @@ import pytest
 from generator import feature_job
 from generator.cli import build_task, main
 from xlfuncs import diagnose as dg
+from xlfuncs.locator import model as locator_model
 from xlfuncs import simulate as sm
 from xlfuncs.recordings import write_recordings
 
@@ -83,7 +84,7 @@ def test_build_exact_overrides_the_task(tmp_path, large, capsys):
 @pytest.fixture
 def point_records(tmp_path, monkeypatch):
     """300 point records (900 observations) counted as large: the structured path above 600."""
-    monkeypatch.setattr(dg, "STRUCTURED_MIN_OBS", 600)
+    monkeypatch.setattr(locator_model, "STRUCTURED_MIN_OBS", 600)
     rec = sm.simulate(sm.scan(PAIR, points=300), MPE1, {"scale": 30.0, "probe_radius": 8.0}, seed=3)
     path = tmp_path / "scan.csv"
     write_recordings(rec, path)

@@ -1,0 +1,376 @@
+"""The linear model of the records (docs/recordings.md sections 1-2, docs/diagnose.md section 1):
+probes resolved, point records aligned (Kabsch), the design of the candidate effects, and the
+record covariance C from the Forbes 2025 point-cloud model -- length records C = G V_X G^T in
+kernel form (eqs. 28-29), point records V_X itself (dense, or the structured operator of
+:mod:`xlfuncs.structured`); and the groups of records (section 3.2)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from .. import effects as fx
+from .. import pointcloud as pc
+from ..errors import ModelError
+from ..recordings import LengthRecords, PointRecords, RecordingsError
+
+
+# ---------------------------------------------------------------------------------------------
+# the model of the simulation, the probes, the design
+# ---------------------------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class Model:
+    """What the recordings are compared with: the task's ``[parameters]`` and ``[[probes]]``
+    (``probes_given`` False when the task has no ``[[probes]]``: every probe then uses the
+    task-wide parameters and the offsets of the records, or zero)."""
+
+    params: pc.Parameters
+    probes: tuple[pc.Probe, ...] = (pc.Probe("P1"),)
+    probes_given: bool = False
+
+
+def _probe_label(p: np.ndarray, model: Model) -> str:
+    for pr in model.probes:
+        if np.max(np.abs(np.asarray(pr.offset_mm) - p)) <= 1e-6 and model.probes_given:
+            return pr.id
+    return "p(" + ",".join(f"{v:g}" for v in p) + ")"
+
+
+def resolve_probes(rec, model: Model):
+    """Probe id of every probing (per end for lengths), probe ids in file order, the Probe
+    objects (offset + per-probe sigmas) and whether offsets are known.
+
+    Returns ``(ids_per_end, probe_ids, probes, offsets_given)`` where ``ids_per_end`` is a list
+    of tuples (one per end for lengths, one for points)."""
+    if isinstance(rec, LengthRecords):
+        label_cols = (rec.probe1, rec.probe2) if rec.probe1 is not None else None
+        P_cols = (rec.P1_mm, rec.P2_mm) if rec.P1_mm is not None else None
+        colnames = ("probe1", "probe2")
+    else:
+        label_cols = (rec.probe,) if rec.probe is not None else None
+        P_cols = (rec.P_mm,) if rec.P_mm is not None else None
+        colnames = ("probe",)
+    n = rec.n
+    if label_cols is not None:
+        ids_per_end = [tuple(c) for c in label_cols]
+    elif P_cols is not None:
+        ids_per_end = [tuple(_probe_label(P[a], model) for a in range(n)) for P in P_cols]
+    else:
+        if model.probes_given and len(model.probes) > 1:
+            raise RecordingsError(
+                "the task defines several probes but the records name none: add the column"
+                + ("s probe1,probe2" if len(colnames) == 2 else " probe"), rec.lines[0])
+        ids_per_end = [(model.probes[0].id,) * n for _ in colnames]
+    order: list[str] = []
+    for a in range(n):
+        for ids in ids_per_end:
+            if ids[a] not in order:
+                order.append(ids[a])
+    task = {p.id: p for p in model.probes}
+    if model.probes_given and label_cols is not None:
+        for a in range(n):
+            for ids, col in zip(ids_per_end, colnames):
+                if ids[a] not in task:
+                    raise RecordingsError(f"unknown probe {ids[a]!r} (the task defines "
+                                          f"{', '.join(p.id for p in model.probes)})", rec.lines[a], col)
+    probes = []
+    for pid in order:
+        if P_cols is not None:
+            a, e = next((a, e) for a in range(n) for e, ids in enumerate(ids_per_end) if ids[a] == pid)
+            off = tuple(float(v) for v in P_cols[e][a])
+        elif pid in task:
+            off = tuple(task[pid].offset_mm)
+        else:
+            off = (0.0, 0.0, 0.0)
+        base = task.get(pid, pc.Probe(pid))
+        probes.append(pc.Probe(pid, off, base.sigma_PQ_um, base.sigma_P0_um, base.sigma_P_um, base.lambda_P))
+    offsets_given = P_cols is not None or model.probes_given
+    try:
+        for p in probes:
+            p.resolved(model.params)
+    except ModelError as e:
+        raise ModelError(f"[[probes]]: {e}") from None
+    return ids_per_end, tuple(order), tuple(probes), offsets_given
+
+
+@dataclass
+class Prepared:
+    """Records turned into the linear model r = A theta + X beta + e, e ~ N(0, C)."""
+
+    rec: LengthRecords | PointRecords
+    design: fx.Design
+    cloud: pc.PointCloud
+    r_um: np.ndarray                 # residual vector (n_obs)
+    C: np.ndarray                    # covariance (µm²)
+    A: np.ndarray                    # baseline columns (n_obs x p0), alignment of point records
+    A_labels: list[str]
+    obs_record: np.ndarray           # record index of every observation row
+    obs_axis: np.ndarray             # axis of every row (points), -1 for lengths
+    ends: tuple[np.ndarray, np.ndarray] | None = None   # unique-point index of the two ends
+    R0: np.ndarray | None = None     # initial alignment (Kabsch): Y = R0 x_nom + t0
+    t0: np.ndarray | None = None
+
+
+def _unique_probings(rec: LengthRecords, k1: np.ndarray, k2: np.ndarray):
+    """Ends with identical coordinates, normal and probe are one probing (docs/recordings.md section 6)."""
+    N1 = rec.N1 if rec.N1 is not None else np.zeros_like(rec.X1_mm)
+    N2 = rec.N2 if rec.N2 is not None else np.zeros_like(rec.X2_mm)
+    keys: dict[tuple, int] = {}
+    X, N, K = [], [], []
+    idx = np.empty((2, rec.n), dtype=int)
+    for e, (Xe, Ne, ke) in enumerate(((rec.X1_mm, N1, k1), (rec.X2_mm, N2, k2))):
+        for a in range(rec.n):
+            key = (*Xe[a].tolist(), *Ne[a].tolist(), int(ke[a]))
+            q = keys.get(key)
+            if q is None:
+                q = keys[key] = len(X)
+                X.append(Xe[a])
+                N.append(Ne[a])
+                K.append(int(ke[a]))
+            idx[e, a] = q
+    pairs: dict[tuple[int, int], int] = {}
+    for a in range(rec.n):
+        key = tuple(sorted((int(idx[0, a]), int(idx[1, a]))))
+        if key in pairs:
+            b = pairs[key]
+            if abs(rec.measured_mm[a] - rec.measured_mm[b]) > 1e-9 or abs(rec.reference_mm[a] - rec.reference_mm[b]) > 1e-9:
+                raise RecordingsError(
+                    f"records {rec.ids[b]!r} (line {rec.lines[b]}) and {rec.ids[a]!r} have the same two "
+                    "probings (identical coordinates, normals and probes: one probing each, spec "
+                    "section 6) but different lengths; give the indicated coordinates of every repeat",
+                    rec.lines[a], "x1")
+        else:
+            pairs[key] = a
+    return np.array(X), np.array(N), np.array(K, dtype=int), idx[0], idx[1]
+
+
+def kabsch(X_nom: np.ndarray, X: np.ndarray, planar: bool) -> tuple[np.ndarray, np.ndarray]:
+    """Least-squares rigid transform with X ~ R X_nom + t (rotation about z only for 2-D data)."""
+    a0, b0 = X_nom.mean(axis=0), X.mean(axis=0)
+    A, B = X_nom - a0, X - b0
+    if planar:
+        s = np.sum(A[:, 0] * B[:, 1] - A[:, 1] * B[:, 0])
+        c = np.sum(A[:, 0] * B[:, 0] + A[:, 1] * B[:, 1])
+        th = math.atan2(s, c)
+        R = np.array([[math.cos(th), -math.sin(th), 0.0], [math.sin(th), math.cos(th), 0.0], [0.0, 0.0, 1.0]])
+    else:
+        H = A.T @ B
+        U, _, Vt = np.linalg.svd(H)
+        dsign = np.sign(np.linalg.det(Vt.T @ U.T)) or 1.0
+        R = Vt.T @ np.diag([1.0, 1.0, dsign]) @ U.T
+    t = b0 - R @ a0
+    return R, t
+
+
+#: point records with more observations than this use the structured covariance
+#: (:mod:`xlfuncs.structured`, C = D + U U^T never formed) unless asked otherwise
+STRUCTURED_MIN_OBS = 6000
+
+
+def uses_structured(rec: LengthRecords | PointRecords, model: Model, structured: bool | None = None) -> bool:
+    """Whether :func:`prepare` takes the structured covariance for these records."""
+    if isinstance(rec, LengthRecords):
+        return False
+    if structured is not None:
+        return bool(structured)
+    dims = 2 if rec.planar else 3
+    return rec.n * dims > STRUCTURED_MIN_OBS and model.params.sigma_R_um > 0
+
+
+def prepare(rec: LengthRecords | PointRecords, model: Model, structured: bool | None = None) -> Prepared:
+    """The linear model of the records.  ``structured``: for point records, the covariance as the
+    operator of :mod:`xlfuncs.structured` (True), dense (False), or dense up to
+    ``STRUCTURED_MIN_OBS`` observations (None)."""
+    ids_per_end, probe_ids, probes, offsets_given = resolve_probes(rec, model)
+    index = {p: k for k, p in enumerate(probe_ids)}
+    offsets = np.array([p.offset_mm for p in probes], dtype=float).reshape(-1, 3)
+    T, t = rec.temperature_C, rec.time_s
+    if isinstance(rec, LengthRecords):
+        k1 = np.array([index[p] for p in ids_per_end[0]], dtype=int)
+        k2 = np.array([index[p] for p in ids_per_end[1]], dtype=int)
+        X, N, K, I, J = _unique_probings(rec, k1, k2)
+        cloud = pc.PointCloud(X, N, K, probes, tuple(f"Q{q + 1}" for q in range(len(X))))
+        P1, P2 = offsets[k1], offsets[k2]
+        delta = rec.X2_mm - rec.X1_mm
+        na = delta / np.linalg.norm(delta, axis=1)[:, None]
+        design = fx.Design("length", probe_ids, offsets_given, T=T, t=t, na=na,
+                           U1=rec.X1_mm - P1, U2=rec.X2_mm - P2, N1=rec.N1, N2=rec.N2, k1=k1, k2=k2,
+                           P1=P1, P2=P2, ref=rec.reference_mm, extent_mm=float(np.max(rec.reference_mm)))
+        C = length_covariance(cloud, model.params, I, J)
+        n = rec.n
+        return Prepared(rec, design, cloud, rec.residual_um.copy(), C, np.zeros((n, 0)), [],
+                        np.arange(n), -np.ones(n, dtype=int), ends=(I, J))
+    k = np.array([index[p] for p in ids_per_end[0]], dtype=int)
+    planar = rec.planar
+    dims = 2 if planar else 3
+    R0, t0 = kabsch(rec.X_nom_mm, rec.X_mm, planar)
+    Y = rec.X_nom_mm @ R0.T + t0
+    P = offsets[k]
+    c = Y.mean(axis=0)
+    N = rec.N if rec.N is not None else np.zeros_like(rec.X_mm)
+    design = fx.Design("point", probe_ids, offsets_given, T=T, t=t, Y=Y, U=Y - P, N=rec.N, k=k, P=P,
+                       c=c, dims=dims,
+                       extent_mm=float(np.max(np.linalg.norm(Y - c, axis=1))) or 1.0)
+    cloud = pc.PointCloud(rec.X_mm, N, k, probes, tuple(rec.ids))
+    if uses_structured(rec, model, structured):
+        from ..structured import StructuredCovariance
+
+        C = StructuredCovariance(cloud, model.params, dims)
+    else:
+        V = pc.V_X(cloud, model.params)
+        keep = np.array([3 * i + a for i in range(rec.n) for a in range(dims)])
+        C = V[np.ix_(keep, keep)]
+    r = ((rec.X_mm - Y)[:, :dims] * 1000.0).reshape(-1)
+    A, labels = fx.alignment_columns(design)
+    return Prepared(rec, design, cloud, r, C, A, labels, np.repeat(np.arange(rec.n), dims),
+                    np.tile(np.arange(dims), rec.n), R0=R0, t0=t0)
+
+
+# ---------------------------------------------------------------------------------------------
+# covariance of length records: C = G V_X G^T in kernel form (Forbes 2025 eqs. 28-29)
+# ---------------------------------------------------------------------------------------------
+
+def _sqdist(A: np.ndarray, B: np.ndarray) -> np.ndarray:
+    d = np.einsum("ij,ij->i", A, A)[:, None] + np.einsum("ij,ij->i", B, B)[None, :] - 2.0 * A @ B.T
+    return np.maximum(d, 0.0)
+
+
+def length_covariance(cloud: pc.PointCloud, params: pc.Parameters, I: np.ndarray, J: np.ndarray,
+                      *, components: bool = False):
+    """Covariance (µm²) of the lengths d_a = ||x_J[a] - x_I[a]|| of the unique points of
+    ``cloud``: Cov(d_a, d_b) = g_a^T V_X g_b with g_a = -n_a at I[a] and +n_a at J[a].
+
+    Each factor of eq. (28) is a point kernel K(p, q) times a direction term, so
+    Cov(d_a, d_b) = sum over the ends s of a and t of b of sign_s sign_t K(s_a, t_b) w_{a,s}.w_{b,t}
+    with w = n_a (R, PQ, ET), w = n_a x p (ER, eq. 24) or w = n_a . n_point (P, eq. 26);
+    scale/squareness is rank 7 (eq. 11).  Memory and time O(n^2 + m^2), m unique points."""
+    X, U, N = cloud.X_mm, cloud.ram_mm, cloud.N
+    kp = cloud.probe_index
+    d = X[J] - X[I]
+    na = d / np.linalg.norm(d, axis=1)[:, None]
+    pa = pc.probe_arrays(cloud, params)
+    NN = na @ na.T
+    out: dict[str, np.ndarray] = {}
+
+    def four(kern, WI=None, WJ=None) -> np.ndarray:
+        """sum_{s,t} sign_s sign_t kern(s, t)[a, b] (W_s[a] . W_t[b]) over the ends s of record a
+        and t of record b (W None: 1)."""
+        total = np.zeros((len(I), len(I)))
+        for s, ss, Ws in ((I, -1.0, WI), (J, 1.0, WJ)):
+            for t_, st, Wt in ((I, -1.0, WI), (J, 1.0, WJ)):
+                term = kern(s, t_)
+                if Ws is not None:
+                    term = term * (Ws @ Wt.T)
+                total += ss * st * term
+        return total
+
+    def gather(K: np.ndarray):
+        return lambda s, t_: K[np.ix_(s, t_)]
+
+    # R (eq. 8): one probing, one repeatability draw
+    out["R"] = params.sigma_R_um**2 * four(lambda s, t_: (s[:, None] == t_[None, :]).astype(float)) * NN
+    # PQ (eq. 9)
+    s = pa["sigma_PQ_um"]
+    out["PQ"] = four(lambda a, b: (kp[a][:, None] == kp[b][None, :]) * np.outer(s[a], s[b])) * NN
+    # S (eqs. 11-14): rank 7 at the ram positions
+    du = U[J] - U[I]
+    nx, ny, nz = na.T
+    ux, uy, uz = du.T
+    g7 = np.column_stack([nx * ux + ny * uy + nz * uz, nx * ux, ny * uy, nz * uz, nx * uy, nx * uz, ny * uz])
+    out["S"] = (g7 * pc.V_S_diag_um_per_mm2(params)) @ g7.T
+    D2 = None
+    if params.sigma_ET_um > 0 or params.sigma_ER_urad > 0:
+        D2 = _sqdist(U, U)
+    # ET (eq. 21): independent axes
+    if params.sigma_ET_um > 0:
+        out["ET"] = params.sigma_ET_um**2 * four(gather(np.exp(-D2 / params.lambda_ET_mm**2))) * NN
+    else:
+        out["ET"] = np.zeros_like(NN)
+    # ER (eq. 25): w = G_k^T n (= p x n; the common sign cancels)
+    if params.sigma_ER_urad > 0:
+        P = cloud.offsets_mm
+        out["ER"] = (params.sigma_ER_urad * pc.MILLI) ** 2 * four(
+            gather(np.exp(-D2 / params.lambda_ER_mm**2)), np.cross(na, P[I]), np.cross(na, P[J]))
+    else:
+        out["ER"] = np.zeros_like(NN)
+    # P (eqs. 26-27): o = n_a . n_point, same probe only
+    s0, sp, lam = pa["sigma_P0_um"], pa["sigma_P_um"], pa["lambda_P"]
+    if np.any(s0 > 0) or np.any(sp > 0):
+        same = kp[:, None] == kp[None, :]
+        DN2 = _sqdist(N, N)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            kern = np.where(np.outer(sp, sp) > 0, np.exp(-DN2 / np.outer(lam, lam)), 0.0)
+        KP = same * (np.outer(s0, s0) + np.outer(sp, sp) * kern)
+        out["P"] = four(gather(KP), np.einsum("ij,ij->i", na, N[I])[:, None],
+                        np.einsum("ij,ij->i", na, N[J])[:, None])
+    else:
+        out["P"] = np.zeros_like(NN)
+    if components:
+        return out
+    total = out["R"]
+    for f in ("PQ", "S", "ET", "ER", "P"):
+        total = total + out[f]
+    return 0.5 * (total + total.T)
+
+
+def length_covariance_dense(cloud: pc.PointCloud, params: pc.Parameters, I, J) -> np.ndarray:
+    """Reference implementation: G V_X G^T with the dense V_X of eq. (28) (tests only)."""
+    V = pc.V_X(cloud, params)
+    d = cloud.X_mm[J] - cloud.X_mm[I]
+    na = d / np.linalg.norm(d, axis=1)[:, None]
+    G = np.zeros((len(I), 3 * cloud.m))
+    for a in range(len(I)):
+        G[a, 3 * I[a]:3 * I[a] + 3] -= na[a]
+        G[a, 3 * J[a]:3 * J[a] + 3] += na[a]
+    return G @ V @ G.T
+
+
+def group_labels(prep: Prepared) -> dict[str, list[str]]:
+    """Labels of every record under each grouping of docs/recordings.md section 3.2."""
+    rec, D = prep.rec, prep.design
+    out: dict[str, list[str]] = {}
+    if rec.group is not None:
+        out["group"] = [g or "(none)" for g in rec.group]
+    if len(D.probe_ids) > 1:
+        if D.kind == "length":
+            out["probe"] = [D.probe_ids[a] if a == b else f"{D.probe_ids[a]}-{D.probe_ids[b]}"
+                            for a, b in zip(D.k1, D.k2)]
+        else:
+            out["probe"] = [D.probe_ids[k] for k in D.k]
+    if D.kind == "length":
+        if D.N1 is not None:
+            o = np.einsum("ij,ij->i", D.na, D.N1) * np.einsum("ij,ij->i", D.na, D.N2)
+            out["probing"] = ["bidirectional" if v < -0.25 else "unidirectional" if v > 0.25 else "other"
+                              for v in o]
+        out["direction"] = [direction_label(v) for v in D.na]
+    for key, v, unit, scale in (("temperature", D.T, "°C", 1.0), ("time", D.t, "h", 1 / 3600.0)):
+        if v is not None and np.ptp(v) > 1e-9:
+            out[key] = band_labels(v * scale, unit)
+    return {k: v for k, v in out.items() if len(set(v)) > 1}
+
+
+def direction_label(v: np.ndarray) -> str:
+    """'+x', '+x+y', '+x-y+z' ...: the axes with |component| > 0.2, first sign made positive."""
+    comps = [(a, np.sign(v[a])) for a in range(3) if abs(v[a]) > 0.2]
+    if not comps:
+        return "other"
+    s0 = comps[0][1]
+    return "".join(("+" if s * s0 > 0 else "-") + fx.AXES[a] for a, s in comps)
+
+
+def band_labels(v: np.ndarray, unit: str) -> list[str]:
+    """Three bands (tertiles) of a quantity, labelled by their ranges."""
+    edges = np.unique(np.quantile(v, [1 / 3, 2 / 3]))
+    idx = np.searchsorted(edges, v, side="right")
+    labels = []
+    for b in range(len(edges) + 1):
+        sel = v[idx == b]
+        labels.append(f"{sel.min():.2f}–{sel.max():.2f} {unit}" if sel.size else "")
+    return [labels[i] for i in idx]
+
+
+def is_structured(prep: Prepared) -> bool:
+    return not isinstance(prep.C, np.ndarray)
