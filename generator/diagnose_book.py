@@ -156,7 +156,7 @@ def _inputs(book: Book, diag: Diagnosis, params: Parameters | None) -> dict:
         for c, v in enumerate(probe.offset_mm):
             book.number(ws, r, 2 + c, v, fmt="General", computed=True)
         probe_cells[probe.id] = cell(r, 1, "Inputs")
-    out = {"probe_cells": probe_cells}
+    out = {"probe_cells": probe_cells, "free_row": r + 2}
     if prep.design.kind == "point":
         r += 2
         book.text(ws, r, 1, "Initial alignment (Kabsch, computed by the core): y = R0 x_nom + t0; "
@@ -173,7 +173,45 @@ def _inputs(book: Book, diag: Diagnosis, params: Parameters | None) -> dict:
         book.text(ws, r, 1, "centroid c of the nominal points (machine coordinates, mm)")
         out["R0"], out["t0"] = R0, t0
         out["c_row"] = r + 1
+        out["free_row"] = r + 3
     return out
+
+
+def _travel_cells(book: Book, diag: Diagnosis, inputs: dict, sheet: str, cols: dict[str, list[int]],
+                  n: int) -> dict[str, tuple[str, str]]:
+    """For the chosen straightness effects (docs/recordings.md section 7): the travel of their
+    carriage over the records, lo = MIN and hi = MAX of the ram coordinate columns ``cols[axis]``
+    of ``sheet`` (rows 2..n+1), on Inputs; {carriage: (lo cell, hi cell)}."""
+    cars = sorted({e[2] for e, _ in diag.sel_labels if e in fx.STRAIGHTNESS})
+    if not cars:
+        return {}
+    wi = book.wb["Inputs"]
+    r = inputs["free_row"]
+    book.text(wi, r, 1, "travel of the carriages over the records (ram coordinates, mm): the straightness "
+                        "polynomials P2, P3 are of s = (2 u - lo - hi)/(hi - lo)")
+    book.header(wi, r + 1, 1, ["carriage", "lo_mm", "hi_mm"])
+    out = {}
+    for k, car in enumerate(cars):
+        rr = r + 2 + k
+        ranges = ",".join(block(2, c, n, 1, sheet) for c in cols[car.lower()])
+        book.text(wi, rr, 1, car)
+        book.formula(wi, rr, 2, f"=MIN({ranges})")
+        book.formula(wi, rr, 3, f"=MAX({ranges})")
+        out[car] = (cell(rr, 2, "Inputs"), cell(rr, 3, "Inputs"))
+    return out
+
+
+def _legendre_formula(k: int, u: str, lo_hi: tuple[str, str]) -> str:
+    """P_k(s), k = 2 or 3, of s = (2 u - lo - hi)/(hi - lo) as formula text (no leading '=')."""
+    lo, hi = lo_hi
+    s = f"((2*{u}-{lo}-{hi})/({hi}-{lo}))"
+    return f"(0.5*(3*{s}^2-1))" if k == 2 else f"(0.5*(5*{s}^3-3*{s}))"
+
+
+def _approach_formula(n: str) -> str:
+    """+1 approached along +axis (n < -0.1), -1 along -axis (n > 0.1), else 0 (effects.approach_sign)."""
+    t = fx.APPROACH_MIN
+    return f"IF({n}<-{t},1,IF({n}>{t},-1,0))"
 
 
 # -- records -------------------------------------------------------------------------------------
@@ -251,12 +289,14 @@ def _length_records(book: Book, diag: Diagnosis, inputs: dict):
         book.formula(ws, r, ci["residual_um"], f"=({L['measured_mm']}-{L['reference_mm']})*1000")
     obs = {"sheet": "Records", "rows": [R.row for R in rows], "ci": ci, "chosen_cols": chosen_cols,
            "first_X": ci[chosen_cols[0]] if chosen_cols else None, "n_align": 0, "row_of_obs": rows}
+    travel = _travel_cells(book, diag, inputs, "Records",
+                           {ax: [ci[f"u{ax}1_mm"], ci[f"u{ax}2_mm"]] for ax in "xyz"}, rec.n)
     for q, label in enumerate(chosen_cols):
         name, par = label.split(":", 1)
         for a, R in enumerate(rows):
             # an outlier left out (docs/recordings.md section 7): its own mean-shift column, 1 on its row
             f = (1.0 if rec.ids[a] == par else 0.0) if name == "outlier" else \
-                length_formula(name, par, R, inputs["probe_cells"])
+                length_formula(name, par, R, inputs["probe_cells"], travel)
             _value_or_formula(book, ws, R.row, ci[label], f)
     ws.freeze_panes = "B2"
     return rows, obs
@@ -280,8 +320,10 @@ def _rot_vec(rot: str, p: tuple[str, str, str]) -> tuple[str, str, str]:
     return {"A": ("0", f"(-{pz})", py), "B": (pz, "0", f"(-{px})"), "C": (f"(-{py})", px, "0")}[rot]
 
 
-def length_formula(name: str, par: str, R: _Row, probe_cells: dict[str, str]) -> str:
-    """Sensitivity of a length record to one parameter, as a formula of its row (effects.py)."""
+def length_formula(name: str, par: str, R: _Row, probe_cells: dict[str, str],
+                   travel: dict[str, tuple[str, str]] | None = None) -> str:
+    """Sensitivity of a length record to one parameter, as a formula of its row (effects.py);
+    ``travel``: the lo/hi cells of the straightness carriages (:func:`_travel_cells`)."""
     du = {ax: f"({R['u' + ax + '2_mm']}-{R['u' + ax + '1_mm']})" for ax in "xyz"}
     ndu = "(" + "+".join(f"{R['na' + ax]}*{du[ax]}" for ax in "xyz") + ")"
     if name == "scale":
@@ -308,6 +350,14 @@ def length_formula(name: str, par: str, R: _Row, probe_cells: dict[str, str]) ->
         return f"=0.000001*({R['u' + car + '2_mm']}*{_na_dot(R, v2)}-{R['u' + car + '1_mm']}*{_na_dot(R, v1)})"
     if name == "scale_drift":
         return f"=0.001*({R['time_s']}/3600)*{ndu}"
+    if name in fx.STRAIGHTNESS:
+        k, car, dev = int(par[1]), name[2], name[1].lower()
+        p2 = _legendre_formula(k, R[f"u{car.lower()}2_mm"], travel[car])
+        p1 = _legendre_formula(k, R[f"u{car.lower()}1_mm"], travel[car])
+        return f"={R['na' + dev]}*({p2}-{p1})"
+    if name in fx.REVERSAL:
+        ax = name[-1]
+        return f"={R['na' + ax]}*({_approach_formula(R['n2' + ax])}-{_approach_formula(R['n1' + ax])})"
     raise ValueError(f"no length formula for {name}")
 
 
@@ -386,6 +436,7 @@ def _point_records(book: Book, diag: Diagnosis, inputs: dict):
         *[None] * len(chosen_cols), "row of X (effects) times b", "r - alignment - fitted",
         "(r - alignment - fitted)/u", "alignment of the baseline fit (alignment columns times b0)",
         "r - baseline"])
+    travel = _travel_cells(book, diag, inputs, "Points", {ax: [ci[f"u{ax}_mm"]] for ax in "xyz"}, rec.n)
     rows = []
     for i in range(rec.n):
         P = prow[i]
@@ -402,7 +453,7 @@ def _point_records(book: Book, diag: Diagnosis, inputs: dict):
             for label in chosen_cols:
                 name, par = label.split(":", 1)
                 f = (1.0 if par == f"{rec.ids[i]}.{ax}" else 0.0) if name == "outlier" else \
-                    point_formula(name, par, a, P, centroid, inputs["probe_cells"])
+                    point_formula(name, par, a, P, centroid, inputs["probe_cells"], travel)
                 _value_or_formula(book, wc, r, cc[label], f)
     wc.freeze_panes = "C2"
     obs = {"sheet": "Coords", "rows": [R.row for R in rows], "ci": cc, "chosen_cols": chosen_cols,
@@ -424,8 +475,10 @@ def alignment_formula(label: str, a: int, P: _Row, c: dict) -> str | float:
     return 0.0 if e == "0" else f"=0.001*{e}"
 
 
-def point_formula(name: str, par: str, a: int, P: _Row, c: dict, probe_cells: dict[str, str]) -> str | float:
-    """Sensitivity of coordinate a of a point record to one parameter (effects.py, point rows)."""
+def point_formula(name: str, par: str, a: int, P: _Row, c: dict, probe_cells: dict[str, str],
+                  travel: dict[str, tuple[str, str]] | None = None) -> str | float:
+    """Sensitivity of coordinate a of a point record to one parameter (effects.py, point rows);
+    ``travel``: the lo/hi cells of the straightness carriages (:func:`_travel_cells`)."""
     ax = "xyz"[a]
     rel = lambda k: f"({P['u' + k + '_mm']}-{c[k]})"   # ram position about the centroid
     if name == "scale":
@@ -449,6 +502,12 @@ def point_formula(name: str, par: str, a: int, P: _Row, c: dict, probe_cells: di
         return f"=0.001*({P['time_s']}/3600)*{rel(ax)}"
     if name == "offset_drift":
         return f"={P['time_s']}/3600" if par == f"v{ax}" else 0.0
+    if name in fx.STRAIGHTNESS:
+        car = name[2]
+        return ("=" + _legendre_formula(int(par[1]), P[f"u{car.lower()}_mm"], travel[car])
+                if name[1].lower() == ax else 0.0)
+    if name in fx.REVERSAL:
+        return "=" + _approach_formula(P["n" + ax]) if name[-1] == ax else 0.0
     raise ValueError(f"no point formula for {name}")
 
 
@@ -899,6 +958,26 @@ def revealing_quantities(diag: Diagnosis) -> list[tuple[str, np.ndarray, bool]]:
             if (len(set(v.tolist())) > 1 if cat else float(np.ptp(v)) > 0)]
 
 
+def _own_quantity(diag: Diagnosis, name: str) -> tuple[str, np.ndarray, bool]:
+    """What shows a straightness (the ram coordinate of its carriage: the curve c2 P2 + c3 P3)
+    or a reversal (the approach direction along its axis), per observation row."""
+    D, rows = diag.prep.design, diag.prep.obs_record
+    if name in fx.STRAIGHTNESS:
+        c = fx.CARRIAGE_AXIS[name[2]]
+        u = 0.5 * (D.U1[:, c] + D.U2[:, c]) if D.kind == "length" else D.U[rows, c]
+        return (f"ram {name[2].lower()} / mm" + (" (middle of the length)" if D.kind == "length" else ""), u, False)
+    a = fx.AXES.index(name[-1])
+    ax = name[-1]
+    if D.kind == "length":
+        w = fx.approach_sign(D.N2, a) - fx.approach_sign(D.N1, a)
+        lab = np.where(w > 0, f"end 1 moving -{ax}, end 2 moving +{ax}",
+                       np.where(w < 0, f"end 1 moving +{ax}, end 2 moving -{ax}", f"no reversal along {ax}"))
+        return (f"probe motion along {ax} at the two ends", lab, True)
+    w = fx.approach_sign(D.N, a)[rows]
+    return (f"probe motion along {ax} when touching", np.where(w > 0, f"moving +{ax}", np.where(
+        w < 0, f"moving -{ax}", f"across {ax}")), True)
+
+
 def _scatter(ax, x, y, cat, **kw):
     if cat:
         cats = list(dict.fromkeys(x.tolist()))
@@ -969,6 +1048,16 @@ def write_plots(diag: Diagnosis, out_dir: Path) -> list[Path]:
             want = {"probing": "length d / mm", "probes": "probe"}.get(want, qs[0][0])
             want = want if want in qmap else qs[0][0]
         x, cat = qmap[want]
+        if name in fx.STRAIGHTNESS or name in fx.REVERSAL:   # section 7: its own revealing quantity
+            want, x, cat = _own_quantity(diag, name)
+            if diag.prep.design.kind == "point":      # only the coordinate the effect moves
+                keep = diag.prep.obs_axis == fx.AXES.index((name[1] if name in fx.STRAIGHTNESS else name[-1]).lower())
+                x, partial, f = x[keep], partial[keep], f[keep]
+                rows_x = diag.X_sel[keep][:, rows]
+            else:
+                rows_x = diag.X_sel[:, rows]
+        else:
+            rows_x = diag.X_sel[:, rows]
         fig, (a1, a2) = plt.subplots(1, 2, figsize=(10, 3.8), dpi=100)
         _scatter(a1, x, partial, cat, label="residual without the other effects")
         _scatter(a1, x, f, cat, label=f"fitted {name}", alpha=0.7)
@@ -976,7 +1065,7 @@ def write_plots(diag: Diagnosis, out_dir: Path) -> list[Path]:
         a1.set_ylabel("µm")
         a1.grid(alpha=0.3)
         a1.legend(fontsize=7)
-        s = diag.X_sel[:, rows]
+        s = rows_x
         xs = s[:, 0] if s.shape[1] == 1 else f / max(np.max(np.abs(f)), 1e-300)
         a2.plot(xs, partial, "o", ms=3)
         order = np.argsort(xs)

@@ -33,7 +33,7 @@ NUMERIC_MODULES = {
     "test_blocked", "test_large_workbook", "test_large_feature_workbook", "test_udf", "test_dask",
     "test_diagnose_core", "test_diagnose_book", "test_diagnose_rates",
     "test_templates", "test_roundtrip", "test_lowrank", "test_diagnose_structured", "test_import",
-    "test_diagnose_second", "test_exact_option", "test_diagnose_discrepancy", "test_kernels",
+    "test_diagnose_second", "test_exact_option", "test_diagnose_discrepancy", "test_kernels", "test_diagnose_new_candidates",
 }
 
 

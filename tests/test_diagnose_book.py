@@ -11,6 +11,7 @@ from generator import diagnose_book
 from generator.diagnose_cli import run_diagnose
 from generator.recalc import results_rows
 from xlfuncs import diagnose as dg
+from xlfuncs import effects as fx
 from xlfuncs import pointcloud as pc
 from xlfuncs import simulate as sm
 from xlfuncs.recordings import write_recordings
@@ -38,6 +39,11 @@ CASES = {
     "lengths, inflated noise": ("iso10360", {"repeats": 3}, ONE, {}, None, set()),
     # an out-of-library bump: not explained, the discrepancy candidate shown (section 7)
     "lengths, a bump": ("iso10360", {"repeats": 3}, ONE, {}, None, set()),
+    # section 7's straightness (Legendre polynomials of the travel) and reversal (approach sign)
+    "lengths, straightness and reversal": ("iso10360", {"repeats": 1}, PAIR, {"EZY": [0.0, 5.0], "reversal_x": 1.5},
+                                           None, {"EZY", "reversal_x"}),
+    "points 2-D, straightness and reversal": ("holeplate", {"grid": 3, "passes": 2}, PAIR[:1],
+                                              {"EYX": [2.0, -1.5], "reversal_x": 1.0}, None, {"EYX", "reversal_x"}),
 }
 
 
@@ -107,7 +113,8 @@ def expected_rows(result):
     for e in result["effects"]:
         if isinstance(e["estimate"], list):
             labels = ([f"{pp['probe']}.d{a}" for pp in e["per_probe"] for a in "xyz"]
-                      if e["name"] == "probe_qualification" else [f"v{a}" for a in "xyz"])
+                      if e["name"] == "probe_qualification" else ["c2", "c3"] if e["name"] in fx.STRAIGHTNESS
+                      else [f"v{a}" for a in "xyz"])
             for lab, v, u in zip(labels, e["estimate"], e["u"]):
                 if v is not None:
                     exp[f"{e['name']} {lab}"], unc[f"{e['name']} {lab}"] = v, u

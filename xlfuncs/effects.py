@@ -24,7 +24,23 @@ probe_qualification    e_c for points probed with probe k (k >= 2)              
 E<R><A>                1e-6 t_A (e_R x p)    t_A = u_A (travel from machine zero) µrad/m
 scale_drift            1e-3 (t_s/3600) u                                          µm/m/h
 offset_drift           (t_s/3600) e_c             (point records only)            µm/h
+E<D><C> (straightness) P_k(s) e_D, k = 2, 3; s = (2 u_C - lo - hi)/(hi - lo)      µm
+reversal_x/_y/_z       w e_a, w = +1 approached along +a (n_a < -0.1),           µm
+                       -1 along -a (n_a > 0.1), else 0
 =====================  =========================================================  =========
+
+Second edition (docs/recordings.md section 7):
+
+* straightness ``EYX``, ``EZX``, ``EXY``, ``EZY``, ``EXZ``, ``EYZ`` (ISO 230-1: the carriage of the
+  second letter's axis deviates along the first letter's direction): the orthogonal (Legendre)
+  polynomials P_2, P_3 of its travel u_C normalized to [-1, 1] over the travel the records see
+  (lo, hi: the smallest and largest ram coordinate of every probing); the linear part is
+  squareness and the constant part the alignment, so they are left out.  Estimate: the
+  coefficients of P_2 and P_3 in µm (a deviation of c_2 P_2 + c_3 P_3; P_k(±1) = (±1)^k);
+* ``reversal_a``: a constant error r whose sign follows the approach direction along the axis
+  (backlash of the drive, pre-travel of the probe): the probe approaches against the outward
+  normal, so a point with n_a < -0.1 is approached along +a and shifted by +r, with n_a > 0.1 by
+  -r; probings nearly perpendicular to a (|n_a| <= 0.1) do not move the axis and are not shifted.
 
 For point records the scale-type effects, thermal expansion and scale drift act about the
 centroid c of the nominal points (docs/recordings.md section 6); the rigid alignment absorbs the choice
@@ -61,6 +77,22 @@ def _angular(rot: str, carriage: str) -> Effect:
                   "section 3.3: rotation errors act through the probe offset)")
 
 
+def _straightness(dev: str, car: str) -> Effect:
+    return Effect(f"E{dev}{car}", "um",
+                  f"a straightness error E{dev}{car} (the {car} carriage deviating along "
+                  f"{dev.lower()}, orders 2 and 3 of its travel)",
+                  f"records whose {dev.lower()} coordinate is seen at many places along the "
+                  f"{car.lower()} travel (a ball plate, or diagonal lengths across it)", vector=True)
+
+
+def _reversal(ax: str) -> Effect:
+    return Effect(f"reversal_{ax}", "um",
+                  f"a reversal error along {ax} (backlash or pre-travel: points approached along "
+                  f"+{ax} shifted by +r, along -{ax} by -r)",
+                  f"points approached along {ax} from both sides, and points approached from other "
+                  f"directions (a probe radius error moves them too, a reversal along {ax} does not)")
+
+
 #: the table of docs/recordings.md section 4, in its order (the order decides among exact aliases)
 EFFECTS: tuple[Effect, ...] = (
     Effect("scale", "um/m", "a scale error", "lengths in several directions (ISO 10360-2: seven positions)"),
@@ -81,10 +113,18 @@ EFFECTS: tuple[Effect, ...] = (
            "records spread in time in an order not tied to length or position (time_s)"),
     Effect("offset_drift", "um/h", "a drift of every point in time",
            "point records spread in time, repeated positions at different times (time_s)", vector=True),
+    # second edition (docs/recordings.md section 7), after the first edition's: among exact
+    # aliases the first edition's effect is named
+    *(_straightness(d, c) for c in "XYZ" for d in "XYZ" if d != c),
+    *(_reversal(ax) for ax in "xyz"),
 )
 BY_NAME = {e.name: e for e in EFFECTS}
 NAMES = tuple(e.name for e in EFFECTS)
 ANGULAR = tuple(e.name for e in EFFECTS if e.unit == "urad/m")
+STRAIGHTNESS = tuple(f"E{d}{c}" for c in "XYZ" for d in "XYZ" if d != c)
+REVERSAL = tuple(f"reversal_{ax}" for ax in AXES)
+#: |n_a| above this: the probing moves axis a (reversal effects)
+APPROACH_MIN = 0.1
 ROT_AXIS = {"A": 0, "B": 1, "C": 2}
 CARRIAGE_AXIS = {"X": 0, "Y": 1, "Z": 2}
 
@@ -181,6 +221,34 @@ def columns(design: Design, name: str) -> Columns:
     return _point_columns(D, name)
 
 
+def legendre_23(s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """P_2(s) = (3 s^2 - 1)/2 and P_3(s) = (5 s^3 - 3 s)/2 (straightness, section 7)."""
+    return 0.5 * (3.0 * s**2 - 1.0), 0.5 * (5.0 * s**3 - 3.0 * s)
+
+
+def travel(D: Design, car: str) -> tuple[float, float]:
+    """Smallest and largest ram coordinate of carriage ``car`` (X, Y, Z) over every probing."""
+    c = CARRIAGE_AXIS[car]
+    U = np.vstack([D.U1, D.U2]) if D.kind == "length" else D.U
+    return float(np.min(U[:, c])), float(np.max(U[:, c]))
+
+
+def _travel_s(D: Design, car: str, U: np.ndarray) -> np.ndarray:
+    lo, hi = travel(D, car)
+    return (2.0 * U[:, CARRIAGE_AXIS[car]] - lo - hi) / (hi - lo)
+
+
+def approach_sign(N: np.ndarray, a: int) -> np.ndarray:
+    """+1 where a probing approaches along +a (outward normal n_a < -APPROACH_MIN), -1 along -a
+    (n_a > APPROACH_MIN), 0 where it hardly moves axis a (reversal, section 7)."""
+    n = N[:, a]
+    return np.where(n < -APPROACH_MIN, 1.0, np.where(n > APPROACH_MIN, -1.0, 0.0))
+
+
+#: the smallest travel (mm) over which a straightness is fitted
+MIN_TRAVEL_MM = 1.0
+
+
 def _needs(D: Design, name: str) -> None:
     if name == "thermal_expansion":
         if D.T is None:
@@ -202,6 +270,22 @@ def _needs(D: Design, name: str) -> None:
             raise NotApplicable("needs probe offsets (p1x..p2z, px..pz or [[probes]] offset_mm): an "
                                 "angular error motion moves the stylus tip through the probe offset "
                                 "only (Forbes 2025 eq. 24)")
+    if name in STRAIGHTNESS:
+        lo, hi = travel(D, name[2])
+        if hi - lo < MIN_TRAVEL_MM:
+            raise NotApplicable(f"the {name[2]} carriage moves {hi - lo:.3g} mm across these records: "
+                                f"no travel to see a straightness along (at least {MIN_TRAVEL_MM:g} mm)")
+    if name in REVERSAL:
+        a = AXES.index(name[-1])
+        N = np.vstack([D.N1, D.N2]) if D.kind == "length" and D.N1 is not None else D.N
+        if N is None:
+            raise NotApplicable("needs normals (" + ("n1x..n2z" if D.kind == "length" else "nx,ny,nz")
+                                + ") to know from which side each point was approached")
+        w = approach_sign(N, a)
+        if not (np.any(w > 0) and np.any(w < 0)):
+            raise NotApplicable(f"needs points approached along {name[-1]} from both sides (normals with "
+                                f"n{name[-1]} above {APPROACH_MIN:g} and below -{APPROACH_MIN:g}): from "
+                                "one side a reversal error is a constant the alignment absorbs")
     if name in ("scale_drift", "offset_drift"):
         if name == "offset_drift" and D.kind == "length":
             raise NotApplicable("needs point records with time_s: a drift of every point cancels in a "
@@ -252,6 +336,16 @@ def _length_columns(D: Design, name: str) -> Columns:
         h = D.t / 3600.0
         return Columns(name, (MILLI * h * np.einsum("ij,ij->i", na, du))[:, None], [name],
                        MILLI * float(np.max(np.abs(h))) * L)
+    if name in STRAIGHTNESS:
+        d = AXES.index(name[1].lower())
+        P1 = legendre_23(_travel_s(D, name[2], D.U1))
+        P2 = legendre_23(_travel_s(D, name[2], D.U2))
+        cols = [na[:, d] * (b - a) for a, b in zip(P1, P2)]
+        return Columns(name, np.column_stack(cols), ["c2", "c3"], 1.0)
+    if name in REVERSAL:
+        a = AXES.index(name[-1])
+        w = approach_sign(D.N2, a) - approach_sign(D.N1, a)
+        return Columns(name, (na[:, a] * w)[:, None], [name], 1.0)
     raise AssertionError(name)
 
 
@@ -306,6 +400,13 @@ def _point_columns(D: Design, name: str) -> Columns:
         cols = [unit_axis(a, h) for a in range(3)]
         return Columns(name, np.column_stack(cols), [f"v{AXES[a]}" for a in range(3)],
                        float(np.max(np.abs(h))))
+    if name in STRAIGHTNESS:
+        d = AXES.index(name[1].lower())
+        cols = [unit_axis(d, Pk) for Pk in legendre_23(_travel_s(D, name[2], D.U))]
+        return Columns(name, np.column_stack(cols), ["c2", "c3"], 1.0)
+    if name in REVERSAL:
+        a = AXES.index(name[-1])
+        return Columns(name, unit_axis(a, approach_sign(D.N, a))[:, None], [name], 1.0)
     raise AssertionError(name)
 
 

@@ -48,7 +48,11 @@ VOLUME_MM = (1000.0, 800.0, 600.0)
 EFFECT_NAMES = (
     "scale", "scale_x", "scale_y", "scale_z", "squareness_xy", "squareness_xz", "squareness_yz",
     "thermal_expansion", "probe_radius", "probe_qualification",
-    "EAX", "EBX", "ECX", "EAY", "EBY", "ECY", "EAZ", "EBZ", "ECZ", "scale_drift", "offset_drift")
+    "EAX", "EBX", "ECX", "EAY", "EBY", "ECY", "EAZ", "EBZ", "ECZ", "scale_drift", "offset_drift",
+    # second edition (docs/recordings.md section 7)
+    "EYX", "EZX", "EXY", "EZY", "EXZ", "EYZ", "reversal_x", "reversal_y", "reversal_z")
+#: straightness E<deviation><carriage>: two coefficients (orders 2 and 3, µm)
+STRAIGHTNESS_NAMES = EFFECT_NAMES[-9:-3]
 
 
 @dataclass
@@ -376,6 +380,11 @@ def check_effects(planted: dict, probes) -> dict:
             if vec.shape != (3,):
                 raise ModelError("offset_drift needs three components (vx, vy, vz) in µm/h")
             out[name] = vec
+        elif name in STRAIGHTNESS_NAMES:
+            vec = np.asarray(v, dtype=float).reshape(-1)
+            if vec.shape != (2,) or not np.all(np.isfinite(vec)):
+                raise ModelError(f"{name} needs two coefficients (orders 2 and 3 of the travel) in µm")
+            out[name] = vec
         else:
             val = float(v)
             if not math.isfinite(val):
@@ -411,12 +420,28 @@ def planted_probing(L: Layout, planted: dict, t_probe: np.ndarray, T_probe: np.n
         kk = [p.id for p in L.probes].index(pid)
         delta[L.k == kk] += vec
     for name in EFFECT_NAMES:
-        if name.startswith("E") and name in planted:
+        if name.startswith("E") and name[1] in "ABC" and name in planted:
             rot, car = "ABC".index(name[1]), "XYZ".index(name[2])
             kappa = planted[name] * 1e-6 * 1e-3        # µrad/m -> rad/mm
             for i in range(m):
                 Rm = _rot(rot, kappa * U[i, car])
                 delta[i] += (Rm @ P[i] - P[i]) * 1000.0
+    # straightness (section 7): the carriage deviates along another axis by c2 P2 + c3 P3 of its
+    # travel normalized over the travel of the layout's probings (numpy's Legendre series)
+    for name in STRAIGHTNESS_NAMES:
+        if name in planted:
+            dev, car = "XYZ".index(name[1]), "XYZ".index(name[2])
+            lo, hi = U[:, car].min(), U[:, car].max()
+            s = (U[:, car] - 0.5 * (lo + hi)) / (0.5 * (hi - lo))
+            delta[:, dev] += np.polynomial.legendre.legval(s, [0.0, 0.0, *planted[name]])
+    # reversal (section 7): +r along the axis where the probe approached in +axis, i.e. against
+    # an outward normal pointing to -axis by more than 0.1
+    for a, ax in enumerate("xyz"):
+        if f"reversal_{ax}" in planted:
+            if L.N is None:
+                raise ModelError(f"reversal_{ax} needs a layout with normals")
+            side = np.sign(-L.N[:, a]) * (np.abs(L.N[:, a]) > 0.1)
+            delta[:, a] += planted[f"reversal_{ax}"] * side
     if point:
         if "thermal_expansion" in planted:
             delta += 1e-3 * planted["thermal_expansion"] * (T_probe - 20.0)[:, None] * (X - c)

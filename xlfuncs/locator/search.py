@@ -343,6 +343,12 @@ def why_zero(prep: Prepared, name: str) -> str:
                 "carriage does not move")
     if name == "probe_radius":
         return "every length is probed in one direction at both ends (unidirectional), so a radius error cancels"
+    if name in fx.STRAIGHTNESS:
+        return (f"no record sees its {name[1].lower()} coordinate change along the {name[2]} travel "
+                f"(lengths along {name[2].lower()} only, or no {name[1].lower()} coordinate)")
+    if name in fx.REVERSAL:
+        return (f"no length is probed from opposite sides along {name[-1]} at its two ends"
+                if D.kind == "length" else f"the records have no {name[-1]} coordinate")
     return "these records do not respond to it"
 
 

@@ -1,0 +1,112 @@
+"""The locator's second-edition candidates (docs/recordings.md section 7): straightness of the
+axes, orders 2 and 3 (ISO 230-1 names EYX ... EYZ), and reversal errors along x, y, z.
+
+The simulator plants them with its own code (numpy's Legendre series, the sign of the approach);
+the locator's sensitivities (xlfuncs/effects.py) must agree with it and find them."""
+
+import numpy as np
+import pytest
+
+from xlfuncs import diagnose as dg
+from xlfuncs import effects as fx
+from xlfuncs import simulate as sm
+
+from test_diagnose_book import MPE1, PAIR
+
+
+def found(j, name):
+    (e,) = [e for e in j["effects"] if e["name"] == name]
+    return e
+
+
+def test_the_simulator_plants_a_straightness_as_legendre_polynomials_of_the_travel():
+    """At the ends of the travel P2 = 1 and P3 = +-1: the y deviation is c2 + c3 at the far end of
+    the x travel and c2 - c3 at the near end."""
+    L = sm.layout("ballplate", PAIR[:1])
+    delta = sm.planted_probing(L, sm.check_effects({"EYX": [2.0, -0.5]}, L.probes), np.zeros(len(L.X)),
+                               np.full(len(L.X), 20.0))
+    u = L.X[:, 0] - PAIR[0].offset_mm[0]
+    assert delta[np.argmax(u), 1] == pytest.approx(2.0 - 0.5, abs=1e-12)
+    assert delta[np.argmin(u), 1] == pytest.approx(2.0 + 0.5, abs=1e-12)
+    assert np.all(delta[:, [0, 2]] == 0.0)
+
+
+@pytest.mark.parametrize("name,value", [("EYX", [2.0, -0.5]), ("EXY", [1.0, 1.5]), ("reversal_x", 1.2),
+                                        ("reversal_y", -0.8)])
+def test_the_sensitivities_agree_with_the_simulator(name, value):
+    """effects.columns times the planted parameters is the simulator's displacement of every
+    coordinate (two independent codes of the same physics)."""
+    L = sm.layout("holeplate", PAIR[:1], grid=3, passes=2)
+    rec = sm.simulate(L, MPE1, {}, seed=1)
+    prep = dg.prepare(rec, dg.Model(MPE1, PAIR[:1], True))
+    cols = fx.columns(prep.design, name)
+    beta = np.atleast_1d(np.asarray(value, dtype=float))
+    delta = sm.planted_probing(L, sm.check_effects({name: value}, L.probes), np.zeros(len(L.X)),
+                               np.full(len(L.X), 20.0))
+    # the design sees the measured ram positions, the simulator the nominal ones (µm apart)
+    assert np.allclose(cols.X @ beta, prep.design.point_rows(delta), atol=1e-4 * np.max(np.abs(beta)))
+
+
+def test_a_straightness_on_a_ball_plate_is_named_with_both_coefficients():
+    L = sm.layout("ballplate", PAIR)
+    rec = sm.simulate(L, MPE1, {"EYX": [3.0, -2.0]}, seed=3)
+    j = dg.diagnose(rec, dg.Model(MPE1, PAIR, True)).to_json()
+    assert j["effects"][0]["name"] == "EYX" and len(j["effects"]) == 1
+    e = found(j, "EYX")
+    assert e["unit"] == "um"
+    for est, u, true in zip(e["estimate"], e["u"], (3.0, -2.0)):
+        assert abs(est - true) < 3 * u
+    assert j["explained"] is True
+
+
+def test_a_straightness_needs_travel_of_its_carriage():
+    """A 2-D hole plate: the z carriage does not move, EXZ and EYZ are not identifiable and say why."""
+    L = sm.layout("holeplate", PAIR[:1], passes=2)
+    j = dg.diagnose(sm.simulate(L, MPE1, {}, seed=2), dg.Model(MPE1, PAIR[:1], True)).to_json()
+    reasons = {x["name"]: x["reason"] for x in j["not_identifiable"]}
+    assert "the Z carriage moves" in reasons["EXZ"] and "no travel" in reasons["EXZ"]
+    assert j["mismatch"] is False and j["effects"] == []
+
+
+def test_a_reversal_on_a_hole_plate_is_named_and_estimated():
+    """Holes probed from both sides along y: the points approached along +y are shifted by +1 µm,
+    those approached along -y by -1 µm."""
+    L = sm.layout("holeplate", PAIR[:1], passes=2)
+    rec = sm.simulate(L, MPE1, {"reversal_y": 1.0}, seed=3)
+    j = dg.diagnose(rec, dg.Model(MPE1, PAIR[:1], True)).to_json()
+    assert [e["name"] for e in j["effects"]] == ["reversal_y"]
+    e = found(j, "reversal_y")
+    assert abs(e["estimate"] - 1.0) < 3 * e["u"] and e["u"] < 0.1
+
+
+def test_a_reversal_needs_points_approached_from_both_sides():
+    """Four spheres probed from above: every point is approached downwards along z."""
+    L = sm.layout("spheres", PAIR)
+    j = dg.diagnose(sm.simulate(L, MPE1, {}, seed=4), dg.Model(MPE1, PAIR, True)).to_json()
+    reasons = {x["name"]: x["reason"] for x in j["not_identifiable"]}
+    assert "from both sides" in reasons["reversal_z"]
+
+
+def test_a_reversal_needs_normals():
+    L = sm.layout("ballplate", PAIR)
+    j = dg.diagnose(sm.simulate(L, MPE1, {}, seed=4), dg.Model(MPE1, PAIR, True)).to_json()
+    reasons = {x["name"]: x["reason"] for x in j["not_identifiable"]}
+    assert reasons["reversal_x"].startswith("needs normals")
+
+
+def test_a_reversal_in_lengths_probed_from_both_sides():
+    """ISO 10360-2 lengths with two probes: bidirectional lengths see twice the reversal."""
+    L = sm.layout("iso10360", PAIR)
+    rec = sm.simulate(L, MPE1, {"reversal_x": 1.5}, seed=17)
+    j = dg.diagnose(rec, dg.Model(MPE1, PAIR, True)).to_json()
+    e = found(j, "reversal_x")
+    assert j["effects"][0]["name"] == "reversal_x" and abs(e["estimate"] - 1.5) < 3 * e["u"]
+
+
+def test_simulate_takes_a_straightness_as_two_coefficients(tmp_path):
+    from generator.diagnose_cli import parse_effect
+    from generator.errors import InputError
+
+    assert parse_effect("EYX=2,-1.5", PAIR) == ("EYX", [2.0, -1.5])
+    with pytest.raises(InputError, match="expected 2 numbers"):
+        parse_effect("EYX=2", PAIR)
