@@ -82,7 +82,9 @@ class Scenario:
     expect_alias: tuple[str, str] | None = None   # (planted, chosen look-alike)
 
 
-def scenarios() -> list[Scenario]:
+def scenarios(second_edition: bool = True) -> list[Scenario]:
+    """Every effect scenario; ``second_edition=False``: the first edition's only (the quick run,
+    whose new-candidate counterparts are tests/test_diagnose_new_candidates.py)."""
     S = []
     iso1 = dict(layout="iso10360", probes=ONE)
     iso3 = dict(layout="iso10360", probes=THREE)
@@ -146,6 +148,8 @@ def scenarios() -> list[Scenario]:
           Scenario("scale_y behind scale", "masked", effects=("scale_y", "scale"), **iso1),
           Scenario("probe_qualification behind offset_drift, ball plate", "masked", "ballplate", PAIR,
                    ("probe_qualification", "offset_drift"))]
+    if not second_edition:
+        return S
     # -- second edition (docs/recordings.md section 7): straightness and reversal, concealed the
     # same four ways -----------------------------------------------------------------------------
     plate4 = dict(layout="ballplate", probes=PAIR[:1], layout_kw={"passes": 4})
@@ -162,6 +166,19 @@ def scenarios() -> list[Scenario]:
     S += [Scenario("reversal_x vs probe_radius, hole plate (normals along y tell them apart)", "aliased-unless",
                    effects=("reversal_x",), **holes2),
           Scenario("EYX vs squareness_xy, ball plate, two probes", "aliased-unless", "ballplate", PAIR, ("EYX",))]
+    # thermal gradient: temperatures varying, records spread along the axis
+    S += [Scenario("thermal_gradient_y, ball plate (four passes), temperature up and down", "small",
+                   effects=("thermal_gradient_y",), temperature=("bump", 20.0, 23.0), **plate4),
+          Scenario("thermal_gradient_x, spheres, temperature up and down", "small", "spheres", PAIR,
+                   ("thermal_gradient_x",), temperature=("bump", 20.0, 23.0)),
+          Scenario("thermal_gradient_x, ball plate (four passes, warm last third)", "subset",
+                   effects=("thermal_gradient_x",), temperature=("warm", 22.0, 24.0), **plate4),
+          Scenario("thermal_gradient_y, step gauge, temperature up and down", "subset", "stepgauge", ONE,
+                   ("thermal_gradient_y",), temperature=("bump", 20.0, 23.0)),
+          Scenario("thermal_gradient_z, spheres, 19.5-22.5 °C ramp (vs thermal_expansion)", "aliased-unless",
+                   "spheres", PAIR, ("thermal_gradient_z",), temperature=(19.5, 22.5)),
+          Scenario("thermal_gradient_x behind thermal_expansion, ball plate", "masked",
+                   effects=("thermal_gradient_x", "thermal_expansion"), temperature=("bump", 20.0, 23.0), **plate4)]
     S += [Scenario("EYX behind squareness_xy, ball plate", "masked", "ballplate", PAIR, ("EYX", "squareness_xy")),
           Scenario("reversal_y behind probe_radius, hole plate", "masked", effects=("reversal_y", "probe_radius"),
                    **holes2)]
@@ -340,7 +357,7 @@ def run_set(sc: Scenario, seed: int, debug: bool = False) -> dict:
 
 
 #: the candidates of the locator's second edition (docs/recordings.md section 7)
-NEW = set(fx.STRAIGHTNESS) | set(fx.REVERSAL)
+NEW = set(fx.STRAIGHTNESS) | set(fx.REVERSAL) | set(fx.GRADIENT)
 
 
 def rate(k: int, n: int) -> str:
@@ -442,7 +459,7 @@ def summarize(results: list[dict], meta: dict) -> str:
         f"| planted effect named first (single-effect sets) | {rate(first, len(single))} | ≥ 95 % |",
         f"| every planted effect found (two-effect sets) | {rate(found_two, len(two))} | all |",
         f"| estimate within 3 u of the truth (found effects) | {rate(sum(est), len(est))} | ≥ 95 % |",
-        f"| second-edition candidates (straightness, reversal; docs/recordings.md section 7) named first | "
+        f"| second-edition candidates (straightness, reversal, thermal gradient; docs/recordings.md section 7) named first | "
         f"{rate(sum(1 for r in single if set(r['planted']) <= NEW and r['chosen'][:1] == list(r['planted'])), sum(1 for r in single if set(r['planted']) <= NEW))} | ≥ 95 % |",
         f"| second-edition candidates: estimate within 3 u of the truth | "
         f"{rate(sum(ok for r in eff for k, ok in r['within_3u'].items() if k in NEW), sum(1 for r in eff for k in r['within_3u'] if k in NEW))} | ≥ 95 % |",
@@ -594,7 +611,7 @@ def main(argv=None) -> int:
     t0 = time.perf_counter()
     rng = np.random.default_rng(args.seed)
     jobs = []
-    scs = scenarios()
+    scs = scenarios(second_edition=not args.quick)
     if args.quick:
         stride = 7 if len(scs) % 7 else 11         # spread over the categories
         eff = [scs[(q * stride) % len(scs)] for q in range(args.quick)]

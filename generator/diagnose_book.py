@@ -291,6 +291,9 @@ def _length_records(book: Book, diag: Diagnosis, inputs: dict):
            "first_X": ci[chosen_cols[0]] if chosen_cols else None, "n_align": 0, "row_of_obs": rows}
     travel = _travel_cells(book, diag, inputs, "Records",
                            {ax: [ci[f"u{ax}1_mm"], ci[f"u{ax}2_mm"]] for ax in "xyz"}, rec.n)
+    # the middle of the probed positions along each axis (thermal gradient, section 7)
+    pos = {ax: ",".join(block(2, ci[f"{ax}{e}"], rec.n, 1, "Records") for e in "12") for ax in "xyz"}
+    travel.update({f"pos_{ax}": (f"MIN({r})", f"MAX({r})") for ax, r in pos.items()})
     for q, label in enumerate(chosen_cols):
         name, par = label.split(":", 1)
         for a, R in enumerate(rows):
@@ -358,6 +361,11 @@ def length_formula(name: str, par: str, R: _Row, probe_cells: dict[str, str],
     if name in fx.REVERSAL:
         ax = name[-1]
         return f"={R['na' + ax]}*({_approach_formula(R['n2' + ax])}-{_approach_formula(R['n1' + ax])})"
+    if name in fx.GRADIENT:
+        ax = name[-1]
+        lo, hi = travel["pos_" + ax]
+        mid = f"(({R[ax + '1']}+{R[ax + '2']})/2-({lo}+{hi})/2)"
+        return f"=0.000001*({R['temperature_C']}-20)*{R['reference_mm']}*{mid}"
     raise ValueError(f"no length formula for {name}")
 
 
@@ -508,6 +516,10 @@ def point_formula(name: str, par: str, a: int, P: _Row, c: dict, probe_cells: di
                 if name[1].lower() == ax else 0.0)
     if name in fx.REVERSAL:
         return "=" + _approach_formula(P["n" + ax]) if name[-1] == ax else 0.0
+    if name in fx.GRADIENT:
+        g = name[-1]
+        return (f"=0.000001*({P['temperature_C']}-20)*({P['y' + g + '_mm']}-{c[g]})"
+                f"*({P['y' + ax + '_mm']}-{c[ax]})")
     raise ValueError(f"no point formula for {name}")
 
 

@@ -44,6 +44,11 @@ CASES = {
                                            None, {"EZY", "reversal_x"}),
     "points 2-D, straightness and reversal": ("holeplate", {"grid": 3, "passes": 2}, PAIR[:1],
                                               {"EYX": [2.0, -1.5], "reversal_x": 1.0}, None, {"EYX", "reversal_x"}),
+    # thermal gradient: the expansion-coefficient error at the length's midpoint / at the point
+    "lengths, thermal gradient": ("stepgauge", {"steps": 8}, ONE, {"thermal_gradient_y": 150.0}, ("bump",),
+                                  {"thermal_gradient_y"}),
+    "points, thermal gradient": ("ballplate", {"grid": 3, "passes": 4}, PAIR[:1], {"thermal_gradient_y": 15.0},
+                                 ("bump",), {"thermal_gradient_y"}),
 }
 
 

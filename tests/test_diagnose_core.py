@@ -279,6 +279,6 @@ def test_json_has_the_keys_and_units_of_the_contract():
     for e in j["effects"]:
         assert {"name", "estimate", "u", "unit", "delta_chi2", "p_value", "p_adjusted", "df"} <= set(e)
     units = {fx.BY_NAME[n].unit for n in fx.NAMES}
-    assert units == {"um/m", "urad", "ppm/K", "um", "urad/m", "um/m/h", "um/h"}
+    assert units == {"um/m", "urad", "ppm/K", "um", "urad/m", "um/m/h", "um/h", "ppm/K/m"}
     z = [abs(x["z"]) for x in j["located"]]
     assert z == sorted(z, reverse=True) and {"id", "residual_um", "z"} <= set(j["located"][0])

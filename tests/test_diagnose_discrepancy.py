@@ -14,7 +14,9 @@ from test_diagnose_second import ONE, iso, u_effect
 
 def bumped(seed: int, height_um: float = 6.0, width_mm: float = 150.0):
     """ISO 10360 lengths with a localized bump of the x error (a Gaussian in ram x), a cause no
-    named candidate matches; the measured length sees n_x (delta(end 2) - delta(end 1))."""
+    named candidate matches; the measured length sees n_x (delta(end 2) - delta(end 1)).  The
+    lengths carry no normals (as many exports give them): with normals, the reversal candidate
+    (section 7) takes the part of the bump that the lengths probed from both sides share."""
     L, model = iso()
     rec = sm.simulate(L, MPE1, {}, seed=seed)
     P = L.probes[0].offset_mm if hasattr(L.probes[0], "offset_mm") else (0.0, 0.0, 0.0)
@@ -26,7 +28,7 @@ def bumped(seed: int, height_um: float = 6.0, width_mm: float = 150.0):
 
     n = (rec.X2_mm - rec.X1_mm) / np.linalg.norm(rec.X2_mm - rec.X1_mm, axis=1)[:, None]
     err_um = n[:, 0] * (dx(U2) - dx(U1))
-    rec = dataclasses.replace(rec, measured_mm=rec.measured_mm + err_um / 1000.0)
+    rec = dataclasses.replace(rec, measured_mm=rec.measured_mm + err_um / 1000.0, N1=None, N2=None)
     return rec, model
 
 

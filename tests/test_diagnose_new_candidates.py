@@ -110,3 +110,44 @@ def test_simulate_takes_a_straightness_as_two_coefficients(tmp_path):
     assert parse_effect("EYX=2,-1.5", PAIR) == ("EYX", [2.0, -1.5])
     with pytest.raises(InputError, match="expected 2 numbers"):
         parse_effect("EYX=2", PAIR)
+
+
+# -- thermal gradient: an expansion-coefficient error varying linearly along an axis ------------
+
+def bump_T(L):
+    """The room warms up by 3 K and cools again over the session."""
+    return 20.0 + 3.0 * np.sin(np.pi * L.time_s / L.time_s.max())
+
+
+def test_a_thermal_gradient_of_points_is_named_first_within_3u():
+    """Ball plate measured four times while the temperature goes up and down."""
+    L = sm.layout("ballplate", PAIR[:1], grid=3, passes=4)
+    rec = sm.simulate(L, MPE1, {"thermal_gradient_y": 15.0}, seed=17, temperature_C=bump_T(L))
+    j = dg.diagnose(rec, dg.Model(MPE1, PAIR[:1], True)).to_json()
+    first = j["effects"][0]
+    assert first["name"] == "thermal_gradient_y" and first["unit"] == "ppm/K/m"
+    assert abs(first["estimate"] - 15.0) <= 3 * first["u"]
+
+
+def test_a_thermal_gradient_of_lengths_is_named_first_within_3u():
+    L = sm.layout("stepgauge", PAIR[:1], steps=8)
+    rec = sm.simulate(L, MPE1, {"thermal_gradient_y": 150.0}, seed=17, temperature_C=bump_T(L))
+    j = dg.diagnose(rec, dg.Model(MPE1, PAIR[:1], True)).to_json()
+    first = j["effects"][0]
+    assert first["name"] == "thermal_gradient_y" and abs(first["estimate"] - 150.0) <= 3 * first["u"]
+
+
+def test_a_thermal_gradient_needs_temperatures_that_vary():
+    L = sm.layout("ballplate", PAIR[:1], grid=3)
+    none = dg.diagnose(sm.simulate(L, MPE1, {}, seed=3), dg.Model(MPE1, PAIR[:1], True)).to_json()
+    const = dg.diagnose(sm.simulate(L, MPE1, {}, seed=3, temperature_C=21.0), dg.Model(MPE1, PAIR[:1], True)).to_json()
+    reason = lambda j: {x["name"]: x["reason"] for x in j["not_identifiable"]}["thermal_gradient_x"]
+    assert reason(none) == "needs temperature_C (absent from the records)"
+    assert reason(const).startswith("temperature_C is the same for every record")
+
+
+def test_planting_a_thermal_gradient_without_temperatures_is_refused():
+    from xlfuncs.errors import ModelError
+
+    with pytest.raises(ModelError, match="thermal_gradient_x needs temperatures"):
+        sm.simulate(sm.layout("ballplate", PAIR[:1], grid=3), MPE1, {"thermal_gradient_x": 5.0}, seed=1)

@@ -1,5 +1,6 @@
 """A small run of the rate benchmark (bench/diagnose_benchmark.py --quick 20): 20 data sets with a
-concealed planted effect (spread over every concealment), 20 null sets, 2 aliased designs.  The full
+concealed planted effect (the first edition's scenarios, spread over every concealment), 20 null
+sets, 2 aliased designs; the second edition's candidates: tests/test_diagnose_new_candidates.py.  The full
 benchmark (about 500 sets) writes bench/results/diagnose_rates.md."""
 
 import importlib.util

@@ -27,6 +27,8 @@ offset_drift           (t_s/3600) e_c             (point records only)          
 E<D><C> (straightness) P_k(s) e_D, k = 2, 3; s = (2 u_C - lo - hi)/(hi - lo)      µm
 reversal_x/_y/_z       w e_a, w = +1 approached along +a (n_a < -0.1),           µm
                        -1 along -a (n_a > 0.1), else 0
+thermal_gradient_a     lengths: 1e-6 (T - 20) L (m_a - c_a);                      ppm/K/m
+                       points: 1e-6 (T - 20) (y_a - c_a)(y - c)
 =====================  =========================================================  =========
 
 Second edition (docs/recordings.md section 7):
@@ -41,6 +43,10 @@ Second edition (docs/recordings.md section 7):
   (backlash of the drive, pre-travel of the probe): the probe approaches against the outward
   normal, so a point with n_a < -0.1 is approached along +a and shifted by +r, with n_a > 0.1 by
   -r; probings nearly perpendicular to a (|n_a| <= 0.1) do not move the axis and are not shifted.
+* ``thermal_gradient_a`` (ppm/K per m): the artefact's expansion-coefficient error varies linearly
+  along a, Δα = g (x_a - c_a)/1000 ppm/K with c_a the middle of the positions along a (points: the
+  centroid); it acts with each record's temperature.  A length integrates it: Δα at its midpoint
+  m_a times (T - 20) L; a point moves by Δα (T - 20) (y - c).
 
 For point records the scale-type effects, thermal expansion and scale drift act about the
 centroid c of the nominal points (docs/recordings.md section 6); the rigid alignment absorbs the choice
@@ -117,12 +123,18 @@ EFFECTS: tuple[Effect, ...] = (
     # aliases the first edition's effect is named
     *(_straightness(d, c) for c in "XYZ" for d in "XYZ" if d != c),
     *(_reversal(ax) for ax in "xyz"),
+    *(Effect(f"thermal_gradient_{a}", "ppm/K/m",
+             f"an expansion-coefficient error of the artefact varying linearly along {a} (a thermal "
+             "gradient)",
+             f"records at different temperatures spread along {a} (temperature_C varying with position)")
+      for a in AXES),
 )
 BY_NAME = {e.name: e for e in EFFECTS}
 NAMES = tuple(e.name for e in EFFECTS)
 ANGULAR = tuple(e.name for e in EFFECTS if e.unit == "urad/m")
 STRAIGHTNESS = tuple(f"E{d}{c}" for c in "XYZ" for d in "XYZ" if d != c)
 REVERSAL = tuple(f"reversal_{ax}" for ax in AXES)
+GRADIENT = tuple(f"thermal_gradient_{ax}" for ax in AXES)
 #: |n_a| above this: the probing moves axis a (reversal effects)
 APPROACH_MIN = 0.1
 ROT_AXIS = {"A": 0, "B": 1, "C": 2}
@@ -275,6 +287,13 @@ def _needs(D: Design, name: str) -> None:
         if hi - lo < MIN_TRAVEL_MM:
             raise NotApplicable(f"the {name[2]} carriage moves {hi - lo:.3g} mm across these records: "
                                 f"no travel to see a straightness along (at least {MIN_TRAVEL_MM:g} mm)")
+    if name in GRADIENT:
+        if D.T is None:
+            raise NotApplicable("needs temperature_C (absent from the records)")
+        if not _varying(D.T):
+            raise NotApplicable("temperature_C is the same for every record: a gradient of the expansion "
+                                "coefficient then looks like a curved scale error; records at different "
+                                "temperatures spread along the axis separate them")
     if name in REVERSAL:
         a = AXES.index(name[-1])
         N = np.vstack([D.N1, D.N2]) if D.kind == "length" and D.N1 is not None else D.N
@@ -346,6 +365,14 @@ def _length_columns(D: Design, name: str) -> Columns:
         a = AXES.index(name[-1])
         w = approach_sign(D.N2, a) - approach_sign(D.N1, a)
         return Columns(name, (na[:, a] * w)[:, None], [name], 1.0)
+    if name in GRADIENT:
+        a = AXES.index(name[-1])
+        X1, X2 = D.U1 + D.P1, D.U2 + D.P2
+        xa = np.r_[X1[:, a], X2[:, a]]
+        mid = 0.5 * (X1[:, a] + X2[:, a]) - 0.5 * (xa.min() + xa.max())
+        dT = D.T - T_REF_C
+        return Columns(name, (MILLI * MILLI * dT * D.ref * mid)[:, None], [name],
+                       MILLI * MILLI * float(np.max(np.abs(dT))) * L * L)
     raise AssertionError(name)
 
 
@@ -407,6 +434,12 @@ def _point_columns(D: Design, name: str) -> Columns:
     if name in REVERSAL:
         a = AXES.index(name[-1])
         return Columns(name, unit_axis(a, approach_sign(D.N, a))[:, None], [name], 1.0)
+    if name in GRADIENT:
+        a = AXES.index(name[-1])
+        dT = D.T - T_REF_C
+        rel = D.Y - D.c
+        return Columns(name, field3(MILLI * MILLI * (dT * rel[:, a])[:, None] * rel)[:, None], [name],
+                       MILLI * MILLI * float(np.max(np.abs(dT))) * L * L)
     raise AssertionError(name)
 
 

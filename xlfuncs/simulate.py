@@ -50,9 +50,10 @@ EFFECT_NAMES = (
     "thermal_expansion", "probe_radius", "probe_qualification",
     "EAX", "EBX", "ECX", "EAY", "EBY", "ECY", "EAZ", "EBZ", "ECZ", "scale_drift", "offset_drift",
     # second edition (docs/recordings.md section 7)
-    "EYX", "EZX", "EXY", "EZY", "EXZ", "EYZ", "reversal_x", "reversal_y", "reversal_z")
+    "EYX", "EZX", "EXY", "EZY", "EXZ", "EYZ", "reversal_x", "reversal_y", "reversal_z",
+    "thermal_gradient_x", "thermal_gradient_y", "thermal_gradient_z")
 #: straightness E<deviation><carriage>: two coefficients (orders 2 and 3, µm)
-STRAIGHTNESS_NAMES = EFFECT_NAMES[-9:-3]
+STRAIGHTNESS_NAMES = ("EYX", "EZX", "EXY", "EZY", "EXZ", "EYZ")
 
 
 @dataclass
@@ -445,6 +446,12 @@ def planted_probing(L: Layout, planted: dict, t_probe: np.ndarray, T_probe: np.n
     if point:
         if "thermal_expansion" in planted:
             delta += 1e-3 * planted["thermal_expansion"] * (T_probe - 20.0)[:, None] * (X - c)
+        for a, ax in enumerate("xyz"):
+            # thermal gradient (section 7): the expansion coefficient (ppm/K) at a point is g times
+            # its distance along the axis from the centroid, in metres
+            if f"thermal_gradient_{ax}" in planted:
+                alpha = planted[f"thermal_gradient_{ax}"] * (X[:, a] - c[a]) / 1000.0
+                delta += 1e-3 * (alpha * (T_probe - 20.0))[:, None] * (X - c)
         if "scale_drift" in planted:
             delta += 1e-3 * planted["scale_drift"] * (t_probe / 3600.0)[:, None] * Uc
         if "offset_drift" in planted:
@@ -467,8 +474,9 @@ def simulate(L: Layout, params: pc.Parameters, planted: dict | None = None, seed
     t_rec = L.time_s
     if temperature_C is None:
         T_rec = None
-        if "thermal_expansion" in planted:
-            raise ModelError("thermal_expansion needs temperatures (give temperature_C)")
+        for name in planted:
+            if name == "thermal_expansion" or name.startswith("thermal_gradient_"):
+                raise ModelError(f"{name} needs temperatures (give temperature_C)")
     elif np.ndim(temperature_C) == 0:
         T_rec = np.full(n, float(temperature_C))
     elif len(temperature_C) == 2 and n != 2:
@@ -500,6 +508,13 @@ def simulate(L: Layout, params: pc.Parameters, planted: dict | None = None, seed
         meas = np.linalg.norm(Xind[J] - Xind[I], axis=1)
         if "thermal_expansion" in planted:
             meas = meas + 1e-6 * planted["thermal_expansion"] * (T_rec - 20.0) * ref
+        for a, ax in enumerate("xyz"):
+            # thermal gradient: a coefficient linear along the axis, integrated over the length, is
+            # its value at the midpoint; the origin is the middle of the probed positions
+            if f"thermal_gradient_{ax}" in planted:
+                centre = 0.5 * (L.X[:, a].max() + L.X[:, a].min())
+                alpha_mid = planted[f"thermal_gradient_{ax}"] * (0.5 * (L.X[I, a] + L.X[J, a]) - centre) / 1000.0
+                meas = meas + 1e-6 * alpha_mid * (T_rec - 20.0) * ref
         if "scale_drift" in planted:
             na = (L.X[J] - L.X[I]) / ref[:, None]
             du = (L.X[J] - P[J]) - (L.X[I] - P[I])

@@ -379,7 +379,7 @@ def _json_safe(v):
 
 
 PLAIN_UNITS = {"um/m": "µm/m", "urad": "µrad", "ppm/K": "ppm/K", "um": "µm", "urad/m": "µrad/m",
-               "um/m/h": "µm/m per hour", "um/h": "µm/h"}
+               "um/m/h": "µm/m per hour", "um/h": "µm/h", "ppm/K/m": "ppm/K per m"}
 
 
 def _fmt_pm(est: float, u: float) -> str:
