@@ -261,14 +261,17 @@ def approach_sign(N: np.ndarray, a: int) -> np.ndarray:
 MIN_TRAVEL_MM = 1.0
 
 
+def _needs_temperatures(D: Design, looks_like: str, separate: str) -> None:
+    if D.T is None:
+        raise NotApplicable("needs temperature_C (absent from the records)")
+    if not _varying(D.T):
+        raise NotApplicable(f"temperature_C is the same for every record: {looks_like}; records at "
+                            f"different temperatures{separate} separate them")
+
+
 def _needs(D: Design, name: str) -> None:
     if name == "thermal_expansion":
-        if D.T is None:
-            raise NotApplicable("needs temperature_C (absent from the records)")
-        if not _varying(D.T):
-            raise NotApplicable("temperature_C is the same for every record: an expansion error then "
-                                "looks exactly like a scale error; records at different temperatures "
-                                "separate them")
+        _needs_temperatures(D, "an expansion error then looks exactly like a scale error", "")
     if name == "probe_radius":
         if (D.N1 if D.kind == "length" else D.N) is None:
             raise NotApplicable("needs normals (" + ("n1x..n2z" if D.kind == "length" else "nx,ny,nz")
@@ -288,12 +291,8 @@ def _needs(D: Design, name: str) -> None:
             raise NotApplicable(f"the {name[2]} carriage moves {hi - lo:.3g} mm across these records: "
                                 f"no travel to see a straightness along (at least {MIN_TRAVEL_MM:g} mm)")
     if name in GRADIENT:
-        if D.T is None:
-            raise NotApplicable("needs temperature_C (absent from the records)")
-        if not _varying(D.T):
-            raise NotApplicable("temperature_C is the same for every record: a gradient of the expansion "
-                                "coefficient then looks like a curved scale error; records at different "
-                                "temperatures spread along the axis separate them")
+        _needs_temperatures(D, "a gradient of the expansion coefficient then looks like a curved scale "
+                               "error", " spread along the axis")
     if name in REVERSAL:
         a = AXES.index(name[-1])
         N = np.vstack([D.N1, D.N2]) if D.kind == "length" and D.N1 is not None else D.N
