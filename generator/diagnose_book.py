@@ -208,6 +208,16 @@ def _legendre_formula(k: int, u: str, lo_hi: tuple[str, str]) -> str:
     return f"(0.5*(3*{s}^2-1))" if k == 2 else f"(0.5*(5*{s}^3-3*{s}))"
 
 
+def _harmonic_formula(h: str, nx: str, ny: str) -> str:
+    """cos k phi ("c<k>") or sin k phi ("s<k>"), k = 2..4, of the azimuth of the normal (nx, ny)
+    as polynomials of (c, s) = (nx, ny)/|n_xy|, 0 where |n_xy| <= 0.1 (effects.azimuth_harmonics)."""
+    r = f"SQRT({nx}^2+{ny}^2)"
+    c, s = f"({nx}/{r})", f"({ny}/{r})"
+    poly = {"c2": f"{c}^2-{s}^2", "s2": f"2*{c}*{s}", "c3": f"{c}^3-3*{c}*{s}^2", "s3": f"3*{c}^2*{s}-{s}^3",
+            "c4": f"{c}^4-6*{c}^2*{s}^2+{s}^4", "s4": f"4*{c}^3*{s}-4*{c}*{s}^3"}[h]
+    return f"IF({r}>{fx.LOBING_MIN_XY},{poly},0)"
+
+
 def _approach_formula(n: str) -> str:
     """+1 approached along +axis (n < -0.1), -1 along -axis (n > 0.1), else 0 (effects.approach_sign)."""
     t = fx.APPROACH_MIN
@@ -361,6 +371,13 @@ def length_formula(name: str, par: str, R: _Row, probe_cells: dict[str, str],
     if name in fx.REVERSAL:
         ax = name[-1]
         return f"={R['na' + ax]}*({_approach_formula(R['n2' + ax])}-{_approach_formula(R['n1' + ax])})"
+    if name == "probe_lobing":
+        pid, h = par.split(".")
+        k = probe_cells[pid]
+        n2 = _na_dot(R, tuple(R[f"n2{a}"] for a in "xyz"))
+        n1 = _na_dot(R, tuple(R[f"n1{a}"] for a in "xyz"))
+        return (f"={n2}*{_harmonic_formula(h, R['n2x'], R['n2y'])}*EXACT({R['probe2']},{k})*1"
+                f"-{n1}*{_harmonic_formula(h, R['n1x'], R['n1y'])}*EXACT({R['probe1']},{k})*1")
     if name in fx.GRADIENT:
         ax = name[-1]
         lo, hi = travel["pos_" + ax]
@@ -516,6 +533,10 @@ def point_formula(name: str, par: str, a: int, P: _Row, c: dict, probe_cells: di
                 if name[1].lower() == ax else 0.0)
     if name in fx.REVERSAL:
         return "=" + _approach_formula(P["n" + ax]) if name[-1] == ax else 0.0
+    if name == "probe_lobing":
+        pid, h = par.split(".")
+        return (f"={P['n' + ax]}*{_harmonic_formula(h, P['nx'], P['ny'])}"
+                f"*EXACT({P['probe']},{probe_cells[pid]})*1")
     if name in fx.GRADIENT:
         g = name[-1]
         return (f"=0.000001*({P['temperature_C']}-20)*({P['y' + g + '_mm']}-{c[g]})"

@@ -49,6 +49,9 @@ CASES = {
                                   {"thermal_gradient_y"}),
     "points, thermal gradient": ("ballplate", {"grid": 3, "passes": 4}, PAIR[:1], {"thermal_gradient_y": 15.0},
                                  ("bump",), {"thermal_gradient_y"}),
+    # probe lobing: harmonics 2-4 of the normal's azimuth as polynomials of nx, ny
+    "points, probe lobing": ("spheres", {}, PAIR, {"probe_lobing": {"P1": [0.8, -0.5, 0.6, 0.0, 0.3, 0.4]}}, None,
+                             {"probe_lobing"}),
 }
 
 
@@ -119,7 +122,8 @@ def expected_rows(result):
         if isinstance(e["estimate"], list):
             labels = ([f"{pp['probe']}.d{a}" for pp in e["per_probe"] for a in "xyz"]
                       if e["name"] == "probe_qualification" else ["c2", "c3"] if e["name"] in fx.STRAIGHTNESS
-                      else [f"v{a}" for a in "xyz"])
+                      else [f"{p}.{h}" for p in ("P1", "P2") for h in ("c2", "s2", "c3", "s3", "c4", "s4")]
+                      if e["name"] == "probe_lobing" else [f"v{a}" for a in "xyz"])
             for lab, v, u in zip(labels, e["estimate"], e["u"]):
                 if v is not None:
                     exp[f"{e['name']} {lab}"], unc[f"{e['name']} {lab}"] = v, u

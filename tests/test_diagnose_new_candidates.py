@@ -151,3 +151,47 @@ def test_planting_a_thermal_gradient_without_temperatures_is_refused():
 
     with pytest.raises(ModelError, match="thermal_gradient_x needs temperatures"):
         sm.simulate(sm.layout("ballplate", PAIR[:1], grid=3), MPE1, {"thermal_gradient_x": 5.0}, seed=1)
+
+
+# -- probe lobing: the radius depending on the approach direction around the stylus axis --------
+
+LOBES = [0.8, -0.5, 0.6, 0.0, 0.3, 0.4]          # c2, s2, c3, s3, c4, s4 (µm)
+
+
+def test_the_lobing_sensitivity_agrees_with_the_simulator():
+    """effects: polynomials of (nx, ny)/|n_xy|; simulator: cos and sin of arctan2 (independent)."""
+    L = sm.layout("spheres", PAIR)
+    prep = dg.prepare(sm.simulate(L, MPE1, {}, seed=1), dg.Model(MPE1, PAIR, True))
+    cols = fx.columns(prep.design, "probe_lobing")
+    beta = np.r_[LOBES, np.zeros(6)]                  # P1 lobed, P2 not
+    delta = sm.planted_probing(L, sm.check_effects({"probe_lobing": {"P1": LOBES}}, L.probes),
+                               np.zeros(len(L.X)), np.full(len(L.X), 20.0))
+    assert cols.labels[:2] == ["P1.c2", "P1.s2"] and len(cols.labels) == 12
+    assert np.allclose(cols.X @ beta, prep.design.point_rows(delta), atol=1e-6)
+
+
+def test_probe_lobing_on_spheres_is_named_with_its_harmonics():
+    L = sm.layout("spheres", PAIR)
+    rec = sm.simulate(L, MPE1, {"probe_lobing": {"P1": LOBES}}, seed=3)
+    j = dg.diagnose(rec, dg.Model(MPE1, PAIR, True)).to_json()
+    assert [e["name"] for e in j["effects"]] == ["probe_lobing"]
+    e = found(j, "probe_lobing")
+    for est, u, true in zip(e["estimate"], e["u"], LOBES + [0.0] * 6):
+        assert abs(est - true) < 3 * u
+
+
+def test_probe_lobing_needs_normals():
+    L = sm.layout("ballplate", PAIR)
+    j = dg.diagnose(sm.simulate(L, MPE1, {}, seed=4), dg.Model(MPE1, PAIR, True)).to_json()
+    reasons = {x["name"]: x["reason"] for x in j["not_identifiable"]}
+    assert reasons["probe_lobing"].startswith("needs normals")
+
+
+def test_probe_lobing_seen_from_four_directions_only_is_a_probe_radius_error():
+    """Holes probed at four points: cos 4 phi is 1 at every point, the same as a radius error (a
+    2 µm radius error planted, so that the search runs and reports its look-alikes)."""
+    L = sm.layout("holeplate", PAIR[:1], passes=2)
+    j = dg.diagnose(sm.simulate(L, MPE1, {"probe_radius": 2.0}, seed=4), dg.Model(MPE1, PAIR[:1], True)).to_json()
+    assert [e["name"] for e in j["effects"]] == ["probe_radius"]
+    item = next(x for x in j["not_identifiable"] if x["name"] == "probe_lobing")
+    assert item["aliased_with"] == "probe_radius"

@@ -29,6 +29,7 @@ reversal_x/_y/_z       w e_a, w = +1 approached along +a (n_a < -0.1),          
                        -1 along -a (n_a > 0.1), else 0
 thermal_gradient_a     lengths: 1e-6 (T - 20) L (m_a - c_a);                      ppm/K/m
                        points: 1e-6 (T - 20) (y_a - c_a)(y - c)
+probe_lobing           n (cos k phi, sin k phi), k = 2, 3, 4, per probe            µm
 =====================  =========================================================  =========
 
 Second edition (docs/recordings.md section 7):
@@ -47,6 +48,12 @@ Second edition (docs/recordings.md section 7):
   along a, Δα = g (x_a - c_a)/1000 ppm/K with c_a the middle of the positions along a (points: the
   centroid); it acts with each record's temperature.  A length integrates it: Δα at its midpoint
   m_a times (T - 20) L; a point moves by Δα (T - 20) (y - c).
+* ``probe_lobing``: the probe's effective radius depends on the approach direction: harmonics of
+  orders 2-4 of the normal's azimuth phi about the stylus axis (z), per probe, each moving the
+  point along its normal, delta = n sum_k (c_k cos k phi + s_k sin k phi).  Order 0 is the probe
+  radius error and order 1 a probe offset, so they are left out; a normal along the stylus axis
+  (|n_xy| <= 0.1) has no azimuth and no lobing term.  cos k phi and sin k phi are polynomials of
+  (n_x, n_y)/|n_xy| (no arctangent: the workbook writes the same products).
 
 For point records the scale-type effects, thermal expansion and scale drift act about the
 centroid c of the nominal points (docs/recordings.md section 6); the rigid alignment absorbs the choice
@@ -123,6 +130,10 @@ EFFECTS: tuple[Effect, ...] = (
     # aliases the first edition's effect is named
     *(_straightness(d, c) for c in "XYZ" for d in "XYZ" if d != c),
     *(_reversal(ax) for ax in "xyz"),
+    Effect("probe_lobing", "um", "a probe lobing error (the probe's radius depending on the approach "
+           "direction: harmonics 2-4 of the normal's azimuth about the stylus axis)",
+           "points probed from many directions around the stylus axis (a circle or sphere with 9 or more "
+           "points per probe)", vector=True),
     *(Effect(f"thermal_gradient_{a}", "ppm/K/m",
              f"an expansion-coefficient error of the artefact varying linearly along {a} (a thermal "
              "gradient)",
@@ -135,6 +146,8 @@ ANGULAR = tuple(e.name for e in EFFECTS if e.unit == "urad/m")
 STRAIGHTNESS = tuple(f"E{d}{c}" for c in "XYZ" for d in "XYZ" if d != c)
 REVERSAL = tuple(f"reversal_{ax}" for ax in AXES)
 GRADIENT = tuple(f"thermal_gradient_{ax}" for ax in AXES)
+#: a normal with |n_xy| below this has no azimuth about the stylus axis (probe_lobing)
+LOBING_MIN_XY = 0.1
 #: |n_a| above this: the probing moves axis a (reversal effects)
 APPROACH_MIN = 0.1
 ROT_AXIS = {"A": 0, "B": 1, "C": 2}
@@ -257,6 +270,22 @@ def approach_sign(N: np.ndarray, a: int) -> np.ndarray:
     return np.where(n < -APPROACH_MIN, 1.0, np.where(n > APPROACH_MIN, -1.0, 0.0))
 
 
+def azimuth_harmonics(N: np.ndarray) -> dict[str, np.ndarray]:
+    """{"c2": cos 2 phi, "s2": sin 2 phi, ..., "s4"} of the azimuth phi of every normal about z, as
+    polynomials of (c, s) = (n_x, n_y)/|n_xy|; 0 where |n_xy| <= LOBING_MIN_XY (no azimuth)."""
+    rho = np.hypot(N[:, 0], N[:, 1])
+    ok = rho > LOBING_MIN_XY
+    c = np.where(ok, N[:, 0] / np.where(ok, rho, 1.0), 0.0)
+    s = np.where(ok, N[:, 1] / np.where(ok, rho, 1.0), 0.0)
+    return {"c2": c**2 - s**2, "s2": 2 * c * s,
+            "c3": c**3 - 3 * c * s**2, "s3": 3 * c**2 * s - s**3,
+            "c4": c**4 - 6 * c**2 * s**2 + s**4, "s4": 4 * c**3 * s - 4 * c * s**3}
+
+
+def lobing_labels(D: Design) -> list[str]:
+    return [f"{pid}.{h}" for pid in D.probe_ids for h in ("c2", "s2", "c3", "s3", "c4", "s4")]
+
+
 #: the smallest travel (mm) over which a straightness is fitted
 MIN_TRAVEL_MM = 1.0
 
@@ -290,6 +319,14 @@ def _needs(D: Design, name: str) -> None:
         if hi - lo < MIN_TRAVEL_MM:
             raise NotApplicable(f"the {name[2]} carriage moves {hi - lo:.3g} mm across these records: "
                                 f"no travel to see a straightness along (at least {MIN_TRAVEL_MM:g} mm)")
+    if name == "probe_lobing":
+        N = (np.vstack([D.N1, D.N2]) if D.N1 is not None else None) if D.kind == "length" else D.N
+        if N is None:
+            raise NotApplicable("needs normals (" + ("n1x..n2z" if D.kind == "length" else "nx,ny,nz")
+                                + ") to know the approach direction of each point")
+        if not np.any(np.hypot(N[:, 0], N[:, 1]) > LOBING_MIN_XY):
+            raise NotApplicable("every normal is along the stylus axis (z): no approach direction "
+                                "around it to see a lobing")
     if name in GRADIENT:
         _needs_temperatures(D, "a gradient of the expansion coefficient then looks like a curved scale "
                                "error", " spread along the axis")
@@ -364,6 +401,12 @@ def _length_columns(D: Design, name: str) -> Columns:
         a = AXES.index(name[-1])
         w = approach_sign(D.N2, a) - approach_sign(D.N1, a)
         return Columns(name, (na[:, a] * w)[:, None], [name], 1.0)
+    if name == "probe_lobing":
+        H1, H2 = azimuth_harmonics(D.N1), azimuth_harmonics(D.N2)
+        n1, n2 = np.einsum("ij,ij->i", na, D.N1), np.einsum("ij,ij->i", na, D.N2)
+        cols = [n2 * H2[h] * (D.k2 == k) - n1 * H1[h] * (D.k1 == k)
+                for k in range(len(D.probe_ids)) for h in ("c2", "s2", "c3", "s3", "c4", "s4")]
+        return Columns(name, np.column_stack(cols), lobing_labels(D), 1.0)
     if name in GRADIENT:
         a = AXES.index(name[-1])
         X1, X2 = D.U1 + D.P1, D.U2 + D.P2
@@ -433,6 +476,11 @@ def _point_columns(D: Design, name: str) -> Columns:
     if name in REVERSAL:
         a = AXES.index(name[-1])
         return Columns(name, unit_axis(a, approach_sign(D.N, a))[:, None], [name], 1.0)
+    if name == "probe_lobing":
+        H = azimuth_harmonics(D.N)
+        cols = [field3(D.N * (H[h] * (D.k == k))[:, None])
+                for k in range(len(D.probe_ids)) for h in ("c2", "s2", "c3", "s3", "c4", "s4")]
+        return Columns(name, np.column_stack(cols), lobing_labels(D), 1.0)
     if name in GRADIENT:
         a = AXES.index(name[-1])
         dT = D.T - T_REF_C

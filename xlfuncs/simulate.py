@@ -51,7 +51,7 @@ EFFECT_NAMES = (
     "EAX", "EBX", "ECX", "EAY", "EBY", "ECY", "EAZ", "EBZ", "ECZ", "scale_drift", "offset_drift",
     # second edition (docs/recordings.md section 7)
     "EYX", "EZX", "EXY", "EZY", "EXZ", "EYZ", "reversal_x", "reversal_y", "reversal_z",
-    "thermal_gradient_x", "thermal_gradient_y", "thermal_gradient_z")
+    "thermal_gradient_x", "thermal_gradient_y", "thermal_gradient_z", "probe_lobing")
 #: straightness E<deviation><carriage>: two coefficients (orders 2 and 3, µm)
 STRAIGHTNESS_NAMES = ("EYX", "EZX", "EXY", "EZY", "EXZ", "EYZ")
 
@@ -381,6 +381,15 @@ def check_effects(planted: dict, probes) -> dict:
             if vec.shape != (3,):
                 raise ModelError("offset_drift needs three components (vx, vy, vz) in µm/h")
             out[name] = vec
+        elif name == "probe_lobing":
+            if not isinstance(v, dict):
+                raise ModelError("probe_lobing needs {probe id: (c2, s2, c3, s3, c4, s4)} in µm")
+            for pid, vec in v.items():
+                if pid not in ids:
+                    raise ModelError(f"probe_lobing: unknown probe {pid!r} (probes: {', '.join(ids)})")
+                if len(vec) != 6 or not np.all(np.isfinite(np.asarray(vec, dtype=float))):
+                    raise ModelError("probe_lobing: six numbers (c2, s2, c3, s3, c4, s4) per probe")
+            out[name] = {pid: np.asarray(vec, dtype=float) for pid, vec in v.items()}
         elif name in STRAIGHTNESS_NAMES:
             vec = np.asarray(v, dtype=float).reshape(-1)
             if vec.shape != (2,) or not np.all(np.isfinite(vec)):
@@ -435,6 +444,16 @@ def planted_probing(L: Layout, planted: dict, t_probe: np.ndarray, T_probe: np.n
             lo, hi = U[:, car].min(), U[:, car].max()
             s = (U[:, car] - 0.5 * (lo + hi)) / (0.5 * (hi - lo))
             delta[:, dev] += np.polynomial.legendre.legval(s, [0.0, 0.0, *planted[name]])
+    # probe lobing (section 7): the radius of probe k depends on the azimuth phi of the normal about
+    # the stylus axis, e(phi) = sum c_j cos(j phi) + s_j sin(j phi), j = 2..4, along the normal
+    for pid, vec in planted.get("probe_lobing", {}).items():
+        if L.N is None:
+            raise ModelError("probe_lobing needs a layout with normals")
+        kk = [p.id for p in L.probes].index(pid)
+        phi = np.arctan2(L.N[:, 1], L.N[:, 0])
+        on = (L.k == kk) & (np.hypot(L.N[:, 0], L.N[:, 1]) > 0.1)
+        e = sum(vec[2 * q] * np.cos(j * phi) + vec[2 * q + 1] * np.sin(j * phi) for q, j in enumerate((2, 3, 4)))
+        delta += (e * on)[:, None] * L.N
     # reversal (section 7): +r along the axis where the probe approached in +axis, i.e. against
     # an outward normal pointing to -axis by more than 0.1
     for a, ax in enumerate("xyz"):

@@ -346,6 +346,8 @@ def why_zero(prep: Prepared, name: str) -> str:
     if name in fx.STRAIGHTNESS:
         return (f"no record sees its {name[1].lower()} coordinate change along the {name[2]} travel "
                 f"(lengths along {name[2].lower()} only, or no {name[1].lower()} coordinate)")
+    if name == "probe_lobing":
+        return "no point is approached from a direction around the stylus axis that lobing would move"
     if name in fx.REVERSAL:
         return (f"no length is probed from opposite sides along {name[-1]} at its two ends"
                 if D.kind == "length" else f"the records have no {name[-1]} coordinate")
