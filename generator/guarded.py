@@ -63,6 +63,8 @@ def _open_regular(path: Path, kind: str) -> int:
     """A file descriptor of ``path`` opened for reading, known to be a regular file within its cap."""
     cap = _cap(kind)
     what = _WHAT[kind]
+    if "\x00" in str(path):
+        raise InputError(f"cannot read {what}: the file name contains a NUL character", file=repr(str(path)))
     try:
         fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | getattr(os, "O_CLOEXEC", 0))
     except IsADirectoryError:

@@ -443,7 +443,10 @@ def read_point_cloud(path: Path, doc: dict) -> tuple[PointCloud, Parameters, Poi
     if "rows" in pts:
         tablep = read_points_rows(path, pts["rows"], probes)
     else:
-        tablep = read_points_csv(Path(path).parent / string(path, pts, "points", "file"), probes)
+        name = string(path, pts, "points", "file")
+        if "\x00" in name:
+            raise InputError("the file name contains a NUL character", file=path, where="[points] file")
+        tablep = read_points_csv(Path(path).parent / name, probes)
     index = {p.id: k for k, p in enumerate(probes)}
     try:
         for p in probes:

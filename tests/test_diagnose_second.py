@@ -180,9 +180,11 @@ def test_the_structured_path_gives_the_same_gates_and_skips_the_outlier_search()
 
 def weak_squareness():
     """ISO 10360-2 lengths, one probe, a squareness of 6 µrad (about 4.7 of its u = 1.28 µrad):
-    the targeted gate fires (adjusted p = 0.0024) but the omnibus test passes."""
+    the targeted gate fires (adjusted p = 0.0007, about 7 times from either end of the window
+    1e-4 ... alpha/2, so that a few more candidates in the Bonferroni count do not move it out)
+    but the omnibus test passes."""
     L, model = iso(repeats=1)
-    return sm.simulate(L, MPE1, {"squareness_xy": 6.0}, seed=1), model
+    return sm.simulate(L, MPE1, {"squareness_xy": 6.0}, seed=7), model
 
 
 def test_an_effect_between_alpha_name_and_alpha_is_indicated_not_chosen():

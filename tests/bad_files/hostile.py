@@ -206,6 +206,12 @@ def name_with_a_nul(tmp):
 
 
 @case
+def points_file_name_with_a_nul(tmp):
+    return (task(tmp, POINTCLOUD_TASK.replace('file = "small.csv"', 'file = "\\u0000"')), "small.toml",
+            ["[points] file", "NUL character"])
+
+
+@case
 def name_with_right_to_left_override(tmp):
     return task(tmp, with_name('"report\\u202Excl.exe"')), "small.toml", ["[task] name", "U+202E"]
 
