@@ -14,6 +14,12 @@ from xlfuncs import simulate as sm
 from test_diagnose_book import MPE1, PAIR
 
 
+def planted_delta(L, planted: dict) -> np.ndarray:
+    """The simulator's displacement (µm) of every probing of ``L`` by ``planted`` (no time, 20 °C)."""
+    return sm.planted_probing(L, sm.check_effects(planted, L.probes), np.zeros(len(L.X)),
+                              np.full(len(L.X), 20.0))
+
+
 def found(j, name):
     (e,) = [e for e in j["effects"] if e["name"] == name]
     return e
@@ -23,8 +29,7 @@ def test_the_simulator_plants_a_straightness_as_legendre_polynomials_of_the_trav
     """At the ends of the travel P2 = 1 and P3 = +-1: the y deviation is c2 + c3 at the far end of
     the x travel and c2 - c3 at the near end."""
     L = sm.layout("ballplate", PAIR[:1])
-    delta = sm.planted_probing(L, sm.check_effects({"EYX": [2.0, -0.5]}, L.probes), np.zeros(len(L.X)),
-                               np.full(len(L.X), 20.0))
+    delta = planted_delta(L, {"EYX": [2.0, -0.5]})
     u = L.X[:, 0] - PAIR[0].offset_mm[0]
     assert delta[np.argmax(u), 1] == pytest.approx(2.0 - 0.5, abs=1e-12)
     assert delta[np.argmin(u), 1] == pytest.approx(2.0 + 0.5, abs=1e-12)
@@ -41,8 +46,7 @@ def test_the_sensitivities_agree_with_the_simulator(name, value):
     prep = dg.prepare(rec, dg.Model(MPE1, PAIR[:1], True))
     cols = fx.columns(prep.design, name)
     beta = np.atleast_1d(np.asarray(value, dtype=float))
-    delta = sm.planted_probing(L, sm.check_effects({name: value}, L.probes), np.zeros(len(L.X)),
-                               np.full(len(L.X), 20.0))
+    delta = planted_delta(L, {name: value})
     # the design sees the measured ram positions, the simulator the nominal ones (µm apart)
     assert np.allclose(cols.X @ beta, prep.design.point_rows(delta), atol=1e-4 * np.max(np.abs(beta)))
 
@@ -164,8 +168,7 @@ def test_the_lobing_sensitivity_agrees_with_the_simulator():
     prep = dg.prepare(sm.simulate(L, MPE1, {}, seed=1), dg.Model(MPE1, PAIR, True))
     cols = fx.columns(prep.design, "probe_lobing")
     beta = np.r_[LOBES, np.zeros(6)]                  # P1 lobed, P2 not
-    delta = sm.planted_probing(L, sm.check_effects({"probe_lobing": {"P1": LOBES}}, L.probes),
-                               np.zeros(len(L.X)), np.full(len(L.X), 20.0))
+    delta = planted_delta(L, {"probe_lobing": {"P1": LOBES}})
     assert cols.labels[:2] == ["P1.c2", "P1.s2"] and len(cols.labels) == 12
     assert np.allclose(cols.X @ beta, prep.design.point_rows(delta), atol=1e-6)
 

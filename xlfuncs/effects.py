@@ -298,13 +298,19 @@ def _needs_temperatures(D: Design, looks_like: str, separate: str) -> None:
                             f"different temperatures{separate} separate them")
 
 
+def _needs_normals(D: Design, why: str) -> np.ndarray:
+    """Every probing's normal (lengths: both ends stacked), or NotApplicable saying ``why``."""
+    if (D.N1 if D.kind == "length" else D.N) is None:
+        raise NotApplicable("needs normals (" + ("n1x..n2z" if D.kind == "length" else "nx,ny,nz")
+                            + f") {why}")
+    return np.vstack([D.N1, D.N2]) if D.kind == "length" else D.N
+
+
 def _needs(D: Design, name: str) -> None:
     if name == "thermal_expansion":
         _needs_temperatures(D, "an expansion error then looks exactly like a scale error", "")
     if name == "probe_radius":
-        if (D.N1 if D.kind == "length" else D.N) is None:
-            raise NotApplicable("needs normals (" + ("n1x..n2z" if D.kind == "length" else "nx,ny,nz")
-                                + ") to know the direction in which a radius error moves each point")
+        _needs_normals(D, "to know the direction in which a radius error moves each point")
     if name == "probe_qualification" and len(D.probe_ids) < 2:
         raise NotApplicable("needs two or more probes (one probe: its offset error cancels or is "
                             "absorbed)")
@@ -320,10 +326,7 @@ def _needs(D: Design, name: str) -> None:
             raise NotApplicable(f"the {name[2]} carriage moves {hi - lo:.3g} mm across these records: "
                                 f"no travel to see a straightness along (at least {MIN_TRAVEL_MM:g} mm)")
     if name == "probe_lobing":
-        N = (np.vstack([D.N1, D.N2]) if D.N1 is not None else None) if D.kind == "length" else D.N
-        if N is None:
-            raise NotApplicable("needs normals (" + ("n1x..n2z" if D.kind == "length" else "nx,ny,nz")
-                                + ") to know the approach direction of each point")
+        N = _needs_normals(D, "to know the approach direction of each point")
         if not np.any(np.hypot(N[:, 0], N[:, 1]) > LOBING_MIN_XY):
             raise NotApplicable("every normal is along the stylus axis (z): no approach direction "
                                 "around it to see a lobing")
@@ -332,11 +335,7 @@ def _needs(D: Design, name: str) -> None:
                                "error", " spread along the axis")
     if name in REVERSAL:
         a = AXES.index(name[-1])
-        N = np.vstack([D.N1, D.N2]) if D.kind == "length" and D.N1 is not None else D.N
-        if N is None:
-            raise NotApplicable("needs normals (" + ("n1x..n2z" if D.kind == "length" else "nx,ny,nz")
-                                + ") to know from which side each point was approached")
-        w = approach_sign(N, a)
+        w = approach_sign(_needs_normals(D, "to know from which side each point was approached"), a)
         if not (np.any(w > 0) and np.any(w < 0)):
             raise NotApplicable(f"needs points approached along {name[-1]} from both sides (normals with "
                                 f"n{name[-1]} above {APPROACH_MIN:g} and below -{APPROACH_MIN:g}): from "

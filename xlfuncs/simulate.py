@@ -358,6 +358,22 @@ def _rot(axis: int, angle_rad: float) -> np.ndarray:
     return np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])
 
 
+def _per_probe(name: str, v, ids: list[str], labels: str, count: str, *, reference: bool = False,
+               finite: bool = False) -> dict:
+    """{probe id: vector} of a per-probe effect, checked: known probes, len(labels) components
+    (finite ones with ``finite``), not the first (reference) probe with ``reference``."""
+    if not isinstance(v, dict):
+        raise ModelError(f"{name} needs {{probe id: ({labels})}} in µm")
+    for pid, vec in v.items():
+        if pid not in ids:
+            raise ModelError(f"{name}: unknown probe {pid!r} (probes: {', '.join(ids)})")
+        if reference and pid == ids[0]:
+            raise ModelError(f"{name}: {pid} is the reference probe (the first); plant the error on another probe")
+        if len(vec) != len(labels.split(", ")) or (finite and not np.all(np.isfinite(np.asarray(vec, dtype=float)))):
+            raise ModelError(f"{name}: {count} ({labels}) per probe")
+    return {pid: np.asarray(vec, dtype=float) for pid, vec in v.items()}
+
+
 def check_effects(planted: dict, probes) -> dict:
     ids = [p.id for p in probes]
     out = {}
@@ -365,31 +381,14 @@ def check_effects(planted: dict, probes) -> dict:
         if name not in EFFECT_NAMES:
             raise ModelError(f"unknown effect {name!r}; choose one of {', '.join(EFFECT_NAMES)}")
         if name == "probe_qualification":
-            if not isinstance(v, dict):
-                raise ModelError("probe_qualification needs {probe id: (dx, dy, dz)} in µm")
-            for pid, vec in v.items():
-                if pid not in ids:
-                    raise ModelError(f"probe_qualification: unknown probe {pid!r} (probes: {', '.join(ids)})")
-                if pid == ids[0]:
-                    raise ModelError(f"probe_qualification: {pid} is the reference probe (the first); "
-                                     "plant the error on another probe")
-                if len(vec) != 3:
-                    raise ModelError("probe_qualification: three components (dx, dy, dz) per probe")
-            out[name] = {pid: np.asarray(vec, dtype=float) for pid, vec in v.items()}
+            out[name] = _per_probe(name, v, ids, "dx, dy, dz", "three components", reference=True)
         elif name == "offset_drift":
             vec = np.asarray(v, dtype=float).reshape(-1)
             if vec.shape != (3,):
                 raise ModelError("offset_drift needs three components (vx, vy, vz) in µm/h")
             out[name] = vec
         elif name == "probe_lobing":
-            if not isinstance(v, dict):
-                raise ModelError("probe_lobing needs {probe id: (c2, s2, c3, s3, c4, s4)} in µm")
-            for pid, vec in v.items():
-                if pid not in ids:
-                    raise ModelError(f"probe_lobing: unknown probe {pid!r} (probes: {', '.join(ids)})")
-                if len(vec) != 6 or not np.all(np.isfinite(np.asarray(vec, dtype=float))):
-                    raise ModelError("probe_lobing: six numbers (c2, s2, c3, s3, c4, s4) per probe")
-            out[name] = {pid: np.asarray(vec, dtype=float) for pid, vec in v.items()}
+            out[name] = _per_probe(name, v, ids, "c2, s2, c3, s3, c4, s4", "six numbers", finite=True)
         elif name in STRAIGHTNESS_NAMES:
             vec = np.asarray(v, dtype=float).reshape(-1)
             if vec.shape != (2,) or not np.all(np.isfinite(vec)):
