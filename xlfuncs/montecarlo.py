@@ -46,16 +46,11 @@ MAX_POINTS = 3000
 # drawing the influence factors
 # ---------------------------------------------------------------------------------------------
 
-def kernel_factor(K: np.ndarray, rank_tol: float = 1e-13) -> np.ndarray:
-    """L (n x r) with L L^T = K for a symmetric positive semi-definite kernel matrix K, from its
-    eigen-decomposition; eigenvalues below ``rank_tol`` times the largest are dropped (below 1e-13
-    an eigenvalue is rounding, ~1e-16 of the largest, and its eigenvector differs from CPU to CPU)."""
-    return kernel_basis(K, rank_tol)[0]
-
-
 def kernel_basis(K: np.ndarray, rank_tol: float = 1e-13) -> tuple[np.ndarray, np.ndarray]:
-    """(L, Q^T): L = Q diag(w)^(1/2) as in :func:`kernel_factor` and the r x n matrix Q^T of its
-    eigenvectors.  A draw L (Q^T z), z of length n, is K^(1/2) z: unique, whatever basis the BLAS
+    """(L, Q^T) of a symmetric positive semi-definite kernel matrix K: L = Q diag(w)^(1/2) (n x r,
+    L L^T = K) from its eigen-decomposition, eigenvalues below ``rank_tol`` times the largest dropped
+    (below 1e-13 an eigenvalue is rounding, ~1e-16 of the largest, and its eigenvector differs from
+    CPU to CPU), and the r x n matrix Q^T of its eigenvectors.  A draw L (Q^T z), z of length n, is K^(1/2) z: unique, whatever basis the BLAS
     kernel chose for a degenerate eigenvalue (a regular grid has many), so a seeded Monte Carlo
     gives the same numbers on every CPU; L z' with z' of length r would not."""
     if K.size == 0:
