@@ -35,6 +35,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from xlfuncs import diagnose as dg  # noqa: E402
+from xlfuncs import effects as fx  # noqa: E402
 from xlfuncs import simulate as sm  # noqa: E402
 
 sys.path.insert(0, str(ROOT / "bench"))
@@ -119,16 +120,20 @@ def library_match(diag, r0_um, steps: int = 3) -> tuple[bool, float]:
     prep, W = diag.prep, diag.whitener
     Q, _ = orth(W(prep.A)) if prep.A.shape[1] else (np.zeros((len(prep.r_um), 0)), [])
     sw = project_out(Q, W(prep.r_um - r0_um))
-    cols = {n: W(c.cols.X[:, c.kept]) for n, c in diag.candidates.items()
+    cols = {n: [W(c.cols.X[:, c.kept])] for n, c in diag.candidates.items()
             if c.cols is not None and c.kept and c.status != "not identifiable"}
+    for n in [n for n in cols if n in fx.PERIODIC]:     # every period of the scan
+        periods, _ = fx.period_grid(prep.design, fx.AXES.index(n[-1]))
+        cols[n] = [W(fx.periodic_columns(prep.design, n, float(P)).X) for P in periods]
     for _ in range(steps):
         best, best_q = 0.0, None
-        for n, Xw in cols.items():
-            Qc, kept = orth(project_out(Q, Xw))
-            if kept:
-                got = float(np.sum((Qc.T @ sw) ** 2))
-                if got > best:
-                    best, best_q = got, Qc
+        for n, blocks in cols.items():
+            for Xw in blocks:
+                Qc, kept = orth(project_out(Q, Xw))
+                if kept:
+                    got = float(np.sum((Qc.T @ sw) ** 2))
+                    if got > best:
+                        best, best_q = got, Qc
         if best_q is None:
             break
         Q = np.column_stack([Q, best_q])

@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from xlfuncs import effects as fx
-from xlfuncs.diagnose import Diagnosis
+from xlfuncs.diagnose import Diagnosis, effect_estimates
 from xlfuncs.pointcloud import Parameters
 
 from .book import Book, ChartSeries, Formula
@@ -66,7 +66,7 @@ def write_book(diag: Diagnosis, path: Path, *, title_extra: str = "", params: Pa
     _fill_after(book, diag, obs, gls)
     _candidates(book, diag)
     _groups(book, diag)
-    cached = _results(book, diag, gls)
+    cached = _results(book, diag, gls, inputs)
     _chart(book, diag, obs)
     out = book.save(path)
     from . import cache
@@ -182,13 +182,15 @@ def _travel_cells(book: Book, diag: Diagnosis, inputs: dict, sheet: str, cols: d
     """For the chosen straightness effects (docs/recordings.md section 7): the travel of their
     carriage over the records, lo = MIN and hi = MAX of the ram coordinate columns ``cols[axis]``
     of ``sheet`` (rows 2..n+1), on Inputs; {carriage: (lo cell, hi cell)}."""
-    cars = sorted({e[2] for e, _ in diag.sel_labels if e in fx.STRAIGHTNESS})
+    periodic = [e for e in dict.fromkeys(e for e, _ in diag.sel_labels) if e in fx.PERIODIC]
+    cars = sorted({e[2] for e, _ in diag.sel_labels if e in fx.STRAIGHTNESS} | {e[-1].upper() for e in periodic})
     if not cars:
         return {}
     wi = book.wb["Inputs"]
     r = inputs["free_row"]
     book.text(wi, r, 1, "travel of the carriages over the records (ram coordinates, mm): the straightness "
-                        "polynomials P2, P3 are of s = (2 u - lo - hi)/(hi - lo)")
+                        "polynomials P2, P3 are of s = (2 u - lo - hi)/(hi - lo); a periodic error's phase "
+                        "is about (lo + hi)/2")
     book.header(wi, r + 1, 1, ["carriage", "lo_mm", "hi_mm"])
     out = {}
     for k, car in enumerate(cars):
@@ -198,7 +200,37 @@ def _travel_cells(book: Book, diag: Diagnosis, inputs: dict, sheet: str, cols: d
         book.formula(wi, rr, 2, f"=MIN({ranges})")
         book.formula(wi, rr, 3, f"=MAX({ranges})")
         out[car] = (cell(rr, 2, "Inputs"), cell(rr, 3, "Inputs"))
+    if periodic:
+        r += 3 + len(cars)
+        book.text(wi, r, 1, "periodic errors (docs/diagnose.md section 6): the period found by the locator's "
+                            "scan (a search, not a formula) and the point (a, b) its sensitivity is linearized at")
+        book.header(wi, r + 1, 1, ["effect", "period_mm", "a0_um", "b0_um"], [
+            None, "the period of the largest drop of chi-square over the scanned grid, refined; fixed here",
+            "a of the fit with the period fixed (the refit's column for the period is the derivative at a0, b0)",
+            "b of the fit with the period fixed"])
+        for k, name in enumerate(periodic):
+            c = diag.candidates[name]
+            rr = r + 2 + k
+            book.text(wi, rr, 1, name)
+            for q, v in enumerate((c.period_mm, *c.lin_ab)):
+                book.number(wi, rr, 2 + q, float(v), fmt="0.0000", computed=True)
+            out["periodic:" + name[-1]] = tuple(cell(rr, 2 + q, "Inputs") for q in range(3))
+            inputs.setdefault("periodic", {})[name] = out["periodic:" + name[-1]]
     return out
+
+
+def _periodic_formula(par: str, u: str, ax: str, travel: dict) -> str:
+    """periodic_<ax> at ram coordinate cell u (no leading '='): SIN (par "a"), COS ("b") of
+    w = 2 pi (u - (lo + hi)/2)/P, or the period's column (a0 COS w - b0 SIN w)(-w/P) (par "period_mm");
+    effects.periodic_columns and effects.period_column."""
+    lo, hi = travel[ax.upper()]
+    P, a0, b0 = travel["periodic:" + ax]
+    w = f"(2*PI()*({u}-({lo}+{hi})/2)/{P})"
+    if par == "a":
+        return f"SIN({w})"
+    if par == "b":
+        return f"COS({w})"
+    return f"(({a0}*COS({w})-{b0}*SIN({w}))*(-{w}/{P}))"
 
 
 def _legendre_formula(k: int, u: str, lo_hi: tuple[str, str]) -> str:
@@ -378,6 +410,11 @@ def length_formula(name: str, par: str, R: _Row, probe_cells: dict[str, str],
         n1 = _na_dot(R, tuple(R[f"n1{a}"] for a in "xyz"))
         return (f"={n2}*{_harmonic_formula(h, R['n2x'], R['n2y'])}*EXACT({R['probe2']},{k})*1"
                 f"-{n1}*{_harmonic_formula(h, R['n1x'], R['n1y'])}*EXACT({R['probe1']},{k})*1")
+    if name in fx.PERIODIC:
+        ax = name[-1]
+        f2 = _periodic_formula(par, R[f"u{ax}2_mm"], ax, travel)
+        f1 = _periodic_formula(par, R[f"u{ax}1_mm"], ax, travel)
+        return f"={R['na' + ax]}*({f2}-{f1})"
     if name in fx.GRADIENT:
         ax = name[-1]
         lo, hi = travel["pos_" + ax]
@@ -537,6 +574,8 @@ def point_formula(name: str, par: str, a: int, P: _Row, c: dict, probe_cells: di
         pid, h = par.split(".")
         return (f"={P['n' + ax]}*{_harmonic_formula(h, P['nx'], P['ny'])}"
                 f"*EXACT({P['probe']},{probe_cells[pid]})*1")
+    if name in fx.PERIODIC:
+        return "=" + _periodic_formula(par, P[f"u{ax}_mm"], ax, travel) if name[-1] == ax else 0.0
     if name in fx.GRADIENT:
         g = name[-1]
         return (f"=0.000001*({P['temperature_C']}-20)*({P['y' + g + '_mm']}-{c[g]})"
@@ -643,7 +682,7 @@ def _gls(book: Book, diag: Diagnosis, obs: dict, native: bool) -> dict:
             book.text(ws, row + 1 + j, c0, l if e == "alignment" else (e if l == e else f"{e} {l}"))
             book.formula(ws, row + 1 + j, c0 + 2, f"=SQRT({Minv.cell(j, j)})", fmt="0.000000E+00")
             unit = (("µm" if l.startswith("t") else "µrad") if e == "alignment" else "µm" if e == "outlier"
-                    else _display_unit(fx.BY_NAME[e].unit))
+                    else "mm" if l == "period_mm" else _display_unit(fx.BY_NAME[e].unit))
             book.text(ws, row + 1 + j, c0 + 3, unit)
         out.update(M=M, g=g, Minv=Minv, b=b, u_col=c0 + 2, b_row=row + 1, c0=c0)
         row += p + 2
@@ -901,9 +940,10 @@ def _display_unit(unit: str) -> str:
     return unit.replace("um", "µm").replace("urad", "µrad").replace("µrµm", "µrad") if unit != "1" else unit
 
 
-def _results(book: Book, diag: Diagnosis, gls: dict) -> list[dict]:
+def _results(book: Book, diag: Diagnosis, gls: dict, inputs: dict) -> list[dict]:
     """The Results sheet; returns its rows' values (the core's numbers, as in diagnosis.json) for
-    the cached values."""
+    the cached values.  A periodic error's period row is the scan's period (Inputs) plus the
+    refit's step for it."""
     st = gls["stats"]
     js = diag.to_json()
     rows, cached = [], []
@@ -920,9 +960,15 @@ def _results(book: Book, diag: Diagnosis, gls: dict) -> list[dict]:
             continue
         b = gls["b"].cell(j, 0)
         u = cell(gls["b_row"] + j, gls["u_col"], "GLS")
+        u_value = float(math.sqrt(max(diag.cov_beta[j, j], 0.0)))
+        if e in fx.PERIODIC and l == "period_mm":
+            period = inputs["periodic"][e][0]
+            rows.append([f"{e} {l}", Formula(f"={period}+{b}"), Formula(f"={u}"), "mm"])
+            cached.append({"value": float(diag.candidates[e].period_mm + diag.beta[j]), "u": u_value})
+            continue
         rows.append([e if l == e else f"{e} {l}", Formula(f"={b}"), Formula(f"={u}"),
                      "µm" if e == "outlier" else _display_unit(fx.BY_NAME[e].unit)])
-        cached.append({"value": float(diag.beta[j]), "u": float(math.sqrt(max(diag.cov_beta[j, j], 0.0)))})
+        cached.append({"value": float(diag.beta[j]), "u": u_value})
     book.results(["quantity", "value", "u", "unit"], rows, [
         "chi2_before ... rms_after_um as in diagnosis.json; then one row per estimated effect parameter",
         "in the row's unit", "standard uncertainty, in the row's unit",
@@ -995,6 +1041,10 @@ def _own_quantity(diag: Diagnosis, name: str) -> tuple[str, np.ndarray, bool]:
     """What shows a straightness (the ram coordinate of its carriage: the curve c2 P2 + c3 P3)
     or a reversal (the approach direction along its axis), per observation row."""
     D, rows = diag.prep.design, diag.prep.obs_record
+    if name in fx.PERIODIC:             # the travel along its axis (lengths: the far end's)
+        a = fx.AXES.index(name[-1])
+        u = D.U2[:, a] if D.kind == "length" else D.U[rows, a]
+        return (f"ram {name[-1]} / mm" + (" (end 2 of the length)" if D.kind == "length" else ""), u, False)
     if name in fx.STRAIGHTNESS:
         c = fx.CARRIAGE_AXIS[name[2]]
         u = 0.5 * (D.U1[:, c] + D.U2[:, c]) if D.kind == "length" else D.U[rows, c]
@@ -1009,6 +1059,22 @@ def _own_quantity(diag: Diagnosis, name: str) -> tuple[str, np.ndarray, bool]:
     w = fx.approach_sign(D.N, a)[rows]
     return (f"probe motion along {ax} when touching", np.where(w > 0, f"moving +{ax}", np.where(
         w < 0, f"moving -{ax}", f"across {ax}")), True)
+
+
+def _periodic_values(diag: Diagnosis, name: str, t: np.ndarray) -> np.ndarray:
+    """The fitted periodic error a sin + b cos of 2 pi (t - middle)/P at ram coordinates t (µm)."""
+    e = effect_estimates(diag, name)
+    a, b = (v or 0.0 for v in e["estimate"])
+    lo, hi = fx.travel(diag.prep.design, name[-1].upper())
+    w = 2 * np.pi * (t - 0.5 * (lo + hi)) / e["period_mm"]
+    return a * np.sin(w) + b * np.cos(w)
+
+
+def _periodic_curve(ax, diag: Diagnosis, name: str, x: np.ndarray) -> None:
+    """The fitted a sin + b cos of the travel as a line."""
+    t = np.linspace(float(np.min(x)), float(np.max(x)), 800)
+    ax.plot(t, _periodic_values(diag, name, t), "-", lw=1.2, color="C1",
+            label=f"fitted a sin + b cos, period {effect_estimates(diag, name)['period_mm']:.4g} mm")
 
 
 def _scatter(ax, x, y, cat, **kw):
@@ -1081,7 +1147,8 @@ def write_plots(diag: Diagnosis, out_dir: Path) -> list[Path]:
             want = {"probing": "length d / mm", "probes": "probe"}.get(want, qs[0][0])
             want = want if want in qmap else qs[0][0]
         x, cat = qmap[want]
-        if name in fx.STRAIGHTNESS or name in fx.REVERSAL:   # section 7: its own revealing quantity
+        own = name in fx.STRAIGHTNESS or name in fx.REVERSAL or name in fx.PERIODIC
+        if own:   # section 7: its own revealing quantity
             want, x, cat = _own_quantity(diag, name)
             if diag.prep.design.kind == "point":      # only the coordinate the effect moves
                 keep = diag.prep.obs_axis == fx.AXES.index((name[1] if name in fx.STRAIGHTNESS else name[-1]).lower())
@@ -1092,8 +1159,19 @@ def write_plots(diag: Diagnosis, out_dir: Path) -> list[Path]:
         else:
             rows_x = diag.X_sel[:, rows]
         fig, (a1, a2) = plt.subplots(1, 2, figsize=(10, 3.8), dpi=100)
-        _scatter(a1, x, partial, cat, label="residual without the other effects")
-        _scatter(a1, x, f, cat, label=f"fitted {name}", alpha=0.7)
+        if name in fx.PERIODIC and diag.prep.design.kind == "length":
+            # the error at end 2: the length's residual along the axis plus the fitted error at end 1
+            D = diag.prep.design
+            k = fx.AXES.index(name[-1])
+            seen = np.abs(D.na[:, k]) > fx.APPROACH_MIN
+            near = _periodic_values(diag, name, D.U1[:, k])
+            _scatter(a1, x[seen], partial[seen] / D.na[seen, k] + near[seen], cat,
+                     label="error at end 2: residual / n_a (other effects out) + fitted error at end 1")
+        else:
+            _scatter(a1, x, partial, cat, label="residual without the other effects")
+            _scatter(a1, x, f, cat, label=f"fitted {name}", alpha=0.7)
+        if name in fx.PERIODIC:
+            _periodic_curve(a1, diag, name, x)
         a1.set_xlabel(want)
         a1.set_ylabel("µm")
         a1.grid(alpha=0.3)

@@ -84,7 +84,8 @@ def register(sub) -> None:
                    help="instead of --task: a CMM with only repeatability sigma_R_um = S (µm)")
     s.add_argument("--effect", action="append", default=[], metavar="NAME=VALUE",
                    help="planted effect in the unit of docs/recordings.md section 4, e.g. squareness_xy=4.1, "
-                        "probe_qualification=P2:0.5,0,0, offset_drift=0.3,0,0 (repeatable; default: none)")
+                        "probe_qualification=P2:0.5,0,0, offset_drift=0.3,0,0, periodic_x=0.5,-0.3,40 "
+                        "(a, b in µm, the period in mm; section 7) (repeatable; default: none)")
     s.add_argument("--seed", type=int, default=1, help="random seed (default: 1)")
     s.add_argument("--temperature-C", default=None, metavar="T|T0,T1",
                    help="artefact temperature: T or T0,T1 (a ramp over the session) in °C "
@@ -228,6 +229,11 @@ def parse_effect(text: str, probes) -> tuple[str, object]:
         return name, {pid.strip(): numbers(vec, 6)}
     if name in sm.STRAIGHTNESS_NAMES:
         return name, numbers(value, 2)       # c2, c3 (µm): orders 2 and 3 of the travel
+    if name in sm.PERIODIC_NAMES:
+        a, b, period = numbers(value, 3)     # a, b (µm), period (mm)
+        if period <= 0:
+            raise InputError(f"the period must be above 0 mm, got {period:g}", where=where)
+        return name, [a, b, period]
     return name, numbers(value, 1)[0]
 
 

@@ -52,6 +52,10 @@ CASES = {
     # probe lobing: harmonics 2-4 of the normal's azimuth as polynomials of nx, ny
     "points, probe lobing": ("spheres", {}, PAIR, {"probe_lobing": {"P1": [0.8, -0.5, 0.6, 0.0, 0.3, 0.4]}}, None,
                              {"probe_lobing"}),
+    # periodic errors: SIN/COS of the travel at the scanned period, and the period's own column
+    "lengths, periodic error": ("stepgauge", {}, ONE, {"periodic_x": [0.6, -0.4, 72.0]}, None, {"periodic_x"}),
+    "points 2-D, periodic error": ("holeplate", {"passes": 2}, PAIR[:1], {"periodic_y": [0.5, 0.7, 118.0]}, None,
+                                   {"periodic_y"}),
 }
 
 
@@ -123,10 +127,13 @@ def expected_rows(result):
             labels = ([f"{pp['probe']}.d{a}" for pp in e["per_probe"] for a in "xyz"]
                       if e["name"] == "probe_qualification" else ["c2", "c3"] if e["name"] in fx.STRAIGHTNESS
                       else [f"{p}.{h}" for p in ("P1", "P2") for h in ("c2", "s2", "c3", "s3", "c4", "s4")]
-                      if e["name"] == "probe_lobing" else [f"v{a}" for a in "xyz"])
+                      if e["name"] == "probe_lobing" else ["a", "b"] if e["name"] in fx.PERIODIC
+                      else [f"v{a}" for a in "xyz"])
             for lab, v, u in zip(labels, e["estimate"], e["u"]):
                 if v is not None:
                     exp[f"{e['name']} {lab}"], unc[f"{e['name']} {lab}"] = v, u
+            if e["name"] in fx.PERIODIC:
+                exp[f"{e['name']} period_mm"], unc[f"{e['name']} period_mm"] = e["period_mm"], e["u_period_mm"]
         else:
             exp[e["name"]], unc[e["name"]] = e["estimate"], e["u"]
     return exp, unc

@@ -11,7 +11,7 @@ from xlfuncs import diagnose as dg
 from xlfuncs import effects as fx
 from xlfuncs import simulate as sm
 
-from test_diagnose_book import MPE1, PAIR
+from test_diagnose_book import MPE1, ONE, PAIR
 
 
 def planted_delta(L, planted: dict) -> np.ndarray:
@@ -198,3 +198,80 @@ def test_probe_lobing_seen_from_four_directions_only_is_a_probe_radius_error():
     assert [e["name"] for e in j["effects"]] == ["probe_radius"]
     item = next(x for x in j["not_identifiable"] if x["name"] == "probe_lobing")
     assert item["aliased_with"] == "probe_radius"
+
+
+# -- periodic errors: a sine of the travel, its period found by a scan -----------------------------
+
+@pytest.mark.parametrize("name", ["periodic_x", "periodic_y"])
+def test_the_periodic_sensitivity_agrees_with_the_simulator(name):
+    """a sin + b cos of 2 pi t/P about the middle of the travel (effects.py) against the
+    simulator's Re((b - i a) exp(i 2 pi t/P)) (simulate.py)."""
+    L = sm.layout("holeplate", PAIR[:1], passes=2)
+    rec = sm.simulate(L, MPE1, {}, seed=1)
+    prep = dg.prepare(rec, dg.Model(MPE1, PAIR[:1], True))
+    cols = fx.columns(prep.design, name, 97.0)
+    delta = planted_delta(L, {name: [1.3, -0.7, 97.0]})
+    assert cols.labels == ["a", "b"] and cols.period_mm == 97.0
+    assert np.allclose(cols.X @ [1.3, -0.7], prep.design.point_rows(delta), atol=1e-4)
+
+
+def test_the_period_column_is_the_derivative_of_the_sine():
+    """effects.period_column against a central difference of periodic_columns in the period."""
+    L = sm.layout("stepgauge", PAIR[:1])
+    prep = dg.prepare(sm.simulate(L, MPE1, {}, seed=1), dg.Model(MPE1, PAIR[:1], True))
+    a, b, P, h = 0.8, -0.3, 71.0, 1e-4
+    plus, minus = (fx.columns(prep.design, "periodic_x", P + s * h).X @ [a, b] for s in (1, -1))
+    assert np.allclose(fx.period_column(prep.design, "periodic_x", P, a, b), (plus - minus) / (2 * h),
+                       rtol=1e-6, atol=1e-9)
+
+
+def test_a_periodic_error_on_a_step_gauge_is_named_with_its_period():
+    """1 µm at 72 mm pitch along x on step gauges along x, y and the xy diagonal: named first, a,
+    b and the period within 3u, the p-value carrying the look-elsewhere factor of the scan."""
+    L = sm.layout("stepgauge", ONE)
+    rec = sm.simulate(L, MPE1, {"periodic_x": [0.6, -0.8, 72.0]}, seed=5)
+    j = dg.diagnose(rec, dg.Model(MPE1, ONE, True)).to_json()
+    assert [e["name"] for e in j["effects"]] == ["periodic_x"]
+    e = found(j, "periodic_x")
+    for est, u, true in zip(e["estimate"], e["u"], [0.6, -0.8]):
+        assert abs(est - true) < 3 * u
+    assert abs(e["period_mm"] - 72.0) < 3 * e["u_period_mm"] and e["u_period_mm"] < 2.0
+    periods, M = fx.period_grid(dg.prepare(rec, dg.Model(MPE1, ONE, True)).design, 0)
+    assert e["periods_searched"] == M > 1 and periods[0] > periods[-1]
+    # the step's p-value is the chi-square tail (df 2) times M
+    assert e["log10_p_value"] == pytest.approx(
+        np.log10(M) + dg.chi2_logsf(e["delta_chi2"], 2) / np.log(10), abs=1e-9)
+
+
+@pytest.mark.parametrize("layout,probes", [("iso10360", ONE), ("ballplate", PAIR[:1])])
+def test_a_periodic_error_needs_the_axis_sampled_densely(layout, probes):
+    """ISO 10360-2 lengths and a ball plate see each axis at a few positions, 40-70 mm apart: a
+    sine through them fits a bump as well, so no period is identifiable (docs/diagnose.md
+    section 6: four probings per cycle at the widest gap, three cycles over the travel)."""
+    L = sm.layout(layout, probes)
+    j = dg.diagnose(sm.simulate(L, MPE1, {}, seed=4), dg.Model(MPE1, probes, True)).to_json()
+    reasons = {x["name"]: x["reason"] for x in j["not_identifiable"]}
+    for ax in "xy":
+        assert "probings per cycle at the widest gap" in reasons[f"periodic_{ax}"]
+        assert "a step gauge or a scan along " + ax in reasons[f"periodic_{ax}"]
+
+
+def test_null_step_gauges_do_not_name_a_periodic_error():
+    """The scan looks at many periods; with its look-elsewhere factor and the naming level
+    alpha/100, records that agree with the simulation name no periodic error."""
+    L = sm.layout("stepgauge", PAIR)
+    model = dg.Model(MPE1, PAIR, True)
+    for seed in range(12):
+        j = dg.diagnose(sm.simulate(L, MPE1, {}, seed=100 + seed), model).to_json()
+        assert not [e for e in j["effects"] if e["name"].startswith("periodic")], seed
+
+
+def test_simulate_takes_a_periodic_error_as_a_b_and_period(tmp_path):
+    from generator.diagnose_cli import parse_effect
+    from generator.errors import InputError
+
+    assert parse_effect("periodic_y=0.5,-0.2,40", PAIR) == ("periodic_y", [0.5, -0.2, 40.0])
+    with pytest.raises(InputError, match="expected 3 numbers"):
+        parse_effect("periodic_y=0.5,-0.2", PAIR)
+    with pytest.raises(InputError, match="period must be above 0 mm"):
+        parse_effect("periodic_y=0.5,-0.2,0", PAIR)

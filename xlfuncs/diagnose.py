@@ -116,6 +116,11 @@ def diagnose_prepared(prep: Prepared, alpha: float = 0.01, alpha_name: float | N
     for eff in fx.EFFECTS:
         c = Candidate(eff.name)
         cands[eff.name] = c
+        if eff.name in fx.PERIODIC and is_structured(prep):
+            c.status, c.reason = "not identifiable", (
+                f"the period scan needs the dense covariance of the records (fewer than "
+                f"{STRUCTURED_MIN_OBS} observations); diagnose a section of the scan")
+            continue
         try:
             cols = fx.columns(prep.design, eff.name)
         except fx.NotApplicable as e:
@@ -253,13 +258,14 @@ def diagnose_prepared(prep: Prepared, alpha: float = 0.01, alpha_name: float | N
     return diag
 
 
-def effect_covariance(prep: Prepared, name: str, W: Whitener | None = None):
+def effect_covariance(prep: Prepared, name: str, W: Whitener | None = None, period_mm: float | None = None):
     """GLS covariance of the parameters of candidate ``name`` fitted alone with the baseline:
     ``(cov, labels)`` over its identifiable columns (the standard uncertainty a planted effect is
-    measured against; used to size effects in the simulator and the benchmark)."""
+    measured against; used to size effects in the simulator and the benchmark; ``period_mm``: of a
+    periodic_* candidate)."""
     if W is None:
         W = structured_whitener(prep, [name]) if is_structured(prep) else Whitener(prep.C)
-    cols = fx.columns(prep.design, name)
+    cols = fx.columns(prep.design, name, period_mm)
     Q0, keptA = orth(W(prep.A))
     Xw = W(cols.X)
     big = np.max(np.abs(cols.X), axis=0) > fx.REL_ZERO * cols.full_scale

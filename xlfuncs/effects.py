@@ -30,6 +30,8 @@ reversal_x/_y/_z       w e_a, w = +1 approached along +a (n_a < -0.1),          
 thermal_gradient_a     lengths: 1e-6 (T - 20) L (m_a - c_a);                      ppm/K/m
                        points: 1e-6 (T - 20) (y_a - c_a)(y - c)
 probe_lobing           n (cos k phi, sin k phi), k = 2, 3, 4, per probe            µm
+periodic_a             (sin 2 pi t/P, cos 2 pi t/P) e_a, t = u_a - (lo + hi)/2;   µm
+                       the period P (mm) found by a scan (:func:`period_grid`)
 =====================  =========================================================  =========
 
 Second edition (docs/recordings.md section 7):
@@ -55,6 +57,16 @@ Second edition (docs/recordings.md section 7):
   (|n_xy| <= 0.1) has no azimuth and no lobing term.  cos k phi and sin k phi are polynomials of
   (n_x, n_y)/|n_xy| (no arctangent: the workbook writes the same products).
 
+* ``periodic_a``: a periodic error of the axis a scale or drive (a ball screw's lead, a grating's
+  interpolation error): delta_a = a sin(2 pi t/P) + b cos(2 pi t/P) of the ram coordinate t about
+  the middle of the travel.  The period P is not a parameter of the linear model: the search scans
+  it (:func:`period_grid`) and reports the p-value with the look-elsewhere correction over the
+  periods scanned (Bonferroni over the grid).  Identifiable only where the records sample the
+  axis densely: from four probings per cycle at the widest gap between the positions seen along a to three cycles
+  over the travel seen, within the plausible pitches 1-200 mm (docs/diagnose.md section 6); a
+  sine through a few positions (ISO 10360-2 lengths, a ball plate's grid) fits a bump or a
+  straightness as well as a periodic error.
+
 For point records the scale-type effects, thermal expansion and scale drift act about the
 centroid c of the nominal points (docs/recordings.md section 6); the rigid alignment absorbs the choice
 for the effects that do not vary from record to record.
@@ -62,6 +74,7 @@ for the effects that do not vary from record to record.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -139,6 +152,11 @@ EFFECTS: tuple[Effect, ...] = (
              "gradient)",
              f"records at different temperatures spread along {a} (temperature_C varying with position)")
       for a in AXES),
+    *(Effect(f"periodic_{a}", "um",
+             f"a periodic error along {a} (a sine of the {a} travel: ball screw lead, scale grating)",
+             f"records sampling the {a} travel densely (a step gauge or a scan along {a}: four or more "
+             f"probings per period, three or more periods)", vector=True)
+      for a in AXES),
 )
 BY_NAME = {e.name: e for e in EFFECTS}
 NAMES = tuple(e.name for e in EFFECTS)
@@ -146,6 +164,15 @@ ANGULAR = tuple(e.name for e in EFFECTS if e.unit == "urad/m")
 STRAIGHTNESS = tuple(f"E{d}{c}" for c in "XYZ" for d in "XYZ" if d != c)
 REVERSAL = tuple(f"reversal_{ax}" for ax in AXES)
 GRADIENT = tuple(f"thermal_gradient_{ax}" for ax in AXES)
+PERIODIC = tuple(f"periodic_{ax}" for ax in AXES)
+#: plausible pitches of a periodic error (docs/recordings.md section 7), mm
+PERIOD_RANGE_MM = (1.0, 200.0)
+#: identifiability of a period (docs/diagnose.md section 6): at least this many probings per cycle
+#: at the widest gap between the positions seen, and at least this many cycles over the travel
+SAMPLES_PER_CYCLE = 4
+MIN_CYCLES = 3
+#: the scan's frequency step is 1/(PERIOD_OVERSAMPLE x travel): a quarter of the resolution
+PERIOD_OVERSAMPLE = 4
 #: a normal with |n_xy| below this has no azimuth about the stylus axis (probe_lobing)
 LOBING_MIN_XY = 0.1
 #: |n_a| above this: the probing moves axis a (reversal effects)
@@ -222,6 +249,7 @@ class Columns:
     X: np.ndarray
     labels: list[str]
     full_scale: float          # natural size of an entry (for the no-sensitivity test)
+    period_mm: float | None = None   # periodic_*: the period the columns are evaluated at
 
 
 def _varying(v: np.ndarray | None) -> bool:
@@ -236,11 +264,15 @@ def rotation_vector(rot: str, P: np.ndarray) -> np.ndarray:
     return np.cross(e, P)
 
 
-def columns(design: Design, name: str) -> Columns:
-    """The sensitivity columns of candidate ``name`` for these records (raises NotApplicable)."""
+def columns(design: Design, name: str, period_mm: float | None = None) -> Columns:
+    """The sensitivity columns of candidate ``name`` for these records (raises NotApplicable);
+    ``period_mm``: the period of a ``periodic_*`` candidate (default: the longest the records can
+    identify, :func:`period_grid`; the search scans it)."""
     if name not in BY_NAME:
         raise KeyError(name)
     D = design
+    if name in PERIODIC:
+        return periodic_columns(D, name, period_mm)
     if D.kind == "length":
         return _length_columns(D, name)
     return _point_columns(D, name)
@@ -284,6 +316,106 @@ def azimuth_harmonics(N: np.ndarray) -> dict[str, np.ndarray]:
 
 def lobing_labels(D: Design) -> list[str]:
     return [f"{pid}.{h}" for pid in D.probe_ids for h in ("c2", "s2", "c3", "s3", "c4", "s4")]
+
+
+def positions_seen(D: Design, a: int) -> np.ndarray:
+    """The distinct ram coordinates along axis a (mm, sorted, to 1 µm) of the probings that see a
+    displacement along a: both ends of every length with |n_a| > APPROACH_MIN, every point (with a
+    coordinate a)."""
+    if D.kind == "length":
+        sees = np.abs(D.na[:, a]) > APPROACH_MIN
+        t = np.r_[D.U1[sees, a], D.U2[sees, a]]
+    else:
+        t = D.U[:, a] if a < D.dims else np.zeros(0)
+    return np.unique(np.round(t, 3))
+
+
+def period_range(D: Design, a: int) -> tuple[float, float, float]:
+    """(P_min, P_max, travel) in mm of the periods the records identify along axis a: P_min =
+    SAMPLES_PER_CYCLE x the widest gap between the positions seen, P_max = travel/MIN_CYCLES,
+    both within PERIOD_RANGE_MM (raises NotApplicable when none is left)."""
+    ax = AXES[a]
+    t = positions_seen(D, a)
+    if len(t) < 2 * SAMPLES_PER_CYCLE:
+        raise NotApplicable(f"the records see {ax} at {len(t)} position(s): a period needs the {ax} travel "
+                            f"sampled densely ({2 * SAMPLES_PER_CYCLE} or more positions; a step gauge or a "
+                            f"scan along {ax})")
+    span = float(t[-1] - t[0])
+    gap = float(np.max(np.diff(t)))
+    lo = max(PERIOD_RANGE_MM[0], SAMPLES_PER_CYCLE * gap)
+    hi = min(PERIOD_RANGE_MM[1], span / MIN_CYCLES)
+    if lo > hi:
+        raise NotApplicable(
+            f"the records see {ax} at {len(t)} positions over {span:.0f} mm with gaps up to {gap:.3g} mm: a "
+            f"period is identifiable from {SAMPLES_PER_CYCLE} x {gap:.3g} = {SAMPLES_PER_CYCLE * gap:.3g} mm "
+            f"({SAMPLES_PER_CYCLE} probings per cycle at the widest gap) to {span:.0f}/{MIN_CYCLES} = "
+            f"{span / MIN_CYCLES:.3g} mm ({MIN_CYCLES} cycles over the travel), within "
+            f"{PERIOD_RANGE_MM[0]:g}-{PERIOD_RANGE_MM[1]:g} mm: none; a step gauge or a scan along {ax} "
+            f"samples it densely")
+    return lo, hi, span
+
+
+def period_grid(D: Design, a: int) -> tuple[np.ndarray, int]:
+    """The periods scanned along axis a (mm, longest first: equally spaced in frequency 1/P with
+    step 1/(PERIOD_OVERSAMPLE x travel), a quarter of the resolution 1/travel) and the
+    look-elsewhere factor M: Bonferroni over the periods of the grid, M = their number.  (One per
+    resolution, 1 + (1/P_min - 1/P_max) x travel, is too few: on null step gauges and hole plates
+    the best period's p-value fell below 0.01 in 1.5-3.5 % of the sets; with the grid's count in
+    0-1 %, docs/diagnose.md section 6.)"""
+    lo, hi, span = period_range(D, a)
+    f0, f1 = 1.0 / hi, 1.0 / lo
+    k = max(1, int(math.ceil((f1 - f0) * span * PERIOD_OVERSAMPLE)))
+    f = np.linspace(f0, f1, k + 1)
+    return 1.0 / f, len(f)
+
+
+def periodic_phase(D: Design, a: int, U: np.ndarray, period_mm: float) -> tuple[np.ndarray, np.ndarray]:
+    """(sin, cos) of 2 pi t/P, t = U_a - (lo + hi)/2 about the middle of the travel (:func:`travel`)."""
+    lo, hi = travel(D, AXES[a].upper())
+    w = 2.0 * math.pi * (U[:, a] - 0.5 * (lo + hi)) / period_mm
+    return np.sin(w), np.cos(w)
+
+
+def periodic_columns(D: Design, name: str, period_mm: float | None = None) -> Columns:
+    """Columns (a, b) of ``periodic_<axis>`` at period ``period_mm`` (default: the longest
+    identifiable); the labels are "a", "b" (µm)."""
+    a = AXES.index(name[-1])
+    if period_mm is None:
+        period_mm = float(period_grid(D, a)[0][0])
+    elif not (math.isfinite(period_mm) and period_mm > 0):
+        raise NotApplicable(f"the period must be a positive number of mm, got {period_mm!r}")
+    if D.kind == "length":
+        s1, c1 = periodic_phase(D, a, D.U1, period_mm)
+        s2, c2 = periodic_phase(D, a, D.U2, period_mm)
+        X = np.column_stack([D.na[:, a] * (s2 - s1), D.na[:, a] * (c2 - c1)])
+    else:
+        sn, cs = periodic_phase(D, a, D.U, period_mm)
+        X = np.column_stack([D.point_rows(_on_axis(len(D.Y), a, w)) for w in (sn, cs)])
+    return Columns(name, X, ["a", "b"], 1.0, period_mm=float(period_mm))
+
+
+def period_column(D: Design, name: str, period_mm: float, a_um: float, b_um: float) -> np.ndarray:
+    """The sensitivity to the period (µm per mm) of ``periodic_<axis>`` at (a, b, P): the partial
+    derivative of a sin(2 pi t/P) + b cos(2 pi t/P), (a cos - b sin)(-2 pi t/P^2).  Added to the
+    refit (linearized at the fit with P fixed) so that the uncertainties of a and b include that of
+    the period, and the period gets its own (docs/diagnose.md section 6)."""
+    a = AXES.index(name[-1])
+    lo, hi = travel(D, AXES[a].upper())
+
+    def d_dP(U: np.ndarray) -> np.ndarray:
+        t = U[:, a] - 0.5 * (lo + hi)
+        w = 2.0 * math.pi * t / period_mm
+        return (a_um * np.cos(w) - b_um * np.sin(w)) * (-w / period_mm)
+
+    if D.kind == "length":
+        return D.na[:, a] * (d_dP(D.U2) - d_dP(D.U1))
+    return D.point_rows(_on_axis(len(D.Y), a, d_dP(D.U)))
+
+
+def _on_axis(m: int, a: int, w: np.ndarray) -> np.ndarray:
+    d = np.zeros((m, 3))
+    d[:, a] = w
+    return d
 
 
 #: the smallest travel (mm) over which a straightness is fitted

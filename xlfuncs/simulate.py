@@ -51,7 +51,10 @@ EFFECT_NAMES = (
     "EAX", "EBX", "ECX", "EAY", "EBY", "ECY", "EAZ", "EBZ", "ECZ", "scale_drift", "offset_drift",
     # second edition (docs/recordings.md section 7)
     "EYX", "EZX", "EXY", "EZY", "EXZ", "EYZ", "reversal_x", "reversal_y", "reversal_z",
-    "thermal_gradient_x", "thermal_gradient_y", "thermal_gradient_z", "probe_lobing")
+    "thermal_gradient_x", "thermal_gradient_y", "thermal_gradient_z", "probe_lobing",
+    "periodic_x", "periodic_y", "periodic_z")
+#: periodic errors: a, b (µm) and the period (mm)
+PERIODIC_NAMES = ("periodic_x", "periodic_y", "periodic_z")
 #: straightness E<deviation><carriage>: two coefficients (orders 2 and 3, µm)
 STRAIGHTNESS_NAMES = ("EYX", "EZX", "EXY", "EZY", "EXZ", "EYZ")
 
@@ -389,6 +392,11 @@ def check_effects(planted: dict, probes) -> dict:
             out[name] = vec
         elif name == "probe_lobing":
             out[name] = _per_probe(name, v, ids, "c2, s2, c3, s3, c4, s4", "six numbers", finite=True)
+        elif name in PERIODIC_NAMES:
+            vec = np.asarray(v, dtype=float).reshape(-1)
+            if vec.shape != (3,) or not np.all(np.isfinite(vec)) or vec[2] <= 0:
+                raise ModelError(f"{name} needs a, b (µm) and the period (mm, above 0)")
+            out[name] = vec
         elif name in STRAIGHTNESS_NAMES:
             vec = np.asarray(v, dtype=float).reshape(-1)
             if vec.shape != (2,) or not np.all(np.isfinite(vec)):
@@ -443,6 +451,13 @@ def planted_probing(L: Layout, planted: dict, t_probe: np.ndarray, T_probe: np.n
             lo, hi = U[:, car].min(), U[:, car].max()
             s = (U[:, car] - 0.5 * (lo + hi)) / (0.5 * (hi - lo))
             delta[:, dev] += np.polynomial.legendre.legval(s, [0.0, 0.0, *planted[name]])
+    # periodic error (section 7): the axis reads off by Re((b - i a) exp(i 2 pi t/P)) = a sin + b cos
+    # of its travel t about the middle of the layout's probings
+    for a, name in enumerate(PERIODIC_NAMES):
+        if name in planted:
+            amp_a, amp_b, period = planted[name]
+            t = U[:, a] - 0.5 * (U[:, a].min() + U[:, a].max())
+            delta[:, a] += np.real((amp_b - 1j * amp_a) * np.exp(2j * np.pi * t / period))
     # probe lobing (section 7): the radius of probe k depends on the azimuth phi of the normal about
     # the stylus axis, e(phi) = sum c_j cos(j phi) + s_j sin(j phi), j = 2..4, along the normal
     for pid, vec in planted.get("probe_lobing", {}).items():

@@ -96,8 +96,8 @@ def structured_whitener(prep: Prepared, names=None):
     parts, where = [prep.r_um[:, None], prep.A], {}
     pos = 1 + prep.A.shape[1]
     for eff in fx.EFFECTS:
-        if names is not None and eff.name not in names:
-            continue
+        if (names is not None and eff.name not in names) or eff.name in fx.PERIODIC:
+            continue            # periodic_*: scanned with the dense covariance only
         try:
             X = fx.columns(prep.design, eff.name).X
         except fx.NotApplicable:

@@ -265,6 +265,11 @@ def _estimates(prep: Prepared, c: Candidate, sel_labels, beta, cov_beta) -> dict
         return {"estimate": est[name], "u": unc[name]}
     labels = c.cols.labels
     out = {"estimate": [est.get(l) for l in labels], "u": [unc.get(l) for l in labels]}
+    if c.period_mm is not None:       # periodic_*: the period of the scan (section 7) and its u
+        # the scan's period plus the refit's step for it (about 0: the scan's optimum)
+        out["period_mm"] = c.period_mm + est.get("period_mm", 0.0)
+        out["u_period_mm"] = unc.get("period_mm")
+        out["periods_searched"] = c.n_periods
     if name == "probe_qualification":
         per = []
         for pid in prep.design.probe_ids[1:]:
@@ -387,6 +392,14 @@ def _fmt_pm(est: float, u: float) -> str:
     return f"{est:.{digits}f} ± {u:.{digits}f}"
 
 
+def _period_words(est: dict) -> str:
+    """', period 71.97 ± 0.20 mm' of a periodic error ('' for other effects)."""
+    if est.get("period_mm") is None:
+        return ""
+    u = est.get("u_period_mm")
+    return f", period {_fmt_pm(est['period_mm'], u) if u else format(est['period_mm'], '.4g')} mm"
+
+
 def where_seen(diag: Diagnosis, name: str) -> str:
     """Plain words for where the fitted effect concentrates (the smallest share of the records
     carrying 80 % of its standardized signal)."""
@@ -463,7 +476,7 @@ def summary_text(diag: Diagnosis) -> str:
         if eff.vector:
             c = diag.candidates[ind["name"]]
             val = "; ".join(f"{l} {_fmt_pm(e, u)}" for l, e, u in zip(c.cols.labels, ind["estimate"], ind["u"])
-                            if e is not None) + f" {PLAIN_UNITS[eff.unit]}"
+                            if e is not None) + f" {PLAIN_UNITS[eff.unit]}" + _period_words(ind)
         else:
             val = f"{_fmt_pm(ind['estimate'], ind['u'])} {PLAIN_UNITS[eff.unit]}"
         pieces.append(f"{eff.plain} of {val} is indicated (adjusted p = {ind['p_adjusted']:.2g}) but not "
@@ -484,7 +497,8 @@ def summary_text(diag: Diagnosis) -> str:
         est = effect_estimates(diag, name)
         if eff.vector:
             comp = [(l, e, u) for l, e, u in zip(c.cols.labels, est["estimate"], est["u"]) if e is not None]
-            val = "; ".join(f"{l} {_fmt_pm(e, u)}" for l, e, u in comp) + f" {PLAIN_UNITS[eff.unit]}"
+            val = "; ".join(f"{l} {_fmt_pm(e, u)}" for l, e, u in comp) + f" {PLAIN_UNITS[eff.unit]}" \
+                + _period_words(est)
         else:
             val = f"{_fmt_pm(est['estimate'], est['u'])} {PLAIN_UNITS[eff.unit]}"
         seen = where_seen(diag, name)

@@ -38,6 +38,12 @@ class Candidate:
     df: int = 0
     logp: float | None = None
     p_adjusted: float | None = None
+    # periodic_*: the period found by the scan and log M, M the periods of the scan's grid (the
+    # look-elsewhere correction, added to logp: docs/diagnose.md section 6)
+    period_mm: float | None = None
+    n_periods: int | None = None
+    look_elsewhere: float = 0.0
+    lin_ab: tuple[float, float] | None = None    # (a, b) the period column is linearized at
 
 
 GATE_SHARE = 0.5           # each of the two gates judged at alpha/2 (docs/recordings.md section 7)
@@ -92,6 +98,10 @@ def candidate_rows(prep, W, Q0, Q, resid, white, cands, identifiable, chosen, sc
         c = cands[name]
         if c.status not in ("untested", "tested"):
             continue
+        if name in fx.PERIODIC:
+            scan_period(prep, W, Q0, Q, resid, white, c)
+            if not c.kept:
+                continue
         Xk = white[name][:, c.kept]
         if chosen:
             alias = _alias_with_chosen(Q0, white, cands, chosen, name)
@@ -113,8 +123,71 @@ def candidate_rows(prep, W, Q0, Q, resid, white, cands, identifiable, chosen, sc
         logp = _test_logp(dchi, df, rest, nu, scaled)
         if logp is None:
             continue
+        logp = min(0.0, logp + c.look_elsewhere)
         rows.append({"name": name, "df": df, "delta_chi2": dchi, "logp": logp, "kz": kz, "Qz": Qz})
     return rows
+
+
+PERIOD_REFINE_STEPS = 40     # golden-section steps of the period between the grid's neighbours
+PERIOD_TIE = 1e-9            # relative: equally good alias periods, the longest taken
+
+
+def _period_dchi(Z: np.ndarray, resid: np.ndarray) -> np.ndarray:
+    """Δχ² of every (sin, cos) pair of columns of Z (n x 2G, already projected): b' G^+ b."""
+    n2 = Z.shape[1] // 2
+    Zs, Zc = Z[:, 0::2], Z[:, 1::2]
+    g11, g22, g12 = np.sum(Zs * Zs, 0), np.sum(Zc * Zc, 0), np.sum(Zs * Zc, 0)
+    b1, b2 = Zs.T @ resid, Zc.T @ resid
+    det = g11 * g22 - g12**2
+    scale = np.maximum(g11 * g22, 1e-300)
+    full = det > 1e-9 * scale
+    out = np.zeros(n2)
+    out[full] = (g22 * b1**2 - 2 * g12 * b1 * b2 + g11 * b2**2)[full] / det[full]
+    one = ~full                     # the pair is (nearly) one column: its larger one alone
+    big = np.where(g11 >= g22, b1**2 / np.maximum(g11, 1e-300), b2**2 / np.maximum(g22, 1e-300))
+    out[one] = big[one]
+    return out
+
+
+def scan_period(prep, W, Q0, Q, resid, white, c: Candidate) -> None:
+    """The period of a ``periodic_*`` candidate given what is fitted already (Q, resid): the
+    largest drop of chi-square over the grid of :func:`xlfuncs.effects.period_grid` (the longest
+    of equally good alias periods), refined by golden section between the grid's neighbours.
+    Sets the candidate's columns, its whitened columns in ``white``, the kept columns (against
+    the baseline Q0, as for every candidate) and the look-elsewhere term log M."""
+    D = prep.design
+    a = fx.AXES.index(c.name[-1])
+    periods, M = fx.period_grid(D, a)
+    X = np.column_stack([fx.periodic_columns(D, c.name, float(P)).X for P in periods])
+    Z = project_out(Q, W(X))
+    d = _period_dchi(Z, resid)
+    best = int(np.flatnonzero(d >= d.max() * (1.0 - PERIOD_TIE))[0])   # grid is longest first
+
+    def dchi_at(f: float) -> float:
+        Zp = project_out(Q, W(fx.periodic_columns(D, c.name, 1.0 / f).X))
+        return float(_period_dchi(Zp, resid)[0])
+
+    f = 1.0 / periods
+    lo, hi = f[max(best - 1, 0)], f[min(best + 1, len(f) - 1)]
+    g = (math.sqrt(5.0) - 1.0) / 2.0
+    x1, x2 = hi - g * (hi - lo), lo + g * (hi - lo)
+    d1, d2 = dchi_at(x1), dchi_at(x2)
+    for _ in range(PERIOD_REFINE_STEPS):
+        if d1 >= d2:
+            hi, x2, d2 = x2, x1, d1
+            x1 = hi - g * (hi - lo)
+            d1 = dchi_at(x1)
+        else:
+            lo, x1, d1 = x1, x2, d2
+            x2 = lo + g * (hi - lo)
+            d2 = dchi_at(x2)
+    f_best, d_best = (x1, d1) if d1 >= d2 else (x2, d2)
+    P = float(1.0 / f_best) if d_best > d[best] else float(periods[best])
+    cols = fx.periodic_columns(D, c.name, P)
+    Xw = W(cols.X)
+    _, kept = orth(project_out(Q0, Xw), np.linalg.norm(Xw, axis=0))
+    c.cols, c.kept, white[c.name] = cols, kept, Xw
+    c.period_mm, c.n_periods, c.look_elsewhere = P, M, math.log(M)
 
 
 def record_obs(prep: Prepared) -> list[np.ndarray]:
@@ -265,13 +338,29 @@ def _still_mismatch(W, S: Search, best: dict, alpha: float, scaled: bool) -> boo
 
 def refit(prep, W, keptA, S: Search):
     """GLS with the alignment, the chosen effects and the outliers' mean-shift columns:
-    (chi2, dof, log p, beta, cov, X_sel, labels)."""
+    (chi2, dof, log p, beta, cov, X_sel, labels).  A chosen ``periodic_*`` adds its period's
+    column (:func:`xlfuncs.effects.period_column`, label "period_mm") linearized at the fit
+    with the period fixed (``Candidate.lin_ab``): the period is a fitted parameter too."""
+    with_period = [n for n in S.chosen if n in fx.PERIODIC and len(S.cands[n].kept) == 2]
+    if with_period:
+        _, _, _, beta0, _, _, labels0 = _refit_columns(prep, W, keptA, S, {})
+        lin = {n: tuple(float(beta0[labels0.index((n, p))]) for p in ("a", "b")) for n in with_period}
+        for n, ab in lin.items():
+            S.cands[n].lin_ab = ab
+        return _refit_columns(prep, W, keptA, S, lin)
+    return _refit_columns(prep, W, keptA, S, {})
+
+
+def _refit_columns(prep, W, keptA, S: Search, lin: dict):
     X_parts = [prep.A[:, keptA]]
     labels = [("alignment", prep.A_labels[j]) for j in keptA]
     for name in S.chosen:
         c = S.cands[name]
         X_parts.append(c.cols.X[:, c.kept])
         labels += [(name, c.cols.labels[j]) for j in c.kept]
+        if name in lin:
+            X_parts.append(fx.period_column(prep.design, name, c.period_mm, *lin[name])[:, None])
+            labels.append((name, "period_mm"))
     n_obs = len(prep.r_um)
     for a, rows in S.outlier_cols:
         E = np.zeros((n_obs, len(rows)))
