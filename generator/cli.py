@@ -106,11 +106,11 @@ def cmd_demo(args) -> int:
             for f in files:
                 print(f"    -> {f}")
     try:
-        from .diagnosis import cli as diagnose_cli
+        from .diagnosis import cli as diagnosis_cli
     except ModuleNotFoundError:
-        diagnose_cli = None
-    if diagnose_cli is not None:
-        diagnose_cli.demo(out / "diagnose")
+        diagnosis_cli = None
+    if diagnosis_cli is not None:
+        diagnosis_cli.demo(out / "diagnose")
     if getattr(args, "pdf", False):
         from .workbook.pdf import print_books
 

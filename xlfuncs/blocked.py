@@ -300,7 +300,7 @@ def distance_components(cloud: pc.PointCloud, params: pc.Parameters, pairs=None,
             bad = np.flatnonzero(d <= 1e-9)
             if bad.size:  # same message as the local path
                 pc.distance_components(cloud, params, _pairs_of_block(m, i0, rows)[bad[:1]])
-            pc.store(out, slice(pos, pos + d.size), d, var)
+            pc.store_distances(out, slice(pos, pos + d.size), d, var)
         return out
     pairs = pc.check_pairs(cloud, pairs)
     n = len(pairs)

@@ -456,7 +456,7 @@ def distance_components(cloud: PointCloud, params: Parameters, pairs: np.ndarray
                 raise DegenerateGeometryError(
                     f"points {cloud.labels[i]} and {cloud.labels[j]} are at the same place: "
                     "the distance direction n_ij of Forbes 2025 eq. (29) is undefined")
-            store(out, slice(pos, pos + dk.size), dk, {f: v[keep] for f, v in var.items()})
+            store_distances(out, slice(pos, pos + dk.size), dk, {f: v[keep] for f, v in var.items()})
             return dk.size
 
         # numpy releases the GIL in elementwise work: row blocks run on every core
@@ -485,13 +485,15 @@ def distance_components(cloud: PointCloud, params: Parameters, pairs: np.ndarray
         sl = slice(start, min(start + block, n))
         i, j = pairs[sl, 0], pairs[sl, 1]
         d, var = _distance_block(cloud, params, pa, i, j)
-        store(out, sl, d, var)
+        store_distances(out, sl, d, var)
         if progress is not None:
             progress(sl.stop, n)
     return out
 
 
-def store(out: dict, sl: slice, d: np.ndarray, var: dict) -> None:
+def store_distances(out: dict, sl: slice, d: np.ndarray, var: dict) -> None:
+    """Distances ``d`` and their per-factor variances ``var`` into rows ``sl`` of the output
+    arrays of :func:`distance_components` (u per factor and in total)."""
     out["d_mm"][sl] = d
     total = np.zeros_like(d)
     for f in FACTORS:
