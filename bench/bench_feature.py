@@ -7,7 +7,7 @@
    python bench/bench_feature.py --workbooks 24 48 72 100
 
 Prints one line per measurement; the numbers quoted in the README and in
-generator/feature_book.py (FEATURE_NATIVE_MAX_POINTS) come from here.
+generator/feature/book.py (FEATURE_NATIVE_MAX_POINTS) come from here.
 """
 
 from __future__ import annotations
@@ -97,7 +97,7 @@ def bench_core(m_theta: int = 100, m_z: int = 20) -> None:
 
 def bench_workbooks(sizes: list[int], engines: list[str]) -> None:
     from generator.cli import build_task
-    from generator.recalc import recalculate
+    from generator.workbook.recalc import recalculate
 
     for m in sizes:
         n_z = 4

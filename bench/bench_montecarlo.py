@@ -25,7 +25,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from generator import pointcloud_job as job  # noqa: E402
+from generator.pointcloud import job  # noqa: E402
 from generator.taskfile import read_toml  # noqa: E402
 from xlfuncs import blocked as bl  # noqa: E402
 from xlfuncs import features as ft  # noqa: E402

@@ -23,7 +23,7 @@ CASES = {
     "build_stepgauge_m52": """
         import time, tomllib
         from pathlib import Path
-        from generator import pointcloud_job as job
+        from generator.pointcloud import job
         from generator.taskfile import read_toml
         p = Path("generator/examples/stepgauge_II_MPE1.toml")
         import tempfile
@@ -55,7 +55,7 @@ CASES = {
         import time, tempfile
         from pathlib import Path
         from generator.cli import build_task
-        from generator.recalc import recalculate
+        from generator.workbook.recalc import recalculate
         out = Path(tempfile.mkdtemp())
         build_task(Path("generator/examples/stepgauge_II_MPE1.toml"), out, plots=False)
         t = time.perf_counter()
@@ -66,7 +66,7 @@ CASES = {
         import time, tempfile
         from pathlib import Path
         from generator.cli import build_task
-        from generator.recalc import recalculate
+        from generator.workbook.recalc import recalculate
         out = Path(tempfile.mkdtemp())
         build_task(Path("generator/examples/stepgauge_II_MPE1.toml"), out, plots=False)
         t = time.perf_counter()

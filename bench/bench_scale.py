@@ -87,7 +87,7 @@ with DaskBackend() as BACKEND:
         sys.path.insert(0, "tests")
         from test_large_workbook import write_large_task
         from generator.cli import build_task
-        from generator.recalc import recalculate, results_rows
+        from generator.workbook.recalc import recalculate, results_rows
         tmp = Path(tempfile.mkdtemp())
         task = write_large_task(tmp, 2000, "plate_m2000")
         t = time.perf_counter()

@@ -55,7 +55,7 @@ def cmd_relink(args) -> int:
 
 
 def register(sub) -> None:
-    from .cli import add_command
+    from .commands import add_command
 
     s = add_command(sub, "addin", "the spreadsheet add-ins (see docs/addins.md)",
                     "The optional add-ins that compute the Gaussian-process blocks of large workbooks: "

@@ -22,12 +22,12 @@ from openpyxl.utils.exceptions import IllegalCharacterError
 
 from xlfuncs.errors import ModelError
 
-from . import cache as cached_values
-from .atomic import write_text
-from .book import describing
 from .errors import InputError
 from .jobs import job
 from .taskfile import read_toml, task_kind_and_name
+from .workbook import cache as cached_values
+from .workbook.atomic import write_text
+from .workbook.book import describing
 
 
 def non_finite(obj, where: str = "results"):
@@ -230,7 +230,7 @@ def build_task(task_path: Path, out_dir: Path, *, plots: bool = True, force: boo
     """Build one task into ``out_dir``: workbook, JSON and plots, all or nothing.
 
     ``force``: replace outputs someone edited (keeping backups); ``cache``: which formula cells
-    get cached values for programs that do not calculate (see :mod:`generator.cache`);
+    get cached values for programs that do not calculate (see :mod:`generator.workbook.cache`);
     ``exact``: no approximation even for large tasks (the job's ``force_exact``, if it has one:
     a feature task's V_A; the other kinds are always exact)."""
     task_path = Path(task_path)

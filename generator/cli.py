@@ -1,5 +1,8 @@
 """The ``cmmwb`` command line (thin: parsing, output folders, error reporting).
 
+The subcommands of :data:`EXTRA_COMMANDS` register themselves with
+:func:`generator.commands.add_command`; they never import this module.
+
 Exit status: 0 success, 2 bad input (one message naming the file and line/key/sheet/cell),
 1 an internal error (a bug: please report it with the task file).
 """
@@ -7,6 +10,7 @@ Exit status: 0 success, 2 bad input (one message naming the file and line/key/sh
 from __future__ import annotations
 
 import argparse
+import importlib
 import json
 import os
 import signal
@@ -18,26 +22,30 @@ from pathlib import Path
 from xlfuncs.errors import ModelError
 
 from . import __version__
-from .atomic import write_text
 from .build import build_task
+from .commands import add_command, examples_epilog
 from .errors import InputError
 from .jobs import available, job
 from .taskfile import KINDS
+from .workbook.atomic import write_text
 
 EXAMPLES_DIR = Path(__file__).parent / "examples"
+#: modules that add their subcommands (``register(sub)``), when present in this installation
+EXTRA_COMMANDS = ("generator.read_cli", "generator.diagnosis.cli", "generator.addin_cli",
+                  "generator.import_cli")
 
 
 # -- commands ----------------------------------------------------------------------------------
 
 def cmd_build(args) -> int:
     if args.pdf:
-        from .pdf import require_libreoffice
+        from .workbook.pdf import require_libreoffice
 
         require_libreoffice()   # before anything is written
     results, files = build_task(Path(args.task), Path(args.out), plots=not args.no_plots,
                                 force=args.force, cache=args.cache, exact=args.exact)
     if args.pdf:
-        from .pdf import print_books
+        from .workbook.pdf import print_books
 
         files += print_books([f for f in files if f.suffix == ".xlsx"])
     print(f"[{results['kind']}] {results['name']}")
@@ -82,7 +90,7 @@ def new_task(kind: str, stem: str) -> tuple[str, dict[str, str]]:
 def cmd_demo(args) -> int:
     out = Path(args.out)
     if getattr(args, "pdf", False):
-        from .pdf import require_libreoffice
+        from .workbook.pdf import require_libreoffice
 
         require_libreoffice()
     t0 = time.perf_counter()
@@ -98,13 +106,13 @@ def cmd_demo(args) -> int:
             for f in files:
                 print(f"    -> {f}")
     try:
-        from . import diagnose_cli
+        from .diagnosis import cli as diagnosis_cli
     except ModuleNotFoundError:
-        diagnose_cli = None
-    if diagnose_cli is not None:
-        diagnose_cli.demo(out / "diagnose")
+        diagnosis_cli = None
+    if diagnosis_cli is not None:
+        diagnosis_cli.demo(out / "diagnose")
     if getattr(args, "pdf", False):
-        from .pdf import print_books
+        from .workbook.pdf import print_books
 
         t = time.perf_counter()
         pdfs = print_books(sorted(out.rglob("*.xlsx")))
@@ -117,9 +125,9 @@ def cmd_demo(args) -> int:
 
 
 def cmd_recalc(args) -> int:
-    from .recalc import RecalcError, recalculate, results_rows
+    from .workbook.recalc import RecalcError, recalculate, results_rows
 
-    from .safe_xlsx import MAX_CELLS, MAX_FORMULAS_ENGINE_CELLS, check
+    from .workbook.safe_xlsx import MAX_CELLS, MAX_FORMULAS_ENGINE_CELLS, check
 
     path = Path(args.book)
     if not path.exists():
@@ -156,8 +164,8 @@ def cmd_recalc(args) -> int:
 def _refuse_circular_references(path: Path) -> None:
     """A circular reference is a clear error (exit 2); looked for with the ``formulas`` engine
     when LibreOffice gave error values and the workbook is small enough for that engine."""
-    from .recalc import RecalcError, check_no_cycles
-    from .safe_xlsx import MAX_FORMULAS_ENGINE_CELLS, check
+    from .workbook.recalc import RecalcError, check_no_cycles
+    from .workbook.safe_xlsx import MAX_FORMULAS_ENGINE_CELLS, check
 
     try:
         check(path, max_cells=MAX_FORMULAS_ENGINE_CELLS)
@@ -171,22 +179,12 @@ def _refuse_circular_references(path: Path) -> None:
         return
 
 
-def _examples(*lines: str) -> str:
-    return "examples:\n" + "\n".join(f"  {line}" for line in lines)
-
-
-def add_command(sub, name: str, help: str, description: str, examples: tuple[str, ...]):
-    """A subcommand whose --help shows its description and a few examples verbatim."""
-    return sub.add_parser(name, help=help, description=textwrap.fill(description, 79),
-                          epilog=_examples(*examples), formatter_class=argparse.RawDescriptionHelpFormatter)
-
-
 def parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="cmmwb", formatter_class=argparse.RawDescriptionHelpFormatter,
         description=textwrap.fill("Task-specific uncertainty of CMM measurements as live spreadsheet "
                                   "workbooks (Forbes 2025, Wojtyla/Plowucha 2023, Forbes 2022).", 79),
-        epilog=_examples("cmmwb demo --out cmmwb-demo",
+        epilog=examples_epilog("cmmwb demo --out cmmwb-demo",
                          "cmmwb new pointcloud --out gauge.toml && cmmwb build gauge.toml --out gauge",
                          "cmmwb COMMAND --help") +
         "\n\nExit status: 0 success, 2 bad input (one message naming the file and line, key, sheet "
@@ -250,9 +248,9 @@ def parser() -> argparse.ArgumentParser:
     s.add_argument("--json", action="store_true", help="print the Results rows as JSON (default: a table)")
     s.set_defaults(func=cmd_recalc)
 
-    for extra in ("read_cli", "diagnose_cli", "addin_cli", "import_cli"):
+    for extra in EXTRA_COMMANDS:
         try:
-            mod = __import__(f"generator.{extra}", fromlist=["register"])
+            mod = importlib.import_module(extra)
         except ModuleNotFoundError:
             continue
         mod.register(sub)

@@ -18,7 +18,7 @@ def cmd_import(args) -> int:
 
 
 def register(sub) -> None:
-    from .cli import add_command
+    from .commands import add_command
 
     s = add_command(sub, "import", "QIF measured points (or Q-DAS AQDEF values) -> task file + points CSV",
                     "Reads the measured points of a QIF results file (ISO 23952: points, normals, probe "

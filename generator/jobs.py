@@ -6,9 +6,9 @@ import importlib
 from types import ModuleType
 
 JOB_MODULES = {
-    "pointcloud": "generator.pointcloud_job",
-    "budget": "generator.budget_job",
-    "feature": "generator.feature_job",
+    "pointcloud": "generator.pointcloud.job",
+    "budget": "generator.budget.job",
+    "feature": "generator.feature.job",
 }
 
 

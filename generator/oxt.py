@@ -30,7 +30,7 @@ from pathlib import Path
 import xlfuncs
 
 from . import __version__
-from .atomic import replacing
+from .workbook.atomic import replacing
 
 SOURCES = Path(__file__).parent / "lo_addin"
 COMPONENT = "cmmwb_calc.py"

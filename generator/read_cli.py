@@ -15,7 +15,7 @@ from .errors import InputError
 
 
 def register(sub) -> None:
-    from .cli import add_command
+    from .commands import add_command
 
     s = add_command(sub, "read", "workbook (filled in, Excel or LibreOffice) -> task file",
                     "Reads the input cells of a workbook written by cmmwb build (and filled in or edited "
@@ -58,7 +58,7 @@ def read_to_files(book: Path, out: Path, *, force: bool = False) -> list[Path]:
             staged.append((tmp, path))
             with os.fdopen(fd, "w", encoding="utf-8", newline="\n") as fh:
                 fh.write(text)
-            os.chmod(tmp, 0o644)  # as every other output (generator.atomic)
+            os.chmod(tmp, 0o644)  # as every other output (generator.workbook.atomic)
         # the points table first: a task file never refers to a table that is not there
         for tmp, path in sorted(staged, key=lambda t: t[1] == out):
             os.replace(tmp, path)

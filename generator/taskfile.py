@@ -20,7 +20,7 @@ from xlfuncs.limits import coordinate_problem
 from xlfuncs.pointcloud import Parameters, PointCloud, Probe
 
 from .errors import InputError
-from .guarded import MAX_BYTES, read_text
+from .workbook.guarded import MAX_BYTES, read_text
 
 KINDS = ("pointcloud", "budget", "feature")
 MAX_TASK_BYTES = MAX_BYTES["task"]
@@ -35,7 +35,7 @@ MAX_INT = 2**63 - 1      # TOML integers are 64-bit (TOML 1.0, "Integer")
 def read_toml(path: Path) -> dict:
     """Parse a task file; syntax errors name the line (tomllib reports line and column).
 
-    Read through :func:`generator.guarded.read_text` (a regular file of at most 16 MiB, UTF-8; a
+    Read through :func:`generator.workbook.guarded.read_text` (a regular file of at most 16 MiB, UTF-8; a
     byte-order mark is accepted).  Integers beyond 64 bits and nesting deeper than
     :data:`MAX_DEPTH` are refused with the key that holds them."""
     path = Path(path)

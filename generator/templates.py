@@ -24,8 +24,8 @@ import tempfile
 import zipfile
 from pathlib import Path
 
-from .atomic import replacing
 from .jobs import available, job
+from .workbook.atomic import replacing
 
 TEMPLATE_DIR = Path(__file__).resolve().parents[1] / "workbook_templates"
 EXAMPLES_DIR = Path(__file__).parent / "examples"
@@ -62,7 +62,7 @@ def normalise(path: Path) -> None:
 
 def build_one(kind: str, example: Path | None, target: Path) -> Path:
     """Build one template into ``target`` (through ``cmmwb build``, no plots)."""
-    from .cli import build_task
+    from .build import build_task
 
     with tempfile.TemporaryDirectory(prefix="cmmwb_tpl_") as tmp:
         tmp = Path(tmp)

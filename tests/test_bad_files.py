@@ -16,7 +16,7 @@ import pytest
 
 from generator.cli import main
 from generator.errors import InputError
-from generator.safe_xlsx import MAX_UNCOMPRESSED_BYTES, check
+from generator.workbook.safe_xlsx import MAX_UNCOMPRESSED_BYTES, check
 
 HERE = Path(__file__).resolve().parent
 CORPUS = HERE / "bad_files"

@@ -18,13 +18,13 @@ import openpyxl
 import pytest
 
 from conftest import close
-from generator import budget_book, budget_job
+from generator.budget import book as budget_book, job as budget_job
 from generator.errors import InputError
-from generator.recalc import recalculate, results_rows
+from generator.workbook.recalc import recalculate, results_rows
 
 from test_budget_core import TABLE9, TABLES, assert_printed, numerical_gradient, reference_value
 
-KNUCKLE = Path(budget_job.__file__).parent / "examples" / "knuckle.toml"
+KNUCKLE = Path(budget_job.__file__).parents[1] / "examples" / "knuckle.toml"
 
 def knuckle_doc() -> dict:
     return tomllib.loads(KNUCKLE.read_text(encoding="utf-8"))

@@ -7,9 +7,9 @@ import json
 import pytest
 
 from conftest import ENGINES, close, recalc
-from generator import diagnose_book
-from generator.diagnose_cli import run_diagnose
-from generator.recalc import results_rows
+from generator.diagnosis import book as diagnose_book
+from generator.diagnosis.cli import run_diagnose
+from generator.workbook.recalc import results_rows
 from xlfuncs import diagnose as dg
 from xlfuncs import effects as fx
 from xlfuncs import pointcloud as pc

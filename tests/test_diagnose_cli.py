@@ -6,7 +6,7 @@ import sys
 
 import pytest
 
-from generator.diagnose_cli import demo
+from generator.diagnosis.cli import demo
 
 
 def run(*args, cwd):

@@ -102,9 +102,9 @@ def test_the_workbook_of_a_structured_diagnosis_agrees_with_its_json(tmp_path, m
     """The whitened GLS sheet holds the structured whitener's coordinates (fewer than n) and the
     rank of C as a number; both engines reproduce chi-square, dof and estimates of the JSON."""
     from conftest import close, recalc
-    from generator import diagnose_book
-    from generator.diagnose_cli import run_diagnose
-    from generator.recalc import results_rows
+    from generator.diagnosis import book as diagnose_book
+    from generator.diagnosis.cli import run_diagnose
+    from generator.workbook.recalc import results_rows
     from test_diagnose_book import expected_rows
     from xlfuncs.recordings import write_recordings
 

@@ -8,7 +8,7 @@ import json
 
 import pytest
 
-from generator import feature_job
+from generator.feature import job as feature_job
 from generator.cli import build_task, main
 from xlfuncs import diagnose as dg
 from xlfuncs.locator import model as locator_model
@@ -89,7 +89,7 @@ def point_records(tmp_path, monkeypatch):
     path = tmp_path / "scan.csv"
     write_recordings(rec, path)
     task = tmp_path / "machine.toml"
-    from generator.diagnose_cli import task_toml
+    from generator.diagnosis.cli import task_toml
 
     task.write_text(task_toml(MPE1, PAIR, "machine", "MPE1 with two probes"))
     return path, task

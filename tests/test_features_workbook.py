@@ -16,10 +16,10 @@ import openpyxl
 import pytest
 
 from conftest import ENGINES, EXAMPLES
-from generator import feature_book, feature_job
+from generator.feature import book as feature_book, job as feature_job
 from generator.cli import build_task, main
 from generator.errors import InputError
-from generator.recalc import recalculate, results_rows
+from generator.workbook.recalc import recalculate, results_rows
 from generator.taskfile import read_toml
 from xlfuncs.pointcloud import FACTORS
 

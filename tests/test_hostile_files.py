@@ -21,7 +21,7 @@ import pytest
 from generator.build import Staging
 from generator.cli import main
 from generator.errors import InputError
-from generator.guarded import read_bytes
+from generator.workbook.guarded import read_bytes
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE / "bad_files"))
@@ -313,7 +313,7 @@ def test_200000_point_records_fit_on_the_structured_path_but_not_dense():
 
 def test_an_external_hyperlink_is_not_refused(tmp_path):
     """Hyperlinks open nothing by themselves: a workbook with one (to any address) passes."""
-    from generator.safe_xlsx import check
+    from generator.workbook.safe_xlsx import check
     from hostile import book, parts
 
     p = parts()

@@ -1,5 +1,5 @@
 """Feature workbooks beyond the native-formula limit (more than
-generator.feature_book.FEATURE_NATIVE_MAX_POINTS points): V_A of the factors PQ, S, ET, ER, P are
+generator.feature.book.FEATURE_NATIVE_MAX_POINTS points): V_A of the factors PQ, S, ET, ER, P are
 grey values computed by the core, every result is visible in LibreOffice and `formulas`, and the
 Excel add-in formulas on 'Live_addin' (cmm_feature, cmm_feature_va) evaluate -- by calling the
 add-in's Python functions with the values of the ranges they name -- to the same numbers.
@@ -20,9 +20,10 @@ from openpyxl.utils import get_column_letter, range_boundaries
 from openpyxl.worksheet.formula import ArrayFormula
 
 from conftest import ENGINES, close, recalc
-from generator import feature_book, feature_job, large_book
+from generator.feature import book as feature_book, job as feature_job
+from generator.pointcloud import large_book
 from generator.cli import build_task
-from generator.recalc import results_rows
+from generator.workbook.recalc import results_rows
 from xlfuncs import udf
 from xlfuncs.pointcloud import FACTORS
 

@@ -1,4 +1,4 @@
-"""Point-cloud workbooks beyond the native-formula limit (generator.large_book): every result
+"""Point-cloud workbooks beyond the native-formula limit (generator.pointcloud.large_book): every result
 visible in LibreOffice (Gaussian-process blocks as labelled values, the rest native formulas),
 and the Excel add-in formulas on 'Live_addin' evaluate -- by calling the add-in's Python
 functions with the values of the ranges they name -- to the same numbers."""
@@ -14,11 +14,11 @@ from openpyxl.utils import range_boundaries
 from openpyxl.worksheet.formula import ArrayFormula
 
 from conftest import close, recalc
-from generator import large_book
+from generator.pointcloud import large_book
 from generator.cli import build_task
 from generator.errors import InputError
-from generator.recalc import results_rows
-from generator.vx_sheets import NATIVE_MAX_POINTS
+from generator.workbook.recalc import results_rows
+from generator.pointcloud.vx_sheets import NATIVE_MAX_POINTS
 from pointcloud_tasks import ALL_FACTORS
 from xlfuncs import udf
 

@@ -28,3 +28,235 @@ def test_every_package_in_the_tree_is_installed():
     installed = set(find_packages(str(ROOT), include=find["include"]))
     assert _packages_in_tree() <= installed, sorted(_packages_in_tree() - installed)
     assert {"xlfuncs.locator", "generator.importers"} <= installed
+
+
+# --- the import graph: layers, no cycles, no private names across modules --------------------
+#
+# Built from the source text with `ast` only (nothing is imported): every Import/ImportFrom of a
+# module of `generator` or `xlfuncs`, relative or absolute, at module level or inside a function,
+# and every string constant that is exactly a module's dotted name (what importlib.import_module
+# is given, as in generator/jobs.py), so that a dynamic import is a dependency too.
+
+import ast  # noqa: E402
+
+TASK_KINDS = ("pointcloud", "budget", "feature", "diagnosis")
+
+
+def _is_private(name: str) -> bool:
+    return name.startswith("_") and not (name.startswith("__") and name.endswith("__"))
+
+
+def _project_modules(root: Path = ROOT) -> dict[str, Path]:
+    """Dotted module name -> file, for every module inside a package of `generator`/`xlfuncs`
+    (package data such as generator/lo_addin or generator/examples is no package)."""
+    out = {}
+    for top in ("generator", "xlfuncs"):
+        for path in sorted((root / top).rglob("*.py")):
+            parts = path.relative_to(root).with_suffix("").parts
+            if not all((root.joinpath(*parts[:i]) / "__init__.py").is_file()
+                       for i in range(1, len(parts))):
+                continue
+            if parts[-1] == "__init__":
+                parts = parts[:-1]
+            out[".".join(parts)] = path
+    return out
+
+
+def _imports(name: str, path: Path, modules: dict[str, Path]):
+    """(imported project module, names taken from it, node) for each import in one module."""
+    is_package = path.name == "__init__.py"
+    package = name if is_package else name.rpartition(".")[0]
+    tree = ast.parse(path.read_text(encoding="utf-8"), str(path))
+    for node in ast.walk(tree):
+        if (isinstance(node, ast.Constant) and isinstance(node.value, str)
+                and node.value in modules):     # importlib.import_module("generator.x") & co.
+            yield node.value, [], node, None
+        elif isinstance(node, ast.Import):
+            for alias in node.names:
+                target = alias.name
+                while target and target not in modules:
+                    target = target.rpartition(".")[0]
+                if target:
+                    yield target, [], node, alias
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = package.split(".")
+                base = base[:len(base) - (node.level - 1)]
+                source = ".".join(base + ([node.module] if node.module else []))
+            else:
+                source = node.module or ""
+            if source not in modules:
+                continue
+            for alias in node.names:
+                sub = f"{source}.{alias.name}"
+                if sub in modules:                 # `from pkg import module`
+                    yield sub, [], node, alias
+                else:
+                    yield source, [alias.name], node, alias
+
+
+def _graph(root: Path = ROOT) -> dict[str, set[str]]:
+    modules = _project_modules(root)
+    graph: dict[str, set[str]] = {m: set() for m in modules}
+    for name, path in modules.items():
+        for target, _names, _node, _alias in _imports(name, path, modules):
+            if target != name:
+                graph[name].add(target)
+    return graph
+
+
+def strongly_connected(graph: dict[str, set[str]]) -> list[list[str]]:
+    """The strongly connected components of more than one module (Tarjan): each is a set of
+    modules that all import one another, directly or through the others."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on_stack: set[str] = set()
+    components: list[list[str]] = []
+
+    def strongconnect(v: str) -> None:
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        on_stack.add(v)
+        for w in sorted(graph[v]):
+            if w not in index:
+                strongconnect(w)
+                low[v] = min(low[v], low[w])
+            elif w in on_stack:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            component = []
+            while True:
+                w = stack.pop()
+                on_stack.discard(w)
+                component.append(w)
+                if w == v:
+                    break
+            if len(component) > 1:
+                components.append(sorted(component))
+
+    for v in sorted(graph):
+        if v not in index:
+            strongconnect(v)
+    return components
+
+
+def find_cycles(root: Path = ROOT) -> list[tuple[list[str], list[str]]]:
+    """For each strongly connected component of the import graph: one shortest cycle through
+    its first module (a -> b -> ... -> a) and the component's modules."""
+    graph = _graph(root)
+    out = []
+    for component in strongly_connected(graph):
+        members = set(component)
+        start = component[0]
+        previous = {start: None}
+        queue = [start]
+        found = None
+        while queue and found is None:
+            v = queue.pop(0)
+            for w in sorted(graph[v] & members):
+                if w == start:
+                    found = v
+                    break
+                if w not in previous:
+                    previous[w] = v
+                    queue.append(w)
+        path = [start]
+        v = found
+        while v is not None and v != start:
+            path.insert(1, v)
+            v = previous[v]
+        out.append((path + [start], component))
+    return out
+
+
+def private_uses(root: Path = ROOT) -> list[str]:
+    """`from m import _x` and `m._x` where m is another module of the project."""
+    modules = _project_modules(root)
+    out = []
+    for name, path in modules.items():
+        bound: dict[str, str] = {}              # local name -> project module it is bound to
+        for target, names, node, alias in _imports(name, path, modules):
+            where = f"{path.relative_to(root)}:{node.lineno}"
+            if target == name:
+                continue
+            for taken in names:
+                if _is_private(taken):
+                    out.append(f"{where}: from {target} import {taken}")
+            if alias is None:
+                continue
+            if not names:
+                if _is_private(target.rpartition(".")[2]):
+                    out.append(f"{where}: imports private module {target}")
+                if isinstance(node, ast.Import) and alias.asname is None:
+                    bound[alias.name.partition(".")[0]] = alias.name.partition(".")[0]
+                else:
+                    bound[alias.asname or alias.name] = target
+        tree = ast.parse(path.read_text(encoding="utf-8"), str(path))
+        for node in ast.walk(tree):
+            if not (isinstance(node, ast.Attribute) and _is_private(node.attr)):
+                continue
+            chain = []
+            value = node.value
+            while isinstance(value, ast.Attribute):
+                chain.insert(0, value.attr)
+                value = value.value
+            if not (isinstance(value, ast.Name) and value.id in bound):
+                continue
+            dotted = ".".join([bound[value.id]] + chain)
+            if dotted in modules and dotted != name:
+                out.append(f"{path.relative_to(root)}:{node.lineno}: {dotted}.{node.attr}")
+    return sorted(out)
+
+
+def test_no_import_cycles():
+    cycles = find_cycles()
+    assert not cycles, "import cycles:\n" + "\n".join(
+        f"{' -> '.join(cycle)}   (one of the cycles among: {', '.join(component)})"
+        for cycle, component in cycles)
+
+
+def test_no_private_names_across_modules():
+    uses = private_uses()
+    assert not uses, "private names used across modules:\n" + "\n".join(uses)
+
+
+def test_xlfuncs_imports_neither_generator_nor_openpyxl():
+    modules = _project_modules()
+    bad = []
+    for name, path in modules.items():
+        if not name.startswith("xlfuncs"):
+            continue
+        tree = ast.parse(path.read_text(encoding="utf-8"), str(path))
+        for node in ast.walk(tree):
+            if isinstance(node, ast.Import):
+                tops = [a.name.partition(".")[0] for a in node.names]
+            elif isinstance(node, ast.ImportFrom) and not node.level:
+                tops = [(node.module or "").partition(".")[0]]
+            else:
+                continue
+            bad += [f"{path.relative_to(ROOT)}:{node.lineno}: {t}" for t in tops
+                    if t in ("generator", "openpyxl")]
+    assert not bad, bad
+
+
+def _job_modules() -> dict[str, str]:
+    """``JOB_MODULES`` of generator/jobs.py, read from the source."""
+    tree = ast.parse((ROOT / "generator" / "jobs.py").read_text(encoding="utf-8"))
+    for node in tree.body:
+        if isinstance(node, ast.Assign) and getattr(node.targets[0], "id", None) == "JOB_MODULES":
+            return ast.literal_eval(node.value)
+    raise AssertionError("generator/jobs.py has no JOB_MODULES")
+
+
+def test_each_task_kind_has_its_own_package_with_its_job():
+    for kind in TASK_KINDS:
+        folder = ROOT / "generator" / kind
+        assert (folder / "__init__.py").is_file(), folder
+    for kind in ("pointcloud", "budget", "feature"):
+        assert (ROOT / "generator" / kind / "job.py").is_file(), kind
+    assert (ROOT / "generator" / "diagnosis" / "cli.py").is_file()
+    for module in _job_modules().values():
+        kind_package = module.split(".")[1]
+        assert kind_package in TASK_KINDS and module.endswith(".job"), module
+        assert (ROOT / Path(*module.split("."))).with_suffix(".py").is_file(), module

@@ -112,7 +112,7 @@ def test_an_unknown_method_is_a_model_error():
 def test_the_feature_job_reports_the_approximation_and_exact_is_one_setting_away(tmp_path, monkeypatch):
     """Above LOWRANK_MIN_POINTS (lowered here) the feature results carry "approximation";
     CMMWB_VA_METHOD=exact gives the exact numbers, which agree to the stated bound."""
-    from generator import feature_job
+    from generator.feature import job as feature_job
     from generator.cli import build_task
     from test_large_feature_workbook import write_bore_task
 

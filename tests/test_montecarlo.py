@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from conftest import EXAMPLES
-from generator import pointcloud_job as job
+from generator.pointcloud import job
 from generator.taskfile import read_toml
 from xlfuncs import blocked as bl
 from xlfuncs import features as ft

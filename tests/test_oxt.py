@@ -95,9 +95,9 @@ def test_live_addin_sheet_follows_an_edited_input_in_libreoffice(tmp_path, insta
     from test_large_workbook import evaluate_addin_formulas, write_large_task
     import openpyxl
     from conftest import close
-    from generator import large_book
+    from generator.pointcloud import large_book
     from generator.cli import build_task
-    from generator.vx_sheets import NATIVE_MAX_POINTS
+    from generator.pointcloud.vx_sheets import NATIVE_MAX_POINTS
 
     m = NATIVE_MAX_POINTS + extra_points
     build_task(write_large_task(tmp_path, m, "plate"), tmp_path / "out", plots=False)
@@ -127,7 +127,7 @@ def test_live_addin_sheet_follows_an_edited_input_in_libreoffice(tmp_path, insta
 def _small_large_book(folder: Path) -> Path:
     from test_large_workbook import write_large_task
     from generator.cli import build_task
-    from generator.vx_sheets import NATIVE_MAX_POINTS
+    from generator.pointcloud.vx_sheets import NATIVE_MAX_POINTS
     build_task(write_large_task(folder, NATIVE_MAX_POINTS + 10, "plate"), folder / "out", plots=False)
     return folder / "out" / "plate.xlsx"
 
@@ -136,7 +136,7 @@ def _small_large_book(folder: Path) -> Path:
 def test_relink_saves_an_ods_whose_live_addin_computes_on_opening(tmp_path, installed_extension):
     from test_large_workbook import evaluate_addin_formulas
     from conftest import close
-    from generator import large_book
+    from generator.pointcloud import large_book
     cache, profile = installed_extension
     book = _small_large_book(tmp_path)
     ods = tmp_path / "plate.ods"
@@ -171,7 +171,7 @@ def test_live_addin_of_a_feature_workbook_computes_in_libreoffice(tmp_path, inst
     from test_large_feature_workbook import evaluate_live, write_bore_task
     import openpyxl
     from conftest import close
-    from generator import large_book
+    from generator.pointcloud import large_book
     from generator.cli import build_task
 
     build_task(write_bore_task(tmp_path), tmp_path / "out", plots=False)

@@ -74,7 +74,7 @@ rad = math.radians
 
 def task_results(example: str) -> dict:
     """load + compute of a shipped feature task, through the same JSON text users get."""
-    from generator import feature_job
+    from generator.feature import job as feature_job
     from generator.taskfile import read_toml
 
     path = EXAMPLES / example

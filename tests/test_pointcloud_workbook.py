@@ -8,7 +8,7 @@ import pytest
 
 from conftest import ENGINES, EXAMPLES, close, recalc
 from generator.cli import build_task
-from generator.recalc import results_rows
+from generator.workbook.recalc import results_rows
 from pointcloud_tasks import write_random_task
 
 FACTORS = ("R", "PQ", "S", "ET", "ER", "P")

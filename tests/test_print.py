@@ -1,5 +1,5 @@
 """Every workbook `cmmwb demo` writes, printed to PDF by a real LibreOffice (one soffice run for
-all of them, through `generator.pdf`, the code behind `cmmwb build --pdf`): readable pages
+all of them, through `generator.workbook.pdf`, the code behind `cmmwb build --pdf`): readable pages
 (no `###`, no error values outside the instruction prose), page counts within the goals of the
 print setup, each knuckle budget on one page, units in the headers, cached Results values."""
 
@@ -13,9 +13,9 @@ from pathlib import Path
 import openpyxl
 import pytest
 
-from generator import budget_book
+from generator.budget import book as budget_book
 from generator.cli import main
-from generator.recalc import soffice
+from generator.workbook.recalc import soffice
 
 EXAMPLES = Path(__file__).resolve().parent.parent / "generator" / "examples"
 
@@ -131,9 +131,9 @@ def test_no_header_is_cut(demo):
 
 
 def test_build_pdf_without_libreoffice_says_so_and_writes_nothing(tmp_path, monkeypatch, capsys):
-    import generator.pdf
+    import generator.workbook.pdf
 
-    monkeypatch.setattr(generator.pdf, "soffice", lambda: None)
+    monkeypatch.setattr(generator.workbook.pdf, "soffice", lambda: None)
     out = tmp_path / "out"
     assert main(["build", str(EXAMPLES / "knuckle.toml"), "--out", str(out), "--pdf"]) == 2
     assert "needs LibreOffice" in capsys.readouterr().err

@@ -46,16 +46,13 @@ finish; :class:`ProgressBar` draws a text bar on stderr for long runs.
 
 from __future__ import annotations
 
-import os
-import sys
-import time
-from concurrent.futures import ThreadPoolExecutor
-from typing import Callable, Iterable, Sequence
+from typing import Sequence
 
 import numpy as np
 
 from . import pointcloud as pc
 from .errors import ModelError
+from .execution import ProgressBar, ThreadBackend, run_blocks
 
 FACTORS = pc.FACTORS
 MILLI = pc.MILLI
@@ -67,88 +64,6 @@ __all__ = [
     "V_X_block", "V_X_dense", "pair_blocks", "distance_components", "V_A_components",
     "propagate_cloud", "record_covariance", "ThreadBackend", "ProgressBar", "FACTORS",
 ]
-
-
-# ---------------------------------------------------------------------------------------------
-# execution: local threads, or any backend with map(fn, items, shared)
-# ---------------------------------------------------------------------------------------------
-
-class ThreadBackend:
-    """Runs block tasks on a local thread pool; ``workers=None``: one per core."""
-
-    name = "threads"
-
-    def __init__(self, workers: int | None = None):
-        self.workers = workers or os.cpu_count() or 1
-
-    def map(self, fn: Callable, items: Sequence, shared) -> Iterable:
-        """``fn(item, shared)`` for every item; results in the order of ``items``."""
-        items = list(items)
-        if self.workers <= 1 or len(items) <= 1:
-            return (fn(it, shared) for it in items)
-        return _ordered_pool_map(fn, items, shared, min(self.workers, len(items)))
-
-
-def _ordered_pool_map(fn, items, shared, workers):
-    pool = ThreadPoolExecutor(max_workers=workers)
-    try:
-        yield from pool.map(lambda it: fn(it, shared), items)
-    finally:
-        pool.shutdown(cancel_futures=True)
-
-
-def _run(fn, items: list, shared, backend, progress, weights: Sequence[float] | None = None) -> list:
-    """Run the block tasks, report progress (weighted by the work in each block), return the
-    results in the order of ``items`` (so sums are reproducible whatever the backend)."""
-    backend = backend or ThreadBackend()
-    weights = list(weights) if weights is not None else [1.0] * len(items)
-    total = float(sum(weights)) or 1.0
-    out, done = [], 0.0
-    for k, r in enumerate(backend.map(fn, items, shared)):
-        out.append(r)
-        done += weights[k]
-        if progress is not None:
-            progress(done, total)
-    if progress is not None and not items:
-        progress(1.0, 1.0)
-    return out
-
-
-class ProgressBar:
-    """``progress(done, total)`` callback drawing ``label [#####     ]  48%  3.1 s`` on a stream.
-
-    Silent for the first ``delay_s`` seconds, so quick runs print nothing; ends the line when
-    ``done == total``.
-    """
-
-    def __init__(self, label: str = "", stream=None, width: int = 30, delay_s: float = 1.0):
-        self.label = label
-        self.stream = stream if stream is not None else sys.stderr
-        self.width = width
-        self.delay_s = delay_s
-        self.t0 = time.perf_counter()
-        self.last = 0.0
-        self.shown = False
-        self.closed = False
-
-    def __call__(self, done: float, total: float) -> None:
-        now = time.perf_counter()
-        elapsed = now - self.t0
-        finished = done >= total * (1 - 1e-12)
-        if self.closed or (elapsed < self.delay_s and not self.shown):
-            return
-        if not finished and now - self.last < 0.2:
-            return
-        self.last = now
-        frac = 0.0 if total <= 0 else min(max(done / total, 0.0), 1.0)
-        n = int(round(frac * self.width))
-        self.stream.write(f"\r{self.label} [{'#' * n}{' ' * (self.width - n)}] {100 * frac:3.0f}%  "
-                          f"{elapsed:.1f} s")
-        self.shown = True
-        if finished:
-            self.stream.write("\n")
-            self.closed = True
-        self.stream.flush()
 
 
 # ---------------------------------------------------------------------------------------------
@@ -173,7 +88,7 @@ def _sq_dists(A: np.ndarray, B: np.ndarray) -> np.ndarray:
     return out
 
 
-def _skew(P: np.ndarray) -> np.ndarray:
+def skew(P: np.ndarray) -> np.ndarray:
     """G_k of Forbes 2025 eq. (24) for every row of P (n x 3): (n, 3, 3), as pc.skew_G."""
     P = np.asarray(P, dtype=float).reshape(-1, 3)
     px, py, pz = P.T
@@ -182,7 +97,7 @@ def _skew(P: np.ndarray) -> np.ndarray:
                      np.stack([py, -px, z], -1)], -2)
 
 
-def _G_S(U: np.ndarray) -> np.ndarray:
+def G_S(U: np.ndarray) -> np.ndarray:
     """G(u) of Forbes 2025 eq. (11) for every row of U (n x 3): (n, 3, 7), as pc.G_S_point."""
     U = np.asarray(U, dtype=float).reshape(-1, 3)
     x, y, z = U.T
@@ -224,8 +139,8 @@ def V_X_block(cloud: pc.PointCloud, params: pc.Parameters, I, J,
             s = pa["sigma_PQ_um"]
             out[f] = kron_I3(same * np.outer(s[I], s[J]))
         elif f == "S":
-            GI = _G_S(U[I]).reshape(3 * nI, 7)
-            GJ = _G_S(U[J]).reshape(3 * nJ, 7)
+            GI = G_S(U[I]).reshape(3 * nI, 7)
+            GJ = G_S(U[J]).reshape(3 * nJ, 7)
             out[f] = (GI * pc.V_S_diag_um_per_mm2(params)) @ GJ.T
         elif f == "ET":
             out[f] = (kron_I3(params.sigma_ET_um**2 * np.exp(-D2 / params.lambda_ET_mm**2))
@@ -233,7 +148,7 @@ def V_X_block(cloud: pc.PointCloud, params: pc.Parameters, I, J,
         elif f == "ER":
             if params.sigma_ER_urad > 0:
                 P = cloud.offsets_mm
-                GRI, GRJ = _skew(P[I]), _skew(P[J])
+                GRI, GRJ = skew(P[I]), skew(P[J])
                 rho = np.exp(-D2 / params.lambda_ER_mm**2)
                 B = np.einsum("ij,iac,jbc->iajb", rho, GRI, GRJ).reshape(3 * nI, 3 * nJ)
                 out[f] = (params.sigma_ER_urad * MILLI) ** 2 * B
@@ -302,7 +217,7 @@ def pair_blocks(cloud: pc.PointCloud, params: pc.Parameters, pairs,
             s = pa["sigma_PQ_um"]
             out[f] = (s[i] ** 2 + s[j] ** 2 - 2.0 * np.where(same, s[i] * s[j], 0.0))[:, None, None] * I3
         elif f == "S":
-            G = _G_S(du)
+            G = G_S(du)
             out[f] = np.einsum("nak,k,nbk->nab", G, pc.V_S_diag_um_per_mm2(params), G)
         elif f == "ET":
             if params.sigma_ET_um > 0:
@@ -313,7 +228,7 @@ def pair_blocks(cloud: pc.PointCloud, params: pc.Parameters, pairs,
         elif f == "ER":
             if params.sigma_ER_urad > 0:
                 P = cloud.offsets_mm
-                Gi, Gj = _skew(P[i]), _skew(P[j])
+                Gi, Gj = skew(P[i]), skew(P[j])
                 rho = np.exp(-du2 / params.lambda_ER_mm**2)[:, None, None]
                 ii = Gi @ Gi.transpose(0, 2, 1)
                 jj = Gj @ Gj.transpose(0, 2, 1)
@@ -350,7 +265,7 @@ def _distance_rows(item, shared):
     cloud, params, pa = shared["cloud"], shared["params"], shared["pa"]
     m = cloud.m
     with np.errstate(invalid="ignore", divide="ignore"):
-        d, var = pc._rect_variances(cloud, params, pa, slice(i0, i0 + rows), slice(i0 + 1, m))
+        d, var = pc.rect_variances(cloud, params, pa, slice(i0, i0 + rows), slice(i0 + 1, m))
     keep = np.arange(i0 + 1, m)[None, :] > np.arange(i0, i0 + rows)[:, None]
     return d[keep], {f: v[keep] for f, v in var.items()}
 
@@ -380,18 +295,18 @@ def distance_components(cloud: pc.PointCloud, params: pc.Parameters, pairs=None,
             out[f"u_{f}_um"] = np.empty(total)
         shared = {"cloud": cloud, "params": params, "pa": pc.probe_arrays(cloud, params)}
         sizes = [rows * (m - 1 - i0) - rows * (rows - 1) // 2 for i0, rows, _ in blocks]
-        results = _run(_distance_rows, blocks, shared, backend, progress, sizes)
+        results = run_blocks(_distance_rows, blocks, shared, backend, progress, sizes)
         for (i0, rows, pos), (d, var) in zip(blocks, results):
             bad = np.flatnonzero(d <= 1e-9)
             if bad.size:  # same message as the local path
                 pc.distance_components(cloud, params, _pairs_of_block(m, i0, rows)[bad[:1]])
-            pc._store(out, slice(pos, pos + d.size), d, var)
+            pc.store_distances(out, slice(pos, pos + d.size), d, var)
         return out
     pairs = pc.check_pairs(cloud, pairs)
     n = len(pairs)
     chunks = [(lo, min(lo + block, n)) for lo in range(0, n, block)]
     shared = {"cloud": cloud, "params": params, "pairs": pairs}
-    results = _run(_distance_pairs, chunks, shared, backend, progress, [hi - lo for lo, hi in chunks])
+    results = run_blocks(_distance_pairs, chunks, shared, backend, progress, [hi - lo for lo, hi in chunks])
     if not results:
         return pc.distance_components(cloud, params, pairs)
     return {k: np.concatenate([r[k] for r in results]) for k in results[0]}
@@ -493,7 +408,7 @@ def V_A_components(G: np.ndarray, cloud: pc.PointCloud, params: pc.Parameters, *
                 V += S_k @ S_k.T
         out["PQ"] = V
     if "S" in factors:
-        GS = _G_S(cloud.ram_mm)
+        GS = G_S(cloud.ram_mm)
         A = np.einsum("ipa,iab->pb", Wx, GS)
         out["S"] = (A * pc.V_S_diag_um_per_mm2(params)) @ A.T
     problems = []
@@ -505,7 +420,7 @@ def V_A_components(G: np.ndarray, cloud: pc.PointCloud, params: pc.Parameters, *
             out["ET"] = np.zeros((nA, nA))
     if "ER" in factors:
         if params.sigma_ER_urad > 0:
-            GR = _skew(cloud.offsets_mm)
+            GR = skew(cloud.offsets_mm)
             H = np.einsum("ipa,iab->ipb", Wx, GR)    # H_i = G_i G_k(i)
             ram_terms.append(("ER", (params.sigma_ER_urad * MILLI) ** 2, 1.0 / params.lambda_ER_mm**2,
                               np.ascontiguousarray(H)))
@@ -539,7 +454,7 @@ def V_A_components(G: np.ndarray, cloud: pc.PointCloud, params: pc.Parameters, *
             out[name] = out.get(name, 0.0) + M
     else:
         items, weights = _kernel_items(problems, block)
-        for part in _run(_kernel_rows, items, {"problems": problems}, backend, progress, weights):
+        for part in run_blocks(_kernel_rows, items, {"problems": problems}, backend, progress, weights):
             for name, M in part.items():
                 out[name] = out.get(name, 0.0) + M
     for f in factors:
@@ -653,7 +568,7 @@ def record_covariance(cloud: pc.PointCloud, params: pc.Parameters, I, J, *, comp
     shared = {"cloud": cloud, "params": params, "pa": pc.probe_arrays(cloud, params),
               "I": I, "J": J, "na": na}
     out = {f: np.empty((n, n)) for f in FACTORS}
-    for (a0, a1), part in zip(items, _run(_record_rows, items, shared, backend, progress,
+    for (a0, a1), part in zip(items, run_blocks(_record_rows, items, shared, backend, progress,
                                           [a1 - a0 for a0, a1 in items])):
         for f in ("R", "PQ", "ET", "ER", "P"):
             out[f][a0:a1] = part[f]

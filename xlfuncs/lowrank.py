@@ -133,7 +133,7 @@ def _project_block(item, shared):
 def nystrom_project(problems, *, backend=None, progress=None, block: int = BLOCK_ENTRIES):
     """For every problem ``(Z, W, factor)``: ``Y = L^T W`` (r x n_A*c) and the residual
     diagonal (length m) over all points, in blocks on ``backend`` (fixed summation order)."""
-    from .blocked import _run
+    from .execution import run_blocks
 
     items, weights = [], []
     for q, (Z, _W, fac) in enumerate(problems):
@@ -144,7 +144,7 @@ def nystrom_project(problems, *, backend=None, progress=None, block: int = BLOCK
             weights.append(min(i0 + b, m) - i0)
     Y = [np.zeros((fac.rank, W[0].size if len(W) else 0)) for Z, W, fac in problems]
     D = [np.empty(Z.shape[0]) for Z, _W, _f in problems]
-    for (q, i0, i1), (Yb, d) in zip(items, _run(_project_block, items, {"problems": problems},
+    for (q, i0, i1), (Yb, d) in zip(items, run_blocks(_project_block, items, {"problems": problems},
                                                  backend, progress, weights)):
         Y[q] += Yb
         D[q][i0:i1] = d

@@ -96,7 +96,7 @@ class PointCloudSampler:
             inputs["S"] = [(7, 1, None)]
         D2 = None
         if ("ET" in factors and params.sigma_ET_um > 0) or ("ER" in factors and params.sigma_ER_urad > 0):
-            D2 = pc._sq_dists(U, U)
+            D2 = pc.sq_dists(U, U)
         if "ET" in factors:
             if params.sigma_ET_um > 0:
                 L, T = kernel_basis(np.exp(-D2 / params.lambda_ET_mm**2), rank_tol)
@@ -124,7 +124,7 @@ class PointCloudSampler:
                 cols.append(c0)
                 segs.append((1, 1, None))
                 if sp[idx[0]] > 0:
-                    L, T = kernel_basis(np.exp(-pc._sq_dists(N[idx], N[idx]) / lam[idx[0]] ** 2), rank_tol)
+                    L, T = kernel_basis(np.exp(-pc.sq_dists(N[idx], N[idx]) / lam[idx[0]] ** 2), rank_tol)
                     cP = np.zeros((m, L.shape[1]))
                     cP[idx] = sp[idx[0]] * L
                     cols.append(cP)

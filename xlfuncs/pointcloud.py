@@ -210,7 +210,7 @@ def probe_arrays(cloud: PointCloud, params: Parameters) -> dict[str, np.ndarray]
             for n in ("sigma_PQ_um", "sigma_P0_um", "sigma_P_um", "lambda_P")}
 
 
-def _sq_dists(A: np.ndarray, B: np.ndarray) -> np.ndarray:
+def sq_dists(A: np.ndarray, B: np.ndarray) -> np.ndarray:
     """Matrix of squared Euclidean distances between the rows of A and B."""
     D = A[:, None, :] - B[None, :, :]
     return np.einsum("ijk,ijk->ij", D, D)
@@ -228,7 +228,7 @@ def V_X_components(cloud: PointCloud, params: Parameters) -> dict[str, np.ndarra
     same_probe = (k[:, None] == k[None, :]).astype(float)
     I3 = np.eye(3)
     U = cloud.ram_mm
-    D2 = _sq_dists(U, U)
+    D2 = sq_dists(U, U)
     out: dict[str, np.ndarray] = {}
 
     # R, eq. (8): sigma_R^2 I
@@ -258,7 +258,7 @@ def V_X_components(cloud: PointCloud, params: Parameters) -> dict[str, np.ndarra
 
     # P, eqs. (26)-(27): N V_DP N^T, probes independent
     N = cloud.N
-    DN2 = _sq_dists(N, N)
+    DN2 = sq_dists(N, N)
     lam = pa["lambda_P"]
     sP = pa["sigma_P_um"]
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -354,7 +354,7 @@ def _distance_block(cloud: PointCloud, params: Parameters, pa: dict, i: np.ndarr
     return d, var
 
 
-def _rect_variances(cloud: PointCloud, params: Parameters, pa: dict, I: slice, J: slice):
+def rect_variances(cloud: PointCloud, params: Parameters, pa: dict, I: slice, J: slice):
     """Distances and per-factor variances (µm²) for every (i in I, j in J), as 2-D arrays.
 
     The quadratic form of eq. (29) with g = [-n_ij; n_ij], factor by factor, written per
@@ -446,7 +446,7 @@ def distance_components(cloud: PointCloud, params: Parameters, pairs: np.ndarray
             i0, rows, pos = b
             I, J = slice(i0, i0 + rows), slice(i0 + 1, m)
             with np.errstate(invalid="ignore", divide="ignore"):
-                d, var = _rect_variances(cloud, params, pa, I, J)
+                d, var = rect_variances(cloud, params, pa, I, J)
             keep = np.arange(i0 + 1, m)[None, :] > np.arange(i0, i0 + rows)[:, None]
             dk = d[keep]
             if np.any(dk <= 1e-9):
@@ -456,7 +456,7 @@ def distance_components(cloud: PointCloud, params: Parameters, pairs: np.ndarray
                 raise DegenerateGeometryError(
                     f"points {cloud.labels[i]} and {cloud.labels[j]} are at the same place: "
                     "the distance direction n_ij of Forbes 2025 eq. (29) is undefined")
-            _store(out, slice(pos, pos + dk.size), dk, {f: v[keep] for f, v in var.items()})
+            store_distances(out, slice(pos, pos + dk.size), dk, {f: v[keep] for f, v in var.items()})
             return dk.size
 
         # numpy releases the GIL in elementwise work: row blocks run on every core
@@ -485,13 +485,15 @@ def distance_components(cloud: PointCloud, params: Parameters, pairs: np.ndarray
         sl = slice(start, min(start + block, n))
         i, j = pairs[sl, 0], pairs[sl, 1]
         d, var = _distance_block(cloud, params, pa, i, j)
-        _store(out, sl, d, var)
+        store_distances(out, sl, d, var)
         if progress is not None:
             progress(sl.stop, n)
     return out
 
 
-def _store(out: dict, sl: slice, d: np.ndarray, var: dict) -> None:
+def store_distances(out: dict, sl: slice, d: np.ndarray, var: dict) -> None:
+    """Distances ``d`` and their per-factor variances ``var`` into rows ``sl`` of the output
+    arrays of :func:`distance_components` (u per factor and in total)."""
     out["d_mm"][sl] = d
     total = np.zeros_like(d)
     for f in FACTORS:

@@ -36,7 +36,7 @@ from scipy.linalg import cho_factor, cho_solve
 
 from . import lowrank as lr
 from . import pointcloud as pc
-from .blocked import _G_S, _skew
+from .blocked import G_S, skew
 from .errors import ModelError
 
 #: points per block of the passes over U
@@ -111,7 +111,7 @@ class StructuredCovariance:
         r = self.facs["ER"][0].rank
         off = 1 + 7 + (self.facs["ET"][0].rank if "ET" in self.facs else 0)
         offsets = np.array([pr.offset_mm for pr in self.cloud.probes], dtype=float).reshape(-1, 3)
-        GRa = _skew(offsets[q])[0][a]
+        GRa = skew(offsets[q])[0][a]
         rest = width - off - 3 * r
         E = np.zeros((width - 2 * r, width))
         E[:off, :off] = np.eye(off)
@@ -127,7 +127,7 @@ class StructuredCovariance:
         r = self.facs["ER"][0].rank
         off = 1 + 7 + (self.facs["ET"][0].rank if "ET" in self.facs else 0)
         offsets = np.array([pr.offset_mm for pr in self.cloud.probes], dtype=float).reshape(-1, 3)
-        g = _skew(offsets[q])[0][a]
+        g = skew(offsets[q])[0][a]
         c_er = np.arange(off, off + r)
         c_ot = np.concatenate([np.arange(off), np.arange(off + r, VV.shape[0])])
         f_er = np.arange(off, off + 3 * r)
@@ -150,7 +150,7 @@ class StructuredCovariance:
         p, cloud, dims = self.params, self.cloud, self.dims
         sl = slice(i0, i1)
         kp = cloud.probe_index[sl]
-        S = _G_S(self.U_ram[sl]) * np.sqrt(pc.V_S_diag_um_per_mm2(p))       # b x 3 x 7
+        S = G_S(self.U_ram[sl]) * np.sqrt(pc.V_S_diag_um_per_mm2(p))       # b x 3 x 7
         LET = LER = None
         if "ET" in self.facs:
             LET = self.facs["ET"][0].rows(self.U_ram[sl]).T * p.sigma_ET_um
@@ -164,7 +164,7 @@ class StructuredCovariance:
             here = np.flatnonzero(kp == q)
             if not here.size:
                 continue
-            GR = _skew(offsets[q])[0]
+            GR = skew(offsets[q])[0]
             LP = None
             if q in self.off_P:
                 LP = self.facs[f"P{q}"][0].rows(N[here]).T * sp[here][:, None]
@@ -208,14 +208,14 @@ class StructuredCovariance:
             pq[np.arange(b), a, kp, a] = s
         parts.append(pq.reshape(b, dims, -1))
         # S
-        parts.append(_G_S(self.U_ram[sl])[:, :dims, :] * np.sqrt(pc.V_S_diag_um_per_mm2(p)))
+        parts.append(G_S(self.U_ram[sl])[:, :dims, :] * np.sqrt(pc.V_S_diag_um_per_mm2(p)))
         if "ET" in self.facs:
             L = self.facs["ET"][0].rows(self.U_ram[sl]).T * p.sigma_ET_um       # b x r
             et = np.einsum("il,ab->ialb", L, np.eye(dims))
             parts.append(et.reshape(b, dims, -1))
         if "ER" in self.facs:
             L = self.facs["ER"][0].rows(self.U_ram[sl]).T * (p.sigma_ER_urad * pc.MILLI)
-            GR = _skew(cloud.offsets_mm[sl])[:, :dims, :]                         # b x dims x 3
+            GR = skew(cloud.offsets_mm[sl])[:, :dims, :]                         # b x dims x 3
             parts.append(np.einsum("il,iac->ialc", L, GR).reshape(b, dims, -1))
         N = cloud.N[sl][:, :dims]
         s0 = self.pa["sigma_P0_um"][sl]

@@ -1,6 +1,6 @@
 """The cmmwb Excel add-in: xlwings user-defined functions over the numerical core.
 
-For workbooks beyond the native-formula limit (``generator.large_book``) Excel users on Windows
+For workbooks beyond the native-formula limit (``generator.pointcloud.large_book``) Excel users on Windows
 can recompute the heavy Gaussian-process blocks live, with the core of this package, instead of
 reading the values written at build time.  Install and use: ``docs/addins.md``
 (UDF Modules = ``xlfuncs.udf``).  The LibreOffice Calc add-in (``generator/lo_addin``) calls

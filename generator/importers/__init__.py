@@ -5,7 +5,7 @@
 ``aqdef``  Q-DAS AQDEF (``.dfq``, ``.dfd`` + ``.dfx``) characteristic values -> what they can
            give: length recordings need point coordinates, which AQDEF does not carry
 
-Every file is read through :func:`generator.guarded.read_bytes` (kind "import": a regular file, size cap).
+Every file is read through :func:`generator.workbook.guarded.read_bytes` (kind "import": a regular file, size cap).
 """
 
 from __future__ import annotations
@@ -17,8 +17,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..atomic import replacing
 from ..errors import InputError
+from ..workbook.atomic import replacing
 
 QIF_SUFFIXES = (".qif", ".xml")
 AQDEF_SUFFIXES = (".dfq", ".dfd", ".dfx")
@@ -148,7 +148,7 @@ def _label(name: str) -> str:
 
 
 def _placeholders() -> tuple[dict, dict]:
-    from ..feature_job import NEW_TASK
+    from ..feature.job import NEW_TASK
 
     doc = tomllib.loads(NEW_TASK)
     return doc["parameters"], doc["probes"][0]

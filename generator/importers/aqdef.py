@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..errors import InputError
-from ..guarded import read_bytes
+from ..workbook.guarded import read_bytes
 
 
 @dataclass

@@ -33,7 +33,7 @@ import numpy as np
 from defusedxml import ElementTree as DET
 
 from ..errors import InputError
-from ..guarded import read_bytes
+from ..workbook.guarded import read_bytes
 
 #: QIF feature kinds that are cmmwb elements (xlfuncs.features.ELEMENTS)
 ELEMENTS = {"Line": "line", "Plane": "plane", "Circle": "circle", "Sphere": "sphere",

@@ -4,9 +4,9 @@ the six-factor point-cloud V_X (Forbes 2025) to its parameters, as native formul
 Sheets (in order):
 
 ``Instructions``  what, how, conventions and the Forbes 2022 errata
-``Inputs``        hyper-parameters (named = task keys), probes            (generator.vx_sheets)
-``Points``        x_i, probing normals, probes                            (generator.vx_sheets)
-``Coords``, ``V_R`` ... ``V_P``, ``V_X``  the 3m x 3m V_X contributions   (generator.vx_sheets;
+``Inputs``        hyper-parameters (named = task keys), probes            (pointcloud.vx_sheets)
+``Points``        x_i, probing normals, probes                            (pointcloud.vx_sheets)
+``Coords``, ``V_R`` ... ``V_P``, ``V_X``  the 3m x 3m V_X contributions   (pointcloud.vx_sheets;
                   only up to FEATURE_NATIVE_MAX_POINTS points)
 ``Fit``           the fitted frame and shape: values computed by xlfuncs.features.fit
                   (Gauss-Newton cannot be a native formula), clearly marked
@@ -25,8 +25,9 @@ Sheets (in order):
 
 Above FEATURE_NATIVE_MAX_POINTS points the V_X sheets are not written; V_A,f of the factors
 other than R are then values computed by xlfuncs (grey cells, with a note naming the core
-function: ``feature_job.propagation_method``); J, H, G and the R factor stay native formulas.
-Such workbooks also carry, as the large point-cloud workbook does (``generator.large_book``):
+function: ``generator.feature.job.propagation_method``); J, H, G and the R factor stay native
+formulas.  Such workbooks also carry, as the large point-cloud workbook does
+(``generator.pointcloud.large_book``):
 
 ``Live_addin``    the same numbers as Excel add-in formulas (``xlfuncs.udf``): ``cmm_feature``
                   (value, u and the six components of each reported parameter) and, per grey
@@ -40,12 +41,12 @@ from __future__ import annotations
 
 from xlfuncs import pointcloud as pc
 
-from . import __version__
-from .book import Book, Formula
-from .feature_job import KIND, Task, fitted, propagation_method
-from .large_book import LIVE, addin_ranges, write_xlwings_conf
-from .vx_sheets import explain_inputs, write_inputs, write_point_cloud_model, write_points
-from .xlref import Block, block, cell
+from .. import __version__
+from ..pointcloud.large_book import LIVE, addin_ranges, write_xlwings_conf
+from ..pointcloud.vx_sheets import explain_inputs, write_inputs, write_point_cloud_model, write_points
+from ..workbook.book import Book, Formula
+from ..workbook.xlref import Block, block, cell
+from .task import KIND, Task
 
 #: native V_X formulas up to this many points (7 matrices of 3m x 3m plus J, G, V_A).  Measured
 #: with `python bench/bench_feature.py --workbooks 24 48 72 100` (cylinder, full model; formulas
@@ -64,12 +65,16 @@ VALUE_SCALE = 1e12
 SMALL = "0.000E+00"
 
 
-def write_feature_book(task: Task, results: dict, path, *, native_max_points: int | None = None):
-    f, unc = fitted(task)
+def write_feature_book(task: Task, results: dict, path, fit, method: str, *,
+                       native_max_points: int | None = None):
+    """The workbook of a fitted feature: ``fit`` = (fit, per-factor V_A) of the task and
+    ``method`` the name of the core function that computed V_A (both from
+    :mod:`generator.feature.job`: ``fitted``, ``propagation_method``)."""
+    f, unc = fit
     limit = FEATURE_NATIVE_MAX_POINTS if native_max_points is None else native_max_points
     native = f.m <= limit
     book = Book(KIND, task.name, f"Uncertainty of a least-squares {_label(f)} — {task.name}")
-    _instructions(book, task, f, native, limit)
+    _instructions(book, task, f, native, limit, method)
     if native:
         layout = write_point_cloud_model(book, task.cloud, task.params)
         X, V = layout.X, layout.V
@@ -84,7 +89,7 @@ def write_feature_book(task: Task, results: dict, path, *, native_max_points: in
     jac = _write_jacobian(book, f, local, labels)
     hs = _write_H(book, f, jac, labels)
     gx = _write_G(book, f, jac, hs)
-    va = _write_V_A(book, f, unc, gx, V, task.va_method)
+    va = _write_V_A(book, f, unc, gx, V, method)
     rows = _write_budget(book, f, va, fitref)
     if task.planning is not None:
         _write_planning(book, task, results)
@@ -125,7 +130,7 @@ ERRATA = [
 ]
 
 
-def _instructions(book: Book, task: Task, f, native: bool, limit: int) -> None:
+def _instructions(book: Book, task: Task, f, native: bool, limit: int, method: str) -> None:
     book.para("What this workbook computes", bold=True)
     book.para(
         f"The uncertainty of a least-squares {_label(f)} fitted to {f.m} points, per CMM influence "
@@ -155,7 +160,7 @@ def _instructions(book: Book, task: Task, f, native: bool, limit: int) -> None:
         book.para(
             f"4. This task has {f.m} points, more than the {limit} for which the 3m x 3m V_X matrices are "
             "laid out as native formulas: the V_X sheets are omitted and V_A of the factors PQ, S, ET, ER and "
-            f"P on 'V_A' are VALUES computed when the workbook was built by {propagation_method(f.m, task.va_method)} "
+            f"P on 'V_A' are VALUES computed when the workbook was built by {method} "
             f"(cmmwb {__version__}), marked grey with a note; they do not follow edits of the inputs. J, H, "
             "G and the R factor remain formulas.",
             f"5. '{LIVE}' holds the same numbers as formulas of the cmmwb Excel add-in (xlwings user-defined "
@@ -464,7 +469,7 @@ def gn_step_block(n: int) -> Block:
     return Block("H", 3 + n + 2 + n + 2, 2, n, 1)
 
 
-def _write_V_A(book: Book, f, unc, G: Block, V, va_method: str = "auto") -> dict:
+def _write_V_A(book: Book, f, unc, G: Block, V, method: str) -> dict:
     ws = book.sheet("V_A")
     n, g = f.n, len(f.names)
     names, lnames = list(f.names), list(f.local_names)
@@ -513,7 +518,7 @@ def _write_V_A(book: Book, f, unc, G: Block, V, va_method: str = "auto") -> dict
                                 computed=True)
             book.note(ws.cell(row=top, column=vb.column),
                       f"VALUES, not formulas: V_A,{fac} = G_A|X V_{fac} G_A|X^T computed at build "
-                      f"time by {propagation_method(f.m, va_method)} (cmmwb {__version__}); V_X "
+                      f"time by {method} (cmmwb {__version__}); V_X "
                       f"({3 * f.m} x {3 * f.m}) is too large for native formulas. In units of 1e-12 "
                       f"(mm^2 -> nm^2, rad^2 -> (µrad)^2), scaled back on the left. Live: the same "
                       f"cells on sheet {LIVE} (add-in function cmm_feature_va)")
@@ -651,7 +656,7 @@ def _write_live(book: Book, task: Task, f, va: dict, probe_rows: dict) -> None:
     head = f'"{task.element}",{points},{probes},{params}'
     cols = ["parameter", "value", "u", *(f"u_{fac}" for fac in pc.FACTORS)]
     book.header(ws, 2, 1, cols,
-                [f"cmm_feature(element, points, probes, params, circle_plane, weights, axis_hint, "
+                ["cmm_feature(element, points, probes, params, circle_plane, weights, axis_hint, "
                  "reference_mm): each reported parameter with its value, u and u per factor, the "
                  "rows of 'Budget' with u in the parameter's unit (as on 'Results'), computed live by the Excel add-in "
                  "(Forbes 2022 fit; Forbes 2025 section 5.6)"] + [None] * (len(cols) - 1))

@@ -34,11 +34,12 @@ import numpy as np
 from xlfuncs import blocked as bl
 from xlfuncs import pointcloud as pc
 
-from . import __version__
-from .book import VALUE_FILL, Book
-from .errors import InputError
+from .. import __version__
+from ..errors import InputError
+from ..workbook.book import VALUE_FILL, Book
+from ..workbook.xlref import Block, block, cell
+from .book import KIND, RESULT_COLUMNS, budget_chart, extra_inputs, results_rows, write_mpe
 from .vx_sheets import NATIVE_MAX_POINTS, explain_inputs, write_inputs, write_points
-from .xlref import Block, block, cell
 
 GP_FACTORS = ("ET", "ER", "P")
 BLOCK_COLUMNS = ("xx", "xy", "xz", "yx", "yy", "yz", "zx", "zy", "zz")
@@ -58,8 +59,6 @@ C = {name: k + 1 for k, name in enumerate(BUDGET_COLUMNS)}
 
 def write_large_book(task, results: dict, path: Path) -> None:
     """Write the workbook of a ``pointcloud`` task with more than NATIVE_MAX_POINTS points."""
-    from .pointcloud_job import KIND, RESULT_COLUMNS, _write_mpe, extra_inputs, results_rows
-
     m, n = task.cloud.m, len(task.pairs)
     if m > MAX_BOOK_POINTS:
         raise InputError(f"{m} points do not fit one sheet of a workbook (at most {MAX_BOOK_POINTS} "
@@ -79,10 +78,8 @@ def write_large_book(task, results: dict, path: Path) -> None:
     first = _write_budget(book, task, X, U, probe_rows, gp_cols)
     _write_live(book, task, refs)
     if task.mpe is not None:
-        _write_mpe(book, task)
-    from .pointcloud_job import _budget_chart
-
-    _budget_chart(book, book.wb["Budget"], task, first)   # after MPE: the chart draws its MPE line
+        write_mpe(book, task)
+    budget_chart(book, book.wb["Budget"], task, first)   # after MPE: the chart draws its MPE line
     book.results(RESULT_COLUMNS, results_rows(task, first))
     write_xlwings_conf(book)
     book.save(path)
@@ -91,7 +88,7 @@ def write_large_book(task, results: dict, path: Path) -> None:
 def addin_ranges(m: int, probe_rows: dict) -> tuple[str, str, str]:
     """The ranges every add-in formula reads (``xlfuncs.udf`` argument layout): ``points`` =
     Points!A:H of the m points, ``probes`` = the probes table on Inputs (rows ``probe_rows``
-    of :func:`generator.vx_sheets.write_inputs`), ``params`` = names and values of the 12
+    of :func:`generator.pointcloud.vx_sheets.write_inputs`), ``params`` = names and values of the 12
     hyper-parameters on Inputs.  Shared by the pointcloud and the feature workbooks."""
     rows = sorted(probe_rows.values())
     return (block(2, 1, m, 8, "Points"),

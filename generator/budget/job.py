@@ -5,7 +5,7 @@ Task file: ``[task]``, ``[mpe]`` (A_um, B_mm, b, k), ``[points]`` (named essenti
 optional ``[datum_system]`` (primary, secondary, tertiary) and ``[[characteristics]]``; the keys
 are documented in ``NEW_TASK`` (= ``examples/knuckle.toml``, the paper's steering knuckle).
 
-Workbook (``generator.budget_book``): Instructions, Inputs, one sheet per characteristic in the
+Workbook (``generator.budget.book``): Instructions, Inputs, one sheet per characteristic in the
 layout of the paper's Tables 1-9 (every value, sensitivity, u_i, contribution and u_c a native
 formula of the inputs), Results.
 """
@@ -14,77 +14,30 @@ from __future__ import annotations
 
 import math
 import re
-from dataclasses import dataclass, field
 from pathlib import Path
 
 from xlfuncs import budget as bd
 from xlfuncs.errors import ModelError
 from xlfuncs.limits import coordinate_problem
 
-from . import __version__
-from .errors import InputError
-from .taskfile import check_keys, number, table, task_kind_and_name, text_list
-from .xlref import check_name
+from .. import __version__
+from ..errors import InputError
+from ..taskfile import check_keys, number, table, task_kind_and_name, text_list
+from ..workbook.xlref import check_name
+from .task import MODEL_KEYS, Characteristic, Task, distance_name
 
 KIND = "budget"
 EXAMPLES = ["knuckle.toml"]
-EXAMPLES_DIR = Path(__file__).parent / "examples"
+EXAMPLES_DIR = Path(__file__).resolve().parents[1] / "examples"
 
 #: the commented steering-knuckle task written by ``cmmwb new budget``
 NEW_TASK: str = (EXAMPLES_DIR / "knuckle.toml").read_text(encoding="utf-8")
 
 RESULT_COLUMNS = ["name", "variant", "value_mm", "u_um", "U_um"]
 
-#: point-name keys of each model (the points a characteristic uses), with their shape
-MODEL_KEYS: dict[str, dict[str, int]] = {
-    "point_point": {"from": 1, "to": 1},
-    "point_line": {"point": 1, "line": 2},
-    "point_plane": {"point": 1, "plane": 3},
-    "line_line": {"line1": 2, "line2": 2},
-    "datum_distance": {"point": 1},
-    "position": {"point": 1},
-}
-MODEL_TEXT = {
-    "point_point": "distance of two points, eq. (1)",
-    "point_line": "distance of a point from a straight line, eq. (2)",
-    "point_plane": "distance of a point from a plane, eq. (3)",
-    "line_line": "distance of two straight lines, eq. (4)",
-    "datum_distance": "distance of a point from a datum, eqs. (7)-(21), (27)-(35)",
-    "position": "position deviation, cylindrical tolerance zone, eq. (22)",
-}
-
 _POINT_NAME = re.compile(r"^[A-Za-z][A-Za-z0-9_]{0,19}$")
 _CHAR_NAME = re.compile(r"^[A-Za-z][A-Za-z0-9_]{0,30}$")
 RESERVED_SHEETS = {"inputs", "results", "instructions"}
-
-
-@dataclass
-class Characteristic:
-    """One ``[[characteristics]]`` entry (``index`` is 1-based, for messages)."""
-
-    index: int
-    name: str
-    model: str
-    points: dict                      # model keys -> point name(s), e.g. {"point": "S4"}
-    variant: str | tuple[str, str] = "auto"
-    datum: str | None = None          # datum_distance
-    datums: tuple[str, str] | None = None   # position
-    ted_mm: tuple[float, float] | None = None
-
-    @property
-    def where(self) -> str:
-        return f"[[characteristics]] #{self.index}"
-
-
-@dataclass
-class Task:
-    path: Path
-    name: str
-    mpe: bd.MPE
-    points: dict[str, tuple[float, float, float]]
-    datum_system: bd.DatumSystem | None
-    characteristics: list[Characteristic]
-    notes: list[str] = field(default_factory=list)
 
 
 # -- reading the task file ----------------------------------------------------------------------
@@ -304,11 +257,6 @@ def _distance_entry(name: str, model: str, d: bd.DistanceBudget, k: float) -> di
     }
 
 
-def distance_name(c: Characteristic, i: int) -> str:
-    """Name of the i-th (0, 1) datum distance of a position: the paper's l_S4,1, l_S4,2."""
-    return f"l_{c.points['point']},{i + 1}"
-
-
 def compute(task: Task) -> dict:
     """Results JSON per the contract (plus per-variant budgets, equations, and for positions the
     two distance budgets)."""
@@ -425,7 +373,7 @@ def read_book(path: Path) -> dict:
 # -- outputs ----------------------------------------------------------------------------------------
 
 def write_book(task: Task, results: dict, path: Path) -> None:
-    from .budget_book import write
+    from .book import write
 
     write(task, evaluate(task), path)
 
@@ -433,9 +381,9 @@ def write_book(task: Task, results: dict, path: Path) -> None:
 def write_plots(task: Task, results: dict, out_dir: Path) -> list[Path]:
     """One PNG: per characteristic, the non-zero contributions of its chosen budget (for a
     position, each distance's contributions times the sensitivity 2 of u_POS)."""
-    from .plots import _plt
+    from ..workbook.plots import pyplot
 
-    plt = _plt()
+    plt = pyplot()
     chars = results["characteristics"]
     n = len(chars)
     ncols = 2 if n > 1 else 1

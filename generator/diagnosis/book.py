@@ -24,8 +24,8 @@ from xlfuncs import effects as fx
 from xlfuncs.diagnose import Diagnosis, effect_estimates
 from xlfuncs.pointcloud import Parameters
 
-from .book import Book, ChartSeries, Formula
-from .xlref import Block, block, cell
+from ..workbook.book import Book, ChartSeries, Formula
+from ..workbook.xlref import Block, block, cell
 
 NATIVE_MAX_OBS = 160
 FMT = "0.000000"
@@ -69,7 +69,7 @@ def write_book(diag: Diagnosis, path: Path, *, title_extra: str = "", params: Pa
     cached = _results(book, diag, gls, inputs)
     _chart(book, diag, obs)
     out = book.save(path)
-    from . import cache
+    from ..workbook import cache
 
     cache.store(out, "diagnose", {"rows": cached})   # Results values for programs that do not calculate
     return out
@@ -999,7 +999,7 @@ def _chart(book: Book, diag: Diagnosis, obs: dict) -> None:
 # -- PNG plots -----------------------------------------------------------------------------------
 
 def _plt():
-    from .plots import pyplot   # headless, '$' in record ids and groups taken literally
+    from ..workbook.plots import pyplot   # headless, '$' in record ids and groups taken literally
 
     return pyplot()
 

@@ -25,9 +25,9 @@ from xlfuncs.errors import ModelError
 from xlfuncs.memory import ResourceError, check_diagnose_fits
 from xlfuncs.recordings import RecordingsError, parse_recordings, write_recordings
 
-from . import __version__
-from .atomic import write_text
-from .errors import InputError
+from .. import __version__
+from ..errors import InputError
+from ..workbook.atomic import write_text
 
 #: Forbes 2025 Table 3, MPE1: the model of the demonstrations
 MPE1 = dict(sigma_R_um=0.20, sigma_S_ppm=0.7, sigma_Sa_ppm=0.7, sigma_Q_ppm=0.7, sigma_PQ_um=0.20,
@@ -36,7 +36,7 @@ MPE1 = dict(sigma_R_um=0.20, sigma_S_ppm=0.7, sigma_Sa_ppm=0.7, sigma_Q_ppm=0.7,
 
 
 def register(sub) -> None:
-    from .cli import add_command
+    from ..commands import add_command
 
     s = add_command(sub, "diagnose", "compare recordings with the simulation: where, why, what to add",
                     "Mismatch locator (docs/recordings.md): chi-square of the recordings against the "
@@ -101,7 +101,7 @@ def register(sub) -> None:
 # -- the model ----------------------------------------------------------------------------------
 
 def load_model(task: str | None, sigma_um: float | None, *, default_mpe1: bool = False) -> tuple[dg.Model, str]:
-    from .taskfile import read_parameters, read_probes, read_toml
+    from ..taskfile import read_parameters, read_probes, read_toml
 
     if task is not None and sigma_um is not None:
         raise InputError("give either --task or --sigma-um, not both")
@@ -129,7 +129,7 @@ def load_model(task: str | None, sigma_um: float | None, *, default_mpe1: bool =
 
 
 def _read(path: Path):
-    from .guarded import read_text
+    from ..workbook.guarded import read_text
 
     text = read_text(path, "recordings")   # a regular file within its size cap, UTF-8
     try:
@@ -144,8 +144,8 @@ def run_diagnose(rec_path: Path, model: dg.Model, out_dir: Path, *, alpha: float
                  ) -> tuple[dict, list[Path]]:
     """Diagnose ``rec_path`` into ``out_dir`` (all or nothing); returns the JSON and the files.
     ``exact``: the dense record covariance whatever the size (no structured approximation)."""
-    from .build import Staging as _Staging
-    from .diagnose_book import write_book, write_plots
+    from ..build import Staging as _Staging
+    from .book import write_book, write_plots
 
     rec_path = Path(rec_path)
     if not (0.0 < alpha < 1.0):
@@ -304,7 +304,7 @@ def demo(out_dir: Path) -> list[Path]:
     (no larger in any record than noise reaches anyway, only in the diagonal lengths) found and
     modelled; and a pitch
     error measured with one probe offset, reported as aliased with an x scale error."""
-    from .build import Staging as _Staging
+    from ..build import Staging as _Staging
 
     out_dir = Path(out_dir)
     params = pc.Parameters(**MPE1)

@@ -23,8 +23,9 @@ from openpyxl.worksheet.cell_range import MultiCellRange
 from openpyxl.worksheet.datavalidation import DataValidation
 from openpyxl.worksheet.worksheet import Worksheet
 
-from . import __version__
+from .. import __version__
 from .atomic import replacing
+from .tasksheet import write_task_sheet
 from .xlref import Block, array_formula, block, cell, check_name
 
 INPUT_FILL = PatternFill("solid", fgColor="FFF2CC")      # pale yellow: type here
@@ -48,7 +49,7 @@ PARA_WIDTH = 95
 RESULTS = "Results"
 INSTRUCTIONS = "Instructions"
 #: the task description :meth:`Book.save` stores when the writer did not call task_info itself
-#: (set by ``generator.cli.build_task`` around ``write_book`` with :func:`describing`)
+#: (set by ``generator.build.build_task`` around ``write_book`` with :func:`describing`)
 _TASK_INFO: ContextVar[dict | None] = ContextVar("cmmwb_task_info", default=None)
 
 
@@ -425,7 +426,7 @@ class Book:
         ``info`` = ``{"kind", "name", "doc"}`` with ``doc`` the task file as a dict (the structure:
         distances, characteristics, notes ...).  :meth:`save` writes it as JSON on the hidden sheet
         ``_task`` together with a snapshot of every input cell's value
-        (:func:`generator.reader.write_task_sheet`); ``cmmwb read`` takes the structure from there
+        (:func:`generator.workbook.tasksheet.write_task_sheet`); ``cmmwb read`` takes the structure from there
         and every value from the named input cells and input tables.
         """
         self._task_info = dict(info)
@@ -438,8 +439,6 @@ class Book:
         self._finish_layout()
         info = self._task_info if self._task_info is not None else _TASK_INFO.get()
         if info is not None and info.get("kind") == self.kind:
-            from .reader import write_task_sheet
-
             write_task_sheet(self, info)
         self.wb.move_sheet(INSTRUCTIONS, offset=-self.wb.sheetnames.index(INSTRUCTIONS))
         self.wb.active = 0

@@ -18,8 +18,8 @@ from dataclasses import dataclass
 
 from xlfuncs.pointcloud import FACTORS, Parameters, PointCloud
 
-from .book import Book
-from .xlref import Block, cell
+from ..workbook.book import Book
+from ..workbook.xlref import Block, cell
 
 # Workbook limit for native V_X formulas: 3m x 3m array formulas per factor.  Measured:
 # m = 52 (156 x 156) recalculates in ~1 s per matrix in `formulas`; see bench/.

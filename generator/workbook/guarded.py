@@ -23,7 +23,7 @@ import os
 import stat
 from pathlib import Path
 
-from .errors import InputError
+from ..errors import InputError
 
 MiB = 2**20
 

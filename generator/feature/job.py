@@ -13,13 +13,12 @@ Task file::
     [planning]  pattern, sweep, values, geometry keys, m_points   (optional)
     [parameters], [[probes]]                  the point-cloud model (Forbes 2025 Table 3 names)
 
-Workbook: see :mod:`generator.feature_book`.
+Workbook: see :mod:`generator.feature.book`.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -32,12 +31,12 @@ from xlfuncs import pointcloud as pc
 from xlfuncs.errors import ModelError
 from xlfuncs.limits import MAX_COORDINATE_MM, coordinate_problem
 
-from . import __version__
-from .errors import InputError
-from .taskfile import (check_keys, number, read_parameters, read_point_cloud, read_probes, text_list,
+from .. import __version__
+from ..errors import InputError
+from ..taskfile import (check_keys, number, read_parameters, read_point_cloud, read_probes, text_list,
                        string, table, task_kind_and_name, vector3)
+from .task import KIND, Planning, Task
 
-KIND = "feature"
 EXAMPLES = [
     "feature_cylinder_bore.toml",
     "feature_table1_circle_arc.toml",
@@ -84,57 +83,6 @@ PLANNING_GEOMETRY = {
     "cone_patch": ("arc_deg", "half_height_mm", "r0_mm", "phi_deg"),
 }
 PLANNING_ELEMENT = {"sphere_full": "sphere", **{k: v["element"] for k, v in pa.PATTERNS.items()}}
-
-
-@dataclass
-class Planning:
-    """The a-priori evaluation: one analytic approximation per value of the sweep key."""
-
-    pattern: str
-    sweep: str | None
-    values: list[float]
-    geometry: dict
-    m_points: int
-    space: bool = False
-
-    def rows(self) -> list[tuple[float | None, pa.Approximation]]:
-        out = []
-        for v in (self.values if self.sweep else [None]):
-            g = dict(self.geometry)
-            if self.sweep:
-                g[self.sweep] = v
-            out.append((v, planning_approximation(self.pattern, g, self.space)))
-        return out
-
-
-def planning_approximation(pattern: str, g: dict, space: bool) -> pa.Approximation:
-    """:func:`xlfuncs.partial.approximation` with the task's key names."""
-    g = dict(g)
-    if pattern == "circle_arc":
-        g["space"] = space
-        g.setdefault("r0_mm", 1.0)
-    return pa.approximation(pattern, **g)
-
-
-@dataclass
-class Task:
-    path: Path
-    name: str
-    element: str
-    circle_plane: str | None          # None: circle in space
-    cloud: pc.PointCloud
-    params: pc.Parameters
-    weights: np.ndarray
-    axis_hint: tuple | None
-    reference_mm: tuple | None
-    max_iter: int
-    source: str                       # "[points]" or "[sampling]"
-    sampling: dict | None = None
-    planning: Planning | None = None
-    notes: list[str] = field(default_factory=list)
-    va_method: str = "auto"           # [feature] va_method, or "exact" by cmmwb build --exact
-    _fit: object = None
-    _unc: object = None
 
 
 # -- reading the task --------------------------------------------------------------------------
@@ -533,15 +481,16 @@ def planning_results(task: Task) -> dict:
 # -- outputs ---------------------------------------------------------------------------------
 
 def write_book(task: Task, results: dict, path: Path) -> None:
-    from .feature_book import write_feature_book
+    from .book import write_feature_book
 
-    write_feature_book(task, results, path)
+    fit = fitted(task)
+    write_feature_book(task, results, path, fit, propagation_method(fit[0].m, task.va_method))
 
 
 def write_plots(task: Task, results: dict, out_dir: Path) -> list[Path]:
-    from .plots import _plt
+    from ..workbook.plots import pyplot
 
-    plt = _plt()
+    plt = pyplot()
     files = []
     fe = results["feature"]
     names = fe["parameter_names"]

@@ -46,7 +46,7 @@ from pathlib import Path
 from defusedxml import DefusedXmlException
 from defusedxml.ElementTree import iterparse
 
-from .errors import InputError
+from ..errors import InputError
 from .guarded import MAX_BYTES, check_regular
 
 MAX_FILE_BYTES = MAX_BYTES["workbook"]

@@ -16,19 +16,17 @@ from xlfuncs import pointcloud as pc
 from xlfuncs.distributed import get_backend
 from xlfuncs.errors import ModelError
 
-from . import __version__
-from .book import Book, ChartSeries, Formula
-from .errors import InputError
-from .taskfile import check_keys, number, read_point_cloud, string, table, task_kind_and_name, text_list
+from .. import __version__
+from ..errors import InputError
+from ..taskfile import check_keys, number, read_point_cloud, string, table, task_kind_and_name, text_list
+from ..workbook.book import Book
+from ..workbook.xlref import Block, block, cell
+from .book import (KIND, MPE_GRID_POINTS, RESULT_COLUMNS, budget_chart, extra_inputs, results_rows,
+                   write_mpe)
 from .vx_sheets import NATIVE_MAX_POINTS, explain_inputs, point_block, write_point_cloud_model
-from .xlref import Block, block, cell
 
-KIND = "pointcloud"
 EXAMPLES = ["stepgauge_I_MPE1.toml", "stepgauge_I_MPE2.toml",
             "stepgauge_II_MPE1.toml", "stepgauge_II_MPE2.toml"]
-MPE_GRID_POINTS = 101
-RESULT_COLUMNS = ["from", "to", "d_mm", "u_um", "U_um", "u_R_um", "u_PQ_um", "u_S_um",
-                  "u_ET_um", "u_ER_um", "u_P_um"]
 
 
 @dataclass
@@ -144,18 +142,6 @@ def compute(task: Task) -> dict:
 
 # -- workbook ----------------------------------------------------------------------------------
 
-def extra_inputs(task: Task) -> list[tuple]:
-    """The named inputs beside the hyper-parameters: (key, value, unit, meaning, lower bound)."""
-    if task.mpe is None:
-        return [("K", task.K, "1", "coverage factor for U = K u", 0.0)]
-    m = task.mpe
-    return [("A_um", m.A_um, "µm", "MPE: E = A + d/B (A)", 0.0),
-            ("B_mm", m.B_mm, "mm/µm", "MPE: E = A + d/B (B)", 0.0),
-            ("K", m.K, "1", "coverage factor K of eq. (6) and (36); U = K u", 0.0),
-            ("P_mm", m.P_mm, "mm", "longest probe length P in eq. (33)", 0.0),
-            ("L_max_mm", m.L_max_mm, "mm", "largest distance of the MPE check", 0.0)]
-
-
 def write_book(task: Task, results: dict, path: Path) -> None:
     if task.cloud.m > NATIVE_MAX_POINTS:
         # beyond the native V_X sheets: GP blocks as values + Excel add-in formulas
@@ -168,18 +154,10 @@ def write_book(task: Task, results: dict, path: Path) -> None:
     layout = write_point_cloud_model(book, task.cloud, task.params, extra_inputs(task))
     budget = _write_budget(book, task, layout)
     if task.mpe is not None:
-        _write_mpe(book, task)
-    _budget_chart(book, book.wb["Budget"], task, budget)
+        write_mpe(book, task)
+    budget_chart(book, book.wb["Budget"], task, budget)
     book.results(RESULT_COLUMNS, results_rows(task, budget))
     book.save(path)
-
-
-def results_rows(task: Task, first: int) -> list[list]:
-    """The contract's Results rows: from, to, then references to Budget columns D..L
-    (d, u, U, u_R ... u_P) of the distance in row ``first + q``."""
-    labels = task.cloud.labels
-    return [[labels[i], labels[j]] + [Formula(f"={cell(first + q, c, 'Budget')}") for c in range(4, 13)]
-            for q, (i, j) in enumerate(task.pairs)]
 
 
 def _instructions(book: Book, task: Task) -> None:
@@ -260,89 +238,10 @@ def _write_budget(book: Book, task: Task, layout) -> int:
     return first
 
 
-def _budget_chart(book: Book, ws, task: Task, first: int) -> None:
-    """K u(d) against d, one series per contiguous run of a group (Forbes 2025 Figures 6/7)."""
-    from openpyxl.chart import Reference
-
-    series = []
-    start, n = 0, len(task.pairs)
-    while start < n:
-        end = start
-        while end + 1 < n and task.groups[end + 1] == task.groups[start]:
-            end += 1
-        series.append(ChartSeries(task.groups[start] or "distances",
-                                  Reference(ws, min_col=4, min_row=first + start, max_row=first + end),
-                                  Reference(ws, min_col=6, min_row=first + start, max_row=first + end)))
-        start = end + 1
-    if task.mpe is not None:
-        # the MPE line A + d/B of Forbes 2025 Figures 6/7, from the grid on the MPE sheet
-        mp = book.wb["MPE"]
-        series.append(ChartSeries("MPE = A + d/B", Reference(mp, min_col=1, min_row=2, max_row=1 + MPE_GRID_POINTS),
-                                  Reference(mp, min_col=2, min_row=2, max_row=1 + MPE_GRID_POINTS),
-                                  markers=False, colour="000000", dash="solid", bold=True))
-    if len(series) <= 13:
-        # below the table, on its own printed page
-        anchor_row = first + len(task.pairs) + 2
-        book.scatter(ws, f"A{anchor_row}", "Expanded uncertainty U = K u(d) against d (Forbes 2025 Figures 6/7)",
-                     "d / mm", "U / µm", series, width=24, height=13, x_min=0, y_min=0)
-        book.print_setup(ws, row_breaks=[anchor_row - 1])
-
-
-def _write_mpe(book: Book, task: Task) -> None:
-    ws = book.sheet("MPE")
-    cols = ["d_mm", "MPE_um", "K_u_um", "K_sigma_A_um", "K_u_S_um", "K_u_ET_um", "K_u_ER_um", "C"]
-    notes = ["grid 0 .. L_max_mm", "A + d/B", "K u(d), eq. (33)", "K sigma_A, eq. (34)",
-             "K sqrt(sigma_S^2 + sigma_Sa^2 + sigma_Q^2) d", "K sqrt(2 sigma_ET^2 (1 - exp(-d^2/lambda_ET^2)))",
-             "K sqrt(2 sigma_ER^2 P^2 (1 - exp(-d^2/lambda_ER^2)))", "C(d) = K u(d)/(A + d/B), eq. (36)"]
-    book.header(ws, 1, 1, cols, notes)
-    n = MPE_GRID_POINTS
-    first = 2
-    for k in range(n):
-        r = first + k
-        d = cell(r, 1)
-        book.formula(ws, r, 1, f"=L_max_mm*{k}/{n - 1}", fmt="0.0")
-        book.formula(ws, r, 2, f"=A_um+{d}/B_mm", fmt="0.0000")
-        book.formula(ws, r, 4, "=K*SQRT(2*(sigma_R_um^2+sigma_PQ_um^2+sigma_P_um^2+2*sigma_P0_um^2))", fmt="0.0000")
-        book.formula(ws, r, 5, f"=K*SQRT(sigma_S_ppm^2+sigma_Sa_ppm^2+sigma_Q_ppm^2)*0.001*{d}", fmt="0.0000")
-        book.formula(ws, r, 6, f"=K*SQRT(2*sigma_ET_um^2*(1-EXP(-({d}^2)/(lambda_ET_mm^2+(lambda_ET_mm=0)))))",
-                     fmt="0.0000")
-        book.formula(ws, r, 7, f"=K*SQRT(2*(sigma_ER_urad*0.001*P_mm)^2*(1-EXP(-({d}^2)/(lambda_ER_mm^2+(lambda_ER_mm=0)))))",
-                     fmt="0.0000")
-        book.formula(ws, r, 3, f"=SQRT(SUMSQ({block(r, 4, 1, 4)}))", fmt="0.0000")
-        book.formula(ws, r, 8, f"={cell(r, 3)}/{cell(r, 2)}", fmt="0.0000")
-    Crange = block(first, 8, n, 1)
-    book.text(ws, 1, 10, "C_max")
-    book.formula(ws, 1, 11, f"=MAX({Crange})", name="C_max", fmt="0.0000",
-                 note="max of C(d) over the grid, Forbes 2025 section 6.8")
-    book.text(ws, 2, 10, "d_at_max_mm")
-    book.formula(ws, 2, 11, f"=L_max_mm*(MATCH(C_max,{Crange},0)-1)/{n - 1}", name="d_at_max_mm", fmt="0.0")
-    book.text(ws, 4, 10, "Conforming parameters: every standard deviation divided by C_max when C_max > 1 (section 6.8)")
-    r = 5
-    for key in pc.Parameters.__dataclass_fields__:
-        book.text(ws, r, 10, key)
-        scaled = key in pc.Parameters.SIGMAS
-        book.formula(ws, r, 11, f"={key}/MAX(1,C_max)" if scaled else f"={key}", fmt="0.0000")
-        r += 1
-    book.text(ws, 3, 10, "conforms")
-    book.formula(ws, 3, 11, '=IF(C_max<=1,"yes","no")', fmt=None,
-                 note="yes when K u(d) <= MPE(d) at every grid distance (C_max <= 1), Forbes 2025 eq. (36)")
-    ws.freeze_panes = "A2"
-    from openpyxl.chart import Reference
-
-    x = Reference(ws, min_col=1, min_row=first, max_row=first + n - 1)
-    anchor_row = first + n + 1
-    book.scatter(ws, f"A{anchor_row}", "MPE and K u(d) with components (Forbes 2025 Figures 4/5)", "d / mm", "µm",
-                 [ChartSeries(None, x, Reference(ws, min_col=c, min_row=1, max_row=first + n - 1),
-                              markers=False, title_from_data=True,
-                              colour="000000" if c == 2 else None, bold=c in (2, 3)) for c in range(2, 8)],
-                 width=24, height=13, x_min=0, y_min=0)
-    book.print_setup(ws, row_breaks=[anchor_row - 1])
-
-
 # -- plots -------------------------------------------------------------------------------------
 
 def write_plots(task: Task, results: dict, out_dir: Path) -> list[Path]:
-    from . import plots
+    from ..workbook import plots
 
     files = [plots.distance_plot(results, out_dir / f"{task.name}_distances.png")]
     if task.mpe is not None:

@@ -21,8 +21,9 @@ from pathlib import Path
 
 from xlfuncs import budget as bd
 
-from .book import HEADER_FONT, Book, Formula
-from .xlref import block, cell
+from ..workbook.book import HEADER_FONT, Book, Formula
+from ..workbook.xlref import block, cell
+from .task import MODEL_TEXT, distance_name
 
 # columns of a budget block (paper layout) and of its intermediate quantities
 C_INPUT, C_X, C_S, C_U, C_C = 1, 2, 3, 4, 5
@@ -354,8 +355,6 @@ def _set_widths(ws) -> None:
 # -- sheets ---------------------------------------------------------------------------------------
 
 def _write_distance_sheet(book: Book, task, c, d: bd.DistanceBudget) -> CharCells:
-    from .budget_job import MODEL_TEXT
-
     ws = book.sheet(c.name)
     _set_widths(ws)
     book.text(ws, 1, 1, f"{c.name}: {MODEL_TEXT[c.model]}", font=HEADER_FONT)
@@ -405,8 +404,6 @@ def _others_and_table(book: Book, ws, r: int, sections, *, keep: list[tuple[int,
 
 
 def _write_position_sheet(book: Book, task, c, pb: bd.PositionBudget) -> CharCells:
-    from .budget_job import distance_name
-
     ws = book.sheet(c.name)
     _set_widths(ws)
     book.text(ws, 1, 1, f"{c.name}: position deviation of the axis point {pb.point}, cylindrical "

@@ -1,7 +1,7 @@
 """Workbooks printed to PDF by a headless LibreOffice, for the audit file (``cmmwb build --pdf``,
 ``cmmwb demo --pdf``).
 
-The PDF holds what the workbook's print setup says (:meth:`generator.book.Book.print_setup`):
+The PDF holds what the workbook's print setup says (:meth:`generator.workbook.book.Book.print_setup`):
 every visible sheet on A4, scaled to the page width, headers repeated; large matrix sheets
 print their top-left corner only; the hidden ``_task`` sheet never prints.  LibreOffice computes
 the formula cells on loading (openpyxl writes none of their values), so the PDF shows the
@@ -19,7 +19,7 @@ import tempfile
 from pathlib import Path
 from typing import Sequence
 
-from .errors import InputError
+from ..errors import InputError
 from .recalc import soffice
 
 NO_LIBREOFFICE = ("--pdf needs LibreOffice (the `soffice` program), which was not found on PATH; install "

@@ -1,0 +1,1 @@
+"""The mismatch locator (``cmmwb diagnose``): its command (``cli``) and its workbook (``book``)."""

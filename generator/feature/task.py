@@ -1,0 +1,67 @@
+"""The data of a ``feature`` task: the fitted element's task as :mod:`generator.feature.job` reads
+it from a task file and :mod:`generator.feature.book` writes it to a workbook, and the a-priori
+planning of partial features (Forbes 2022 Tables 1-8).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from xlfuncs import partial as pa
+from xlfuncs import pointcloud as pc
+
+KIND = "feature"
+
+
+@dataclass
+class Planning:
+    """The a-priori evaluation: one analytic approximation per value of the sweep key."""
+
+    pattern: str
+    sweep: str | None
+    values: list[float]
+    geometry: dict
+    m_points: int
+    space: bool = False
+
+    def rows(self) -> list[tuple[float | None, pa.Approximation]]:
+        out = []
+        for v in (self.values if self.sweep else [None]):
+            g = dict(self.geometry)
+            if self.sweep:
+                g[self.sweep] = v
+            out.append((v, planning_approximation(self.pattern, g, self.space)))
+        return out
+
+
+def planning_approximation(pattern: str, g: dict, space: bool) -> pa.Approximation:
+    """:func:`xlfuncs.partial.approximation` with the task's key names."""
+    g = dict(g)
+    if pattern == "circle_arc":
+        g["space"] = space
+        g.setdefault("r0_mm", 1.0)
+    return pa.approximation(pattern, **g)
+
+
+@dataclass
+class Task:
+    path: Path
+    name: str
+    element: str
+    circle_plane: str | None          # None: circle in space
+    cloud: pc.PointCloud
+    params: pc.Parameters
+    weights: np.ndarray
+    axis_hint: tuple | None
+    reference_mm: tuple | None
+    max_iter: int
+    source: str                       # "[points]" or "[sampling]"
+    sampling: dict | None = None
+    planning: Planning | None = None
+    notes: list[str] = field(default_factory=list)
+    va_method: str = "auto"           # [feature] va_method, or "exact" by cmmwb build --exact
+    _fit: object = None
+    _unc: object = None
