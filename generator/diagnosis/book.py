@@ -119,7 +119,7 @@ def _instructions(book: Book, diag: Diagnosis, native: bool, source: str) -> Non
     book.para("Conventions", bold=True)
     book.para(
         "Units: coordinates mm, residuals and uncertainties µm; estimates in the units of docs/recordings.md section 4 "
-        "(µm/m, µrad, ppm/K, µm, µrad/m, µm/m per hour, µm/h).",
+        "(µm/m, µrad, ppm/K, µm, µrad/m, µm/m per hour, µm/h, ppm/K per m; a periodic error's period in mm).",
         "Sign: measured - true = sum of effects + noise. Angular error motions act with angle kappa*t, t "
         "the carriage travel (x - p)_axis from machine zero; drifts are zero at time_s = 0.",
         "z is the residual divided by its standard uncertainty under the simulation (for point records "
