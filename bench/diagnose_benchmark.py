@@ -644,11 +644,20 @@ def main(argv=None) -> int:
     ap.add_argument("--seed", type=int, default=20250101)
     ap.add_argument("--out", default=str(ROOT / "bench" / "results"))
     ap.add_argument("--json", action="store_true", help="also write every data set (diagnose_benchmark*.json)")
+    ap.add_argument("--only", default=None, metavar="PREFIX",
+                    help="only the effect scenarios planting a candidate whose name starts with PREFIX (e.g. "
+                         "periodic; with --reps for more seeds), no null, outlier, noise or power sets; "
+                         "written to diagnose_rates_PREFIX.md")
     args = ap.parse_args(argv)
     t0 = time.perf_counter()
     rng = np.random.default_rng(args.seed)
     jobs = []
     scs = scenarios(second_edition=not args.quick)
+    if args.only:
+        scs = [sc for sc in scs if any(e.startswith(args.only) for e in sc.effects)]
+        if not scs:
+            ap.error(f"--only {args.only}: no scenario plants such a candidate")
+        args.nulls = args.aliased = args.outliers = args.noise = args.power = 0
     if args.quick:
         stride = 7 if len(scs) % 7 else 11         # spread over the categories
         eff = [scs[(q * stride) % len(scs)] for q in range(args.quick)]
@@ -676,7 +685,8 @@ def main(argv=None) -> int:
     table = summarize(results, meta)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    name = "diagnose_rates" if not args.quick else f"diagnose_rates_quick{args.quick}"
+    name = ("diagnose_rates" if not args.quick else f"diagnose_rates_quick{args.quick}") + \
+        (f"_{args.only}" if args.only else "")
     (out / f"{name}.md").write_text(table, encoding="utf-8")
     if args.json:
         (out / f"{name.replace('rates', 'benchmark')}.json").write_text(
