@@ -251,7 +251,9 @@ def parser() -> argparse.ArgumentParser:
     for extra in EXTRA_COMMANDS:
         try:
             mod = importlib.import_module(extra)
-        except ModuleNotFoundError:
+        except ModuleNotFoundError as e:
+            if e.name != extra:     # the module is there but something it needs is not: say so
+                raise
             continue
         mod.register(sub)
     return p

@@ -23,7 +23,9 @@ def available() -> list[str]:
     for kind in JOB_MODULES:
         try:
             job(kind)
-        except ModuleNotFoundError:
+        except ModuleNotFoundError as e:
+            if e.name != JOB_MODULES[kind]:   # present, but something it needs is missing: say so
+                raise
             continue
         out.append(kind)
     return out

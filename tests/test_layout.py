@@ -260,3 +260,26 @@ def test_each_task_kind_has_its_own_package_with_its_job():
         kind_package = module.split(".")[1]
         assert kind_package in TASK_KINDS and module.endswith(".job"), module
         assert (ROOT / Path(*module.split("."))).with_suffix(".py").is_file(), module
+
+
+def test_a_subcommand_whose_dependency_is_missing_is_an_error_not_a_silent_absence(monkeypatch):
+    """A non-editable install without xlfuncs.locator once dropped `cmmwb diagnose` without a
+    word; a module that is there but cannot import what it needs must say so."""
+    import importlib
+
+    from generator import cli
+
+    real = importlib.import_module
+
+    def broken(name, *a, **k):
+        if name == "generator.diagnosis.cli":
+            raise ModuleNotFoundError("No module named 'xlfuncs.locator'", name="xlfuncs.locator")
+        return real(name, *a, **k)
+
+    monkeypatch.setattr(importlib, "import_module", broken)
+    try:
+        cli.parser()
+    except ModuleNotFoundError as e:
+        assert e.name == "xlfuncs.locator"
+    else:
+        raise AssertionError("the missing dependency was swallowed")
