@@ -59,11 +59,12 @@ def tasks(draw):
         if defect == "param":
             params[draw(st.sampled_from(PARAMS))] = draw(odd_values)
         elif defect == "name":
-            doc["task"]["name"] = draw(st.sampled_from(["", "../up", "a/b", ".hidden", "=x", "x" * 101]))
+            doc.setdefault("task", {})["name"] = draw(st.sampled_from(["", "../up", "a/b", ".hidden", "=x",
+                                                                       "x" * 101]))
         elif defect == "kind":
-            doc["task"]["kind"] = draw(st.sampled_from(["budget", "feature", "spline", ""]))
+            doc.setdefault("task", {})["kind"] = draw(st.sampled_from(["budget", "feature", "spline", ""]))
         elif defect == "drop":
-            doc.pop(draw(st.sampled_from(["task", "points", "probes", "parameters"])))
+            doc.pop(draw(st.sampled_from(["task", "points", "probes", "parameters"])), None)   # two drops may meet
         elif defect == "extra":
             doc[draw(st.sampled_from(["extra", "distance", "parameter"]))] = draw(odd_values)
         elif defect == "coord":
