@@ -369,11 +369,12 @@ def period_grid(D: Design, a: int) -> tuple[np.ndarray, int]:
     return 1.0 / f, len(f)
 
 
-def periodic_phase(D: Design, a: int, U: np.ndarray, period_mm: float) -> tuple[np.ndarray, np.ndarray]:
-    """(sin, cos) of 2 pi t/P, t = U_a - (lo + hi)/2 about the middle of the travel (:func:`travel`)."""
+def periodic_angle(D: Design, a: int, u: np.ndarray, period_mm: float) -> np.ndarray:
+    """The phase w = 2 pi t/P of ram coordinates ``u`` along axis a, t = u - (lo + hi)/2 about the
+    middle of the travel (:func:`travel`): the one definition the columns, the period's column and
+    the plot of a fitted periodic error share."""
     lo, hi = travel(D, AXES[a].upper())
-    w = 2.0 * math.pi * (U[:, a] - 0.5 * (lo + hi)) / period_mm
-    return np.sin(w), np.cos(w)
+    return 2.0 * math.pi * (u - 0.5 * (lo + hi)) / period_mm
 
 
 def periodic_columns(D: Design, name: str, period_mm: float | None = None) -> Columns:
@@ -385,12 +386,11 @@ def periodic_columns(D: Design, name: str, period_mm: float | None = None) -> Co
     elif not (math.isfinite(period_mm) and period_mm > 0):
         raise NotApplicable(f"the period must be a positive number of mm, got {period_mm!r}")
     if D.kind == "length":
-        s1, c1 = periodic_phase(D, a, D.U1, period_mm)
-        s2, c2 = periodic_phase(D, a, D.U2, period_mm)
-        X = np.column_stack([D.na[:, a] * (s2 - s1), D.na[:, a] * (c2 - c1)])
+        w1, w2 = (periodic_angle(D, a, U[:, a], period_mm) for U in (D.U1, D.U2))
+        X = D.na[:, a, None] * np.column_stack([np.sin(w2) - np.sin(w1), np.cos(w2) - np.cos(w1)])
     else:
-        sn, cs = periodic_phase(D, a, D.U, period_mm)
-        X = np.column_stack([D.point_rows(_on_axis(len(D.Y), a, w)) for w in (sn, cs)])
+        w = periodic_angle(D, a, D.U[:, a], period_mm)
+        X = np.column_stack([D.point_rows(_on_axis(len(D.Y), a, f(w))) for f in (np.sin, np.cos)])
     return Columns(name, X, ["a", "b"], 1.0, period_mm=float(period_mm))
 
 
@@ -400,11 +400,9 @@ def period_column(D: Design, name: str, period_mm: float, a_um: float, b_um: flo
     refit (linearized at the fit with P fixed) so that the uncertainties of a and b include that of
     the period, and the period gets its own (docs/diagnose.md section 6)."""
     a = AXES.index(name[-1])
-    lo, hi = travel(D, AXES[a].upper())
 
     def d_dP(U: np.ndarray) -> np.ndarray:
-        t = U[:, a] - 0.5 * (lo + hi)
-        w = 2.0 * math.pi * t / period_mm
+        w = periodic_angle(D, a, U[:, a], period_mm)
         return (a_um * np.cos(w) - b_um * np.sin(w)) * (-w / period_mm)
 
     if D.kind == "length":

@@ -964,7 +964,7 @@ def _results(book: Book, diag: Diagnosis, gls: dict, inputs: dict) -> list[dict]
         if e in fx.PERIODIC and l == "period_mm":
             period = inputs["periodic"][e][0]
             rows.append([f"{e} {l}", Formula(f"={period}+{b}"), Formula(f"={u}"), "mm"])
-            cached.append({"value": float(diag.candidates[e].period_mm + diag.beta[j]), "u": u_value})
+            cached.append({"value": float(effect_estimates(diag, e)["period_mm"]), "u": u_value})
             continue
         rows.append([e if l == e else f"{e} {l}", Formula(f"={b}"), Formula(f"={u}"),
                      "µm" if e == "outlier" else _display_unit(fx.BY_NAME[e].unit)])
@@ -1065,8 +1065,7 @@ def _periodic_values(diag: Diagnosis, name: str, t: np.ndarray) -> np.ndarray:
     """The fitted periodic error a sin + b cos of 2 pi (t - middle)/P at ram coordinates t (µm)."""
     e = effect_estimates(diag, name)
     a, b = (v or 0.0 for v in e["estimate"])
-    lo, hi = fx.travel(diag.prep.design, name[-1].upper())
-    w = 2 * np.pi * (t - 0.5 * (lo + hi)) / e["period_mm"]
+    w = fx.periodic_angle(diag.prep.design, fx.AXES.index(name[-1]), t, e["period_mm"])
     return a * np.sin(w) + b * np.cos(w)
 
 

@@ -42,8 +42,12 @@ class Candidate:
     # look-elsewhere correction, added to logp: docs/diagnose.md section 6)
     period_mm: float | None = None
     n_periods: int | None = None
-    look_elsewhere: float = 0.0
     lin_ab: tuple[float, float] | None = None    # (a, b) the period column is linearized at
+
+    @property
+    def look_elsewhere(self) -> float:
+        """log M (0 for a candidate without a scanned period)."""
+        return math.log(self.n_periods) if self.n_periods else 0.0
 
 
 GATE_SHARE = 0.5           # each of the two gates judged at alpha/2 (docs/recordings.md section 7)
@@ -187,7 +191,7 @@ def scan_period(prep, W, Q0, Q, resid, white, c: Candidate) -> None:
     Xw = W(cols.X)
     _, kept = orth(project_out(Q0, Xw), np.linalg.norm(Xw, axis=0))
     c.cols, c.kept, white[c.name] = cols, kept, Xw
-    c.period_mm, c.n_periods, c.look_elsewhere = P, M, math.log(M)
+    c.period_mm, c.n_periods = P, M
 
 
 def record_obs(prep: Prepared) -> list[np.ndarray]:
