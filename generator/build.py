@@ -60,13 +60,13 @@ def _locked(folder: Path):
 
 @contextmanager
 def _signals_held():
-    """Hold back Ctrl-C (SIGINT) and SIGTERM while the block runs, then deliver them."""
+    """Hold back Ctrl-C (SIGINT), SIGTERM and SIGHUP while the block runs, then deliver them."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
     pending: list[int] = []
     old = {}
-    for sig in (signal.SIGINT, signal.SIGTERM):
+    for sig in (signal.SIGINT, signal.SIGTERM, *([signal.SIGHUP] if hasattr(signal, "SIGHUP") else [])):
         try:
             old[sig] = signal.signal(sig, lambda s, _f: pending.append(s))
         except (ValueError, OSError):
