@@ -24,7 +24,7 @@ from xlfuncs.errors import ModelError
 
 from .errors import InputError
 from .jobs import job
-from .taskfile import read_toml, task_kind_and_name
+from .taskfile import collecting_notes, read_toml, task_kind_and_name
 from .workbook import cache as cached_values
 from .workbook.atomic import write_text
 from .workbook.book import describing
@@ -234,7 +234,8 @@ def build_task(task_path: Path, out_dir: Path, *, plots: bool = True, force: boo
     ``exact``: no approximation even for large tasks (the job's ``force_exact``, if it has one:
     a feature task's V_A; the other kinds are always exact)."""
     task_path = Path(task_path)
-    kind, mod, doc, task = load_task(task_path)
+    with collecting_notes() as notes:
+        kind, mod, doc, task = load_task(task_path)
     if exact and hasattr(mod, "force_exact"):
         mod.force_exact(task)
     try:
@@ -244,6 +245,7 @@ def build_task(task_path: Path, out_dir: Path, *, plots: bool = True, force: boo
     except ModelError as e:
         raise InputError(str(e), file=task_path) from None
 
+    results["warnings"] = list(notes)     # docs/cli.md: what was detected or looks implausible
     bad = non_finite(results)
     if bad is not None:
         raise InputError(f"the model gives {bad[1]!r} for {bad[0]}: check the inputs for extreme values "
@@ -264,6 +266,8 @@ def build_task(task_path: Path, out_dir: Path, *, plots: bool = True, force: boo
         made = [tmp / f"{name}.xlsx", tmp / f"{name}.json"]
         if plots:
             made += list(mod.write_plots(task, results, tmp))
+    for w in notes:
+        print(f"cmmwb: warning: {w}", file=sys.stderr)
     for b in staging.backups:
         print(f"cmmwb: kept a backup of the replaced file: {b}", file=sys.stderr)
     return results, [Path(out_dir) / p.name for p in made]

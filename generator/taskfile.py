@@ -6,15 +6,18 @@ line, so the CLI can print it and exit with status 2.
 
 from __future__ import annotations
 
-import csv
-import io
 import math
 import tomllib
+from contextlib import contextmanager
+from contextvars import ContextVar
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Iterator
 
 import numpy as np
 
+from xlfuncs.csvtable import TableError
+from xlfuncs.csvtable import read_table as read_csv_table
 from xlfuncs.errors import ModelError
 from xlfuncs.limits import coordinate_problem
 from xlfuncs.pointcloud import Parameters, PointCloud, Probe
@@ -30,6 +33,31 @@ NORMAL_TOL = 1e-3
 
 MAX_DEPTH = 16           # tables and arrays nested deeper than this are refused
 MAX_INT = 2**63 - 1      # TOML integers are 64-bit (TOML 1.0, "Integer")
+
+
+_NOTES: ContextVar[list[str] | None] = ContextVar("cmmwb_input_notes", default=None)
+
+
+@contextmanager
+def collecting_notes() -> Iterator[list[str]]:
+    """Collect what the readers :func:`note` while the block runs (a build prints the notes on
+    stderr and lists them in its JSON ``warnings``)."""
+    notes: list[str] = []
+    token = _NOTES.set(notes)
+    try:
+        yield notes
+    finally:
+        _NOTES.reset(token)
+
+
+def note(message: str, *, file=None, where: str | None = None) -> None:
+    """Something the user should know about an accepted input (what was detected in a CSV file,
+    an implausible value): one line naming the file and the place, like an :class:`InputError`.
+    Kept once, in the order noted, when notes are being collected; dropped otherwise."""
+    notes = _NOTES.get()
+    text = str(InputError(message, file=file, where=where))
+    if notes is not None and text not in notes:
+        notes.append(text)
 
 
 def read_toml(path: Path) -> dict:
@@ -253,19 +281,6 @@ def check_label(label: str, path: Path, where: str) -> str:
     return label
 
 
-def _csv_rows(reader, path: Path, start: int):
-    """(file line, fields) of each record; a malformed record (e.g. a field over the csv
-    module's limit, an unclosed quote) is named by its line."""
-    while True:
-        try:
-            row = next(reader)
-        except StopIteration:
-            return
-        except csv.Error as e:
-            raise InputError(f"malformed CSV: {e}", file=path, where=f"line {start + reader.line_num}") from None
-        yield start + reader.line_num, row
-
-
 @dataclass(frozen=True)
 class PointTable:
     labels: tuple[str, ...]
@@ -296,10 +311,12 @@ class _PointRows:
         self.lines: list[int] = []
         self.seen: dict[str, str] = {}
 
+    number_text = staticmethod(float)     # a CSV table's own reading of a number's text (decimal comma)
+
     def number(self, raw, where: str) -> float:
         if isinstance(raw, str):
             try:
-                v = float(raw.strip())
+                v = self.number_text(raw.strip())
             except ValueError:
                 raise InputError(f"{raw.strip()!r} is not a number", file=self.path, where=where) from None
         elif isinstance(raw, bool) or not isinstance(raw, (int, float)):
@@ -354,21 +371,20 @@ class _PointRows:
 
 def read_points_csv(path: Path, probes: tuple[Probe, ...]) -> PointTable:
     """``id,x,y,z,nx,ny,nz,probe`` (mm; n = outward unit normal).  Lines starting with ``#``
-    before the header are comments.  ``probe`` may be omitted when the task has one probe."""
+    before the header are comments.  ``probe`` may be omitted when the task has one probe.
+    Comma-, semicolon- or tab-separated, header names in any letter case, decimal commas in
+    semicolon/tab files, empty columns dropped (:mod:`xlfuncs.csvtable`); what was detected is
+    noted (:func:`note`)."""
     path = Path(path)
     text = read_text(path, "points")
-    lines = text.splitlines()
-    start = 0
-    while start < len(lines) and (lines[start].lstrip().startswith("#") or not lines[start].strip()):
-        start += 1
-    if start == len(lines):
-        raise InputError("no header line", file=path)
-    reader = csv.reader(io.StringIO("\n".join(lines[start:])))
-    header = [h.strip() for h in next(reader)]
+    known = [a for aliases in POINT_COLUMNS.values() for a in aliases]
+    try:
+        tbl = read_csv_table(text, known)
+    except TableError as e:
+        raise InputError(e.message, file=path, where=None if e.line is None else f"line {e.line}") from None
+    header = list(tbl.header)
+    start = tbl.header_line - 1
     colmap: dict[str, int] = {}
-    for k, h in enumerate(header):
-        if h in header[:k]:
-            raise InputError(f"column {h!r} appears twice in the header", file=path, where=f"line {start + 1}")
     for key, aliases in POINT_COLUMNS.items():
         given = [a for a in aliases if a in header]
         if len(given) > 1:
@@ -378,26 +394,27 @@ def read_points_csv(path: Path, probes: tuple[Probe, ...]) -> PointTable:
             colmap[key] = header.index(given[0])
     for key in ("id", "x", "y", "z", "nx", "ny", "nz"):
         if key not in colmap:
-            raise InputError(f"missing column {POINT_COLUMNS[key][0]!r} (header: {','.join(header)})",
+            sep = tbl.delimiter if tbl.delimiter != "\t" else "\\t"
+            raise InputError(f"missing column {POINT_COLUMNS[key][0]!r} (header: {sep.join(header)})",
                              file=path, where=f"line {start + 1}")
     points = _PointRows(path, probes)
-    for offset, row in _csv_rows(reader, path, start):
-        if not row or all(not c.strip() for c in row):
-            continue
-        if len(row) != len(header):
-            hint = " (a decimal comma in a comma-separated file?)" if len(row) > len(header) else ""
-            raise InputError(f"{len(row)} fields, the header has {len(header)}{hint}", file=path,
-                             where=f"line {offset}")
+    points.number_text = tbl.number
+    try:
+        for offset, row in tbl.records():
 
-        def where(column, offset=offset):
-            if column is None:
-                return f"line {offset}"
-            name = header[colmap[column]] if column in colmap else column
-            return f"line {offset}, column {name!r}"
+            def where(column, offset=offset):
+                if column is None:
+                    return f"line {offset}"
+                name = header[colmap[column]] if column in colmap else column
+                return f"line {offset}, column {name!r}"
 
-        points.add(offset, f"on line {offset}", row[colmap["id"]],
-                   [row[colmap[k]] for k in ("x", "y", "z", "nx", "ny", "nz")],
-                   row[colmap["probe"]] if "probe" in colmap else None, where)
+            points.add(offset, f"on line {offset}", row[colmap["id"]],
+                       [row[colmap[k]] for k in ("x", "y", "z", "nx", "ny", "nz")],
+                       row[colmap["probe"]] if "probe" in colmap else None, where)
+    except TableError as e:
+        raise InputError(e.message, file=path, where=f"line {e.line}") from None
+    for message in tbl.notes:
+        note(message, file=path, where=f"line {tbl.header_line}")
     return points.table()
 
 
