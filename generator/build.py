@@ -4,6 +4,7 @@ nothing, never over a file someone edited (unless forced, with a backup)."""
 from __future__ import annotations
 
 import csv
+import errno
 import hashlib
 import json
 import math
@@ -22,7 +23,7 @@ from openpyxl.utils.exceptions import IllegalCharacterError
 
 from xlfuncs.errors import ModelError
 
-from .errors import InputError
+from .errors import InputError, os_error_reason
 from .jobs import job
 from .taskfile import collecting_notes, read_toml, task_kind_and_name
 from .workbook import cache as cached_values
@@ -147,10 +148,26 @@ class Staging:
                     with _locked(self.out_dir):
                         self._commit()
                         ok = True
+            except OSError as e:         # the commit could not write (full disk, ...)
+                exc = e
             finally:
                 shutil.rmtree(self.tmp, ignore_errors=True)
                 if not ok:
                     self._remove_made_dirs()
+        if isinstance(exc, OSError) and self._writing_failed(exc):
+            # a full disk, a read-only folder: said of the output folder, not of a staging file
+            raise InputError(f"cannot write the outputs into this folder: {os_error_reason(exc)}; "
+                             "the previous output is unchanged", file=self.out_dir) from None
+
+    _WRITE_ERRNOS = frozenset({errno.ENOSPC, errno.EROFS, errno.EACCES, errno.EPERM, errno.EFBIG, errno.EIO,
+                               getattr(errno, "EDQUOT", errno.ENOSPC)})
+
+    def _writing_failed(self, e: OSError) -> bool:
+        """``e`` is a failure to write into the output folder (rather than, say, a broken pipe)."""
+        if e.errno in self._WRITE_ERRNOS:
+            return True
+        name = getattr(e, "filename", None)
+        return name is not None and Path(str(name)).parent in (self.out_dir, self.tmp)
 
     def _remove_made_dirs(self) -> None:
         """Remove the folders this run created, innermost first, only while they are empty."""

@@ -24,7 +24,7 @@ from xlfuncs.errors import ModelError
 from . import __version__
 from .build import build_task
 from .commands import add_command, examples_epilog
-from .errors import InputError
+from .errors import InputError, os_error_reason
 from .jobs import available, job
 from .taskfile import KINDS
 from .workbook.atomic import write_text
@@ -352,10 +352,7 @@ def _run(args) -> int:
         return EXIT_CLOSED_PIPE
     except OSError as e:         # disk full, read-only folder, permission denied, ...
         where = f"{e.filename}: " if getattr(e, "filename", None) else ""
-        reason = e.strerror or str(e)
-        hint = {28: " (the disk is full)", 30: " (a read-only file system)", 13: " (permission denied)",
-                122: " (disk quota exceeded)", 27: " (over the file-size limit)"}.get(e.errno or 0, "")
-        return _fail(f"{where}cannot write or read: {reason}{hint}; the previous output is unchanged")
+        return _fail(f"{where}cannot write or read: {os_error_reason(e)}; the previous output is unchanged")
     except MemoryError:
         return _fail("not enough memory for this task (see docs/input_limits.md for the sizes that fit)")
     except RecursionError:

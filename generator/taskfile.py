@@ -7,6 +7,7 @@ line, so the CLI can print it and exit with status 2.
 from __future__ import annotations
 
 import math
+import re
 import tomllib
 from contextlib import contextmanager
 from contextvars import ContextVar
@@ -74,11 +75,54 @@ def read_toml(path: Path) -> dict:
         raise InputError(f"malformed TOML: {e}", file=path) from None
     except RecursionError:
         raise InputError(f"malformed TOML: arrays or tables nested too deeply (at most {MAX_DEPTH} levels)",
-                         file=path) from None
+                         file=path, where=_too_deep(text)) from None
     except ValueError as e:   # an integer of more than 4300 digits (Python's own limit)
         raise InputError(f"malformed TOML: an integer too large ({str(e).split(':')[0]})", file=path) from None
     _check_structure(path, doc, "", 0)
     return doc
+
+
+_TABLE_HEADER = re.compile(r"^\s*\[\[?\s*([^\]]*?)\s*\]\]?\s*(#.*)?$")
+_KEY = re.compile(r"^\s*([^=\[{#]+?)\s*=")
+
+
+def _too_deep(text: str) -> str | None:
+    """Where arrays or inline tables first nest deeper than :data:`MAX_DEPTH` (``line N, key K``
+    with the key under its table), found in the text: the parser itself only ran out of stack."""
+    depth, table, key, quote = 0, "", None, None
+    for n, line in enumerate(text.splitlines(), start=1):
+        if depth == 0 and quote is None:
+            m = _TABLE_HEADER.match(line)
+            if m:
+                table = m.group(1).strip()
+                continue
+            m = _KEY.match(line)
+            if m:
+                key = f"{table}.{m.group(1).strip()}" if table else m.group(1).strip()
+        k = 0
+        while k < len(line):
+            c = line[k]
+            if quote is not None:
+                if c == "\\" and quote == '"':
+                    k += 1
+                elif c == quote:
+                    quote = None
+            elif c in "\"'":
+                quote = c
+            elif c == "#":
+                break
+            elif c in "[{":
+                depth += 1
+                if depth > MAX_DEPTH:
+                    return f"line {n}" + (f", key {key}" if key else "")
+            elif c in "]}":
+                depth = max(depth - 1, 0)
+            k += 1
+        if quote == "'":            # literal strings end with their line; so do basic ones
+            quote = None
+        if quote == '"':
+            quote = None
+    return None
 
 
 def _check_structure(path: Path, value, where: str, depth: int) -> None:
@@ -463,7 +507,14 @@ def read_point_cloud(path: Path, doc: dict) -> tuple[PointCloud, Parameters, Poi
         name = string(path, pts, "points", "file")
         if "\x00" in name:
             raise InputError("the file name contains a NUL character", file=path, where="[points] file")
-        tablep = read_points_csv(Path(path).parent / name, probes)
+        if not name.strip():
+            raise InputError("is empty: name the points table, a CSV file beside the task file "
+                             "(or give the points as [points] rows)", file=path, where="[points] file")
+        csv_path = Path(path).parent / name
+        if csv_path.is_dir():
+            raise InputError(f"{name!r} is a folder ({csv_path}), not a points table (CSV file)",
+                             file=path, where="[points] file")
+        tablep = read_points_csv(csv_path, probes)
     index = {p.id: k for k, p in enumerate(probes)}
     try:
         for p in probes:
