@@ -71,13 +71,28 @@ class QifDocument:
     sets: dict[str, PointSet] = field(default_factory=dict)
     features: list[Feature] = field(default_factory=list)
     not_read: list[str] = field(default_factory=list)
+    #: features in the file whose points cmmwb cannot import: (name, QIF kind, id, why)
+    unsupported: list[tuple[str, str, str, str]] = field(default_factory=list)
+    #: every FeatureItem (a feature of the part, measured or not): name -> (QIF kind, id)
+    items: dict[str, tuple[str, str]] = field(default_factory=dict)
 
     def feature(self, key: str) -> Feature:
         for f in self.features:
             if key in (f.name, f.id):
                 return f
+        for name, kind, fid, why in self.unsupported:
+            if key in (name, fid):
+                raise InputError(f"feature {name} is in the file (a {kind.lower()} feature, id {fid}) but not "
+                                 f"supported: {why}", file=self.path, where="--feature")
+        if key in self.items:
+            kind, iid = self.items[key]
+            raise InputError(f"feature {key} is in the file (a {kind.lower()} feature item, id {iid}) but has no "
+                             "measurement (no FeatureMeasurement or FeatureActual refers to it): no points to "
+                             "import", file=self.path, where="--feature")
         names = ", ".join(f"{f.name} ({f.kind.lower()}, id {f.id})" for f in self.features) or "none"
-        raise InputError(f"no feature named or numbered {key!r}; the file has: {names}",
+        other = "; not importable: " + ", ".join(f"{n} ({k.lower()})" for n, k, _, _ in self.unsupported) \
+            if self.unsupported else ""
+        raise InputError(f"no feature named or numbered {key!r}; the file has: {names}{other}",
                          file=self.path, where="--feature")
 
     def points_of(self, f: Feature) -> PointSet:
@@ -195,6 +210,7 @@ def read_qif(path: str | Path) -> QifDocument:
             nom = _child(el, "FeatureNominalId")
             items[el.get("id")] = ((name.text or "").strip() if name is not None else el.get("id"),
                                    None if nom is None else (nom.text or "").strip())
+            doc.items[items[el.get("id")][0]] = (tag.removesuffix("FeatureItem"), el.get("id"))
 
     # point sets (QIF 3) and point lists (QIF 2)
     for el in root.iter():
@@ -257,9 +273,13 @@ def _read_set(doc: QifDocument, el) -> None:
                              None if radius is None else float(radius.text) * mm, where)
 
 
+#: a unit vector of the file (point normal, direction of a feature) may differ from length 1 by this
+UNIT_TOL = 1e-3
+
+
 def _unit(path: Path, N: np.ndarray, where: str) -> np.ndarray:
     norm = np.linalg.norm(N, axis=1)
-    if np.any(np.abs(norm - 1) > 1e-3):
+    if np.any(np.abs(norm - 1) > UNIT_TOL):
         k = int(np.argmax(np.abs(norm - 1)))
         raise InputError(f"normal {k + 1} has length {norm[k]:.6g}, not 1", file=path, where=where)
     return N / norm[:, None]
@@ -309,8 +329,10 @@ def _read_feature(doc: QifDocument, el, tag: str, items, nominal_def, definition
                 lo, hi = (int(x) for x in ref.get("range", "").split())
                 set_ids.append(((ref.text or "").strip(), (lo, hi)))
             elif rt == "SinglePointSetId":
-                doc.not_read.append(f"{where} ({name}): single points of a set (SinglePointSetId) -- "
-                                    "constructed from other features' points; not imported")
+                why = ("its points are single points of other point sets (SinglePointSetId): constructed "
+                       "from other features' points, not imported")
+                doc.not_read.append(f"{where} ({name}): {why}")
+                doc.unsupported.append((name, kind, fid, why))
                 set_ids = []
                 break
     geometry = _geometry(path, el, where, doc.mm_per_unit)
@@ -318,6 +340,12 @@ def _read_feature(doc: QifDocument, el, tag: str, items, nominal_def, definition
         feature = Feature(kind, fid, name, set_ids, geometry, internal)
         feature.nominal_id = nominal
         doc.features.append(feature)
+    elif plist is None:      # e.g. a point given by its Location only (POINT3 of a CMM report)
+        given = ", ".join(k for k in ("Location", "Normal", "Direction", "AxisPoint") if k in geometry)
+        why = (f"measured without a point list (no PointList; the file gives only its {given or 'result'}): "
+               "no points to import")
+        doc.not_read.append(f"{where} ({name}): {why}")
+        doc.unsupported.append((name, kind, fid, why))
 
 
 def _geometry(path: Path, el, where: str, mm: float) -> dict:
@@ -333,10 +361,20 @@ def _geometry(path: Path, el, where: str, mm: float) -> dict:
         geometry["Direction"] = _vec(path, axis, "Direction", where)
     for key in ("Normal", "Direction"):
         if key in geometry and geometry[key] is not None:
-            norm = float(np.linalg.norm(geometry[key]))
+            v = geometry[key]
+            norm = float(np.linalg.norm(v))
             if not norm > 0:
                 raise InputError(f"{key} is the zero vector", file=path, where=where)
-            geometry[key] = geometry[key] / norm
+            if abs(norm - 1.0) > UNIT_TOL:
+                # normalising it would hide a defect (Location and Normal swapped: the points'
+                # nominal positions would move by millimetres), as for the point normals
+                loc = geometry.get("Location", geometry.get("AxisPoint"))
+                swapped = (" (are Location and Normal swapped? the Location has length "
+                           f"{float(np.linalg.norm(loc / mm)):.6g})"
+                           if loc is not None and abs(float(np.linalg.norm(loc / mm)) - 1.0) <= UNIT_TOL else "")
+                raise InputError(f"{key} ({v[0]:g}, {v[1]:g}, {v[2]:g}) has length {norm:.6g}, not 1: a direction "
+                                 f"must be a unit vector{swapped}", file=path, where=where)
+            geometry[key] = v / norm
     return geometry
 
 
