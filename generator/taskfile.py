@@ -20,7 +20,7 @@ import numpy as np
 from xlfuncs.csvtable import TableError
 from xlfuncs.csvtable import read_table as read_csv_table
 from xlfuncs.errors import ModelError
-from xlfuncs.limits import coordinate_problem
+from xlfuncs.limits import PLAUSIBLE, coordinate_problem, plausibility_problem
 from xlfuncs.pointcloud import Parameters, PointCloud, Probe
 
 from .errors import InputError
@@ -235,6 +235,9 @@ def number(path: Path, tbl: dict, section: str, key: str, default: float | None 
         raise InputError(f"must be >= {lo:g}, got {value:g}", file=path, where=where)
     if positive and value <= 0:
         raise InputError(f"must be positive, got {value:g}", file=path, where=where)
+    problem = plausibility_problem(key, value) if key in tbl else None
+    if problem:
+        note(problem, file=path, where=where)
     return value
 
 
@@ -302,7 +305,18 @@ def read_probes(path: Path, doc: dict) -> tuple[Probe, ...]:
         if pid in seen:
             raise InputError(f"probe id {pid!r} used twice", file=path, where=f"{section} id")
         seen.add(pid)
-        offset = vector3(path, p, section, "offset_mm") if "offset_mm" in p else (0.0, 0.0, 0.0)
+        if "offset_mm" in p:
+            offset = vector3(path, p, section, "offset_mm")
+            length = math.sqrt(sum(v * v for v in offset))
+            if plausibility_problem("offset_mm", length):
+                note(f"offset_mm {list(offset)} is {length:g} mm long, longer than any stylus or ram offset "
+                     f"of a CMM (at most {PLAUSIBLE['offset_mm'][1]:g} mm); built as given -- is it in mm?",
+                     file=path, where=f"{section} (probe {pid}) offset_mm")
+        else:
+            offset = (0.0, 0.0, 0.0)
+            note(f"probe {pid} has no offset_mm: taken as [0, 0, 0] mm, so the rotation errors (ER, Forbes "
+                 "2025 eq. (25), which act through the offset) contribute nothing; give the probe's offset",
+                 file=path, where=f"{section} (probe {pid})")
         over = {k: number(path, p, section, k, lo=0.0) for k in PROBE_OVERRIDES if k in p}
         probes.append(Probe(pid, offset, **over))
     return tuple(probes)
