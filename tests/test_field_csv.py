@@ -157,3 +157,11 @@ def test_recordings_from_an_excel_range_with_empty_columns_read_as_the_plain_one
     rec = parse_recordings(excel_range(text, 3))
     np.testing.assert_array_equal(rec.measured_mm, parse_recordings(text).measured_mm)
     assert rec.extra == {} and "without a name in the header" in rec.notes[0]
+
+
+def test_rows_may_end_without_the_empty_columns_that_end_the_header(tmp_path, capsys, plain):
+    lines = PLAIN.splitlines()
+    lines[0] += ",,"
+    code, res, err = build(tmp_path, capsys, "\n".join(lines) + "\n", "short")
+    assert code == 0, err
+    same_distances(res, plain)

@@ -11,7 +11,8 @@ What a lab's Excel or LibreOffice exports, and what is accepted:
 * **header names** match the known column names ignoring case (``ID,X,Y,Z``);
 * **empty columns** (no name in the header and no value in any row, as an Excel range with
   empty columns at its right is exported: ``id,x,...,probe,,``) are dropped; an unnamed column
-  that holds a value is an error naming the line.
+  that holds a value is an error naming the line; when the unnamed columns are the header's
+  last ones, a row may also end without them.
 
 Lines starting with ``#`` (and blank lines) before the header are comments.  What was detected
 beyond a plain comma-separated file is said in :attr:`Table.notes`, for the command to print.
@@ -53,6 +54,11 @@ class Table:
     _width: int = 0                  # number of fields of the file's header line
 
     @property
+    def _trailing_unnamed(self) -> bool:
+        """The unnamed columns are all at the right end of the header."""
+        return self._keep == tuple(range(len(self._keep)))
+
+    @property
     def decimal_comma(self) -> bool:
         """Decimal commas are accepted (semicolon- or tab-separated files)."""
         return self.delimiter != ","
@@ -80,6 +86,8 @@ class Table:
             line = self._start + reader.line_num
             if not row or all(not c.strip() for c in row):
                 continue
+            if self._trailing_unnamed and named <= len(row) < self._width:
+                row = row + [""] * (self._width - len(row))    # a row without the header's empty tail
             if len(row) != self._width:
                 hint = (" (a decimal comma in a comma-separated file?)"
                         if self.delimiter == "," and len(row) > self._width else "")
