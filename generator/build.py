@@ -149,6 +149,8 @@ class Staging:
                         self._commit()
                         ok = True
             except OSError as e:         # the commit could not write (full disk, ...)
+                if not self._writing_failed(e):
+                    raise
                 exc = e
             finally:
                 shutil.rmtree(self.tmp, ignore_errors=True)

@@ -167,3 +167,24 @@ def test_a_table_header_3000_deep_names_its_top_key(tmp_path, capsys):
     task = write_task(tmp_path, POINTCLOUD_TASK + "\n[deep" + ".a" * 3000 + "]\nx = 1\n")
     code, err = run_cli(capsys, "build", str(task), "--out", str(tmp_path / "out"))
     assert_clear_failure(code, err, "small.toml", ["small.toml, deep.a.a", "nested deeper than 16"])
+
+
+def test_a_full_disk_while_importing_names_the_file_being_written(tmp_path, capsys, monkeypatch):
+    """`cmmwb import` writes through generator.workbook.atomic: the message names the output
+    file, not the hidden temporary file beside it."""
+    from pathlib import Path as _Path
+
+    sample = HERE / "data" / "qif" / "QIF_PTS_SAMPLE.QIF"
+    real_write = _Path.write_text
+
+    def no_space(self, *a, **k):
+        if self.name.startswith(".rec.csv."):
+            raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), str(self))
+        return real_write(self, *a, **k)
+
+    monkeypatch.setattr(_Path, "write_text", no_space)
+    out = tmp_path / "rec.csv"
+    code, err = run_cli(capsys, "import", str(sample), "--out", str(out))
+    assert_clear_failure(code, err, str(out), ["the disk is full"])
+    assert err.startswith(f"cmmwb: error: {out}: ") and ".tmp" not in err, err
+    assert list(tmp_path.iterdir()) == []
