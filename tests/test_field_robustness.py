@@ -41,7 +41,7 @@ def _wait_for_staging(out: Path, proc: subprocess.Popen) -> None:
     pytest.fail("build B never staged its files")
 
 
-@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM, signal.SIGHUP])
 @pytest.mark.parametrize("same_name", [False, True], ids=["other task", "same task"])
 def test_an_interrupted_build_keeps_what_another_build_finished_in_the_same_new_folder(tmp_path, sig,
                                                                                         same_name):
