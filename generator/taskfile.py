@@ -290,9 +290,18 @@ def read_parameters(path: Path, doc: dict) -> Parameters:
         raise InputError(str(e), file=path, where="[parameters]") from None
 
 
+#: what a missing probe offset means (a warning, docs/input_limits.md "Plausible values")
+NO_OFFSET = ("the stylus tip at the ram's reference point: the rotation errors (ER, Forbes 2025 eq. (25)) act "
+             "through the offset and then contribute nothing; give the probe's offset_mm")
+
+
 def read_probes(path: Path, doc: dict) -> tuple[Probe, ...]:
     raw = doc.get("probes")
     if raw is None:
+        er = doc.get("parameters", {}).get("sigma_ER_urad", 0) if isinstance(doc.get("parameters"), dict) else 0
+        if isinstance(er, (int, float)) and not isinstance(er, bool) and er > 0:
+            note(f"no [[probes]]: one probe P1 with offset [0, 0, 0] mm is assumed, {NO_OFFSET}", file=path,
+                 where="[[probes]]")
         return (Probe("P1"),)
     if not isinstance(raw, list) or not raw or not all(isinstance(p, dict) for p in raw):
         raise InputError("must be one or more [[probes]] tables", file=path, where="[[probes]]")
@@ -314,9 +323,8 @@ def read_probes(path: Path, doc: dict) -> tuple[Probe, ...]:
                      file=path, where=f"{section} (probe {pid}) offset_mm")
         else:
             offset = (0.0, 0.0, 0.0)
-            note(f"probe {pid} has no offset_mm: taken as [0, 0, 0] mm, so the rotation errors (ER, Forbes "
-                 "2025 eq. (25), which act through the offset) contribute nothing; give the probe's offset",
-                 file=path, where=f"{section} (probe {pid})")
+            note(f"probe {pid} has no offset_mm: taken as [0, 0, 0] mm, {NO_OFFSET}", file=path,
+                 where=f"{section} (probe {pid})")
         over = {k: number(path, p, section, k, lo=0.0) for k in PROBE_OVERRIDES if k in p}
         probes.append(Probe(pid, offset, **over))
     return tuple(probes)

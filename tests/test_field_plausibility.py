@@ -64,9 +64,23 @@ def test_a_probe_without_offset_is_warned_about(tmp_path, capsys):
     toml = POINTCLOUD_TASK.replace('id = "P2"\noffset_mm = [30.0, 0.0, -20.0]\n', 'id = "P2"\n')
     res, err = build(tmp_path, capsys, toml)
     assert res["warnings"] == [f"{tmp_path / 'small.toml'}, [[probes]] #2 (probe P2): probe P2 has no offset_mm: "
-                               "taken as [0, 0, 0] mm, so the rotation errors (ER, Forbes 2025 eq. (25), which "
-                               "act through the offset) contribute nothing; give the probe's offset"]
+                               "taken as [0, 0, 0] mm, the stylus tip at the ram's reference point: the rotation "
+                               "errors (ER, Forbes 2025 eq. (25)) act through the offset and then contribute "
+                               "nothing; give the probe's offset_mm"]
     assert err == [f"cmmwb: warning: {res['warnings'][0]}"]
+
+
+def test_a_task_without_probes_but_with_rotation_errors_is_warned_about(tmp_path, capsys):
+    toml = POINTCLOUD_TASK.replace("sigma_ET_um = 0.3", "sigma_ET_um = 0.3\nsigma_ER_urad = 4\nlambda_ER_mm = 400")
+    toml = toml[:toml.index("[[probes]]")] + toml[toml.index("[points]"):]
+    csv = POINTCLOUD_CSV.replace(",P2\n", ",P1\n")
+    (tmp_path / "small.toml").write_text(toml)
+    (tmp_path / "small.csv").write_text(csv.replace(",probe\n", "\n", 1).replace(",P1\n", "\n"))
+    assert main(["build", str(tmp_path / "small.toml"), "--out", str(tmp_path / "out"), "--no-plots"]) == 0, \
+        capsys.readouterr().err
+    res = json.loads((tmp_path / "out" / "small.json").read_text())
+    assert len(res["warnings"]) == 1 and "[[probes]]: no [[probes]]: one probe P1 with offset [0, 0, 0] mm" \
+        in res["warnings"][0]
 
 
 def test_a_probe_offset_of_metres_is_warned_about(tmp_path, capsys):
