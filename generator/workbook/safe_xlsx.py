@@ -122,7 +122,7 @@ def check(path: Path, *, max_cells: int = MAX_CELLS) -> None:
                 raise InputError(f"more than {max_cells:,} cells: too large for this command (see "
                                  "docs/input_limits.md)" + (" -- use --engine libreoffice"
                                                             if max_cells < MAX_CELLS else ""),
-                                 file=path, where=f"part {info.filename}")
+                                 file=path, where=part_place(zf, info.filename))
             if strings > MAX_SHARED_STRINGS:
                 raise InputError(f"more than {MAX_SHARED_STRINGS:,} shared strings: too large to read "
                                  "(see docs/input_limits.md)", file=path, where=f"part {info.filename}")
