@@ -165,3 +165,21 @@ def test_rows_may_end_without_the_empty_columns_that_end_the_header(tmp_path, ca
     code, res, err = build(tmp_path, capsys, "\n".join(lines) + "\n", "short")
     assert code == 0, err
     same_distances(res, plain)
+
+
+def test_diagnose_reads_european_recordings_to_the_same_answer_and_says_what_it_detected(tmp_path, capsys):
+    text = recordings_text()
+    (tmp_path / "plain.csv").write_text(text)
+    (tmp_path / "eu.csv").write_text(european(text, ";"))
+    answers = {}
+    for name in ("plain", "eu"):
+        assert main(["diagnose", str(tmp_path / f"{name}.csv"), "--sigma-um", "0.3", "--out",
+                     str(tmp_path / name), "--no-plots", "--no-workbook"]) == 0
+        answers[name] = (json.loads((tmp_path / name / "diagnosis.json").read_text()), capsys.readouterr().err)
+    (plain, plain_err), (eu, eu_err) = answers["plain"], answers["eu"]
+    assert plain["warnings"] == [] and plain_err == ""
+    assert eu["warnings"] == [f"{tmp_path / 'eu.csv'}, line 1: read as semicolon-separated (detected from the "
+                              "header), decimal commas accepted"]
+    assert eu_err.strip() == f"cmmwb: warning: {eu['warnings'][0]}"
+    assert eu["records"] == plain["records"]
+    assert eu["chi2_before"] == pytest.approx(plain["chi2_before"], rel=1e-12)
