@@ -122,3 +122,24 @@ def test_aqdef_length_units():
 
     assert all(is_length_unit(u) for u in ("mm", "cm", "CM", "µm", "um", "m", "inch", "in", "nm"))
     assert not any(is_length_unit(u) for u in (None, "", "deg", "°", "N", "%"))
+
+
+@pytest.mark.parametrize("old,new,words", [
+    ('<RangePointSetId range="3 8">', '<RangePointSetId range="3 80000">',
+     ["feature DATUMA takes points 3-80000 of point set 12, which holds", "PlaneFeature id=11"]),
+    ('<RangePointSetId range="3 8">', '<RangePointSetId range="8">',
+     ["PlaneFeatureMeasurement id=11/RangePointSetId", "range '8' is not two whole numbers"]),
+    ('<RangePointSetId range="3 8">', '<RangePointSetId range="8 3">', ["range '8 3': expected 1 <= first <= last"]),
+    ("<ProbeRadius>", "<ProbeRadius>r=", ["ProbeRadius", "not a list of numbers"]),
+])
+def test_malformed_point_references_and_radii_name_the_element(tmp_path, capsys, old, new, words):
+    text = SAMPLE.read_text()
+    assert old in text
+    (tmp_path / "bad.qif").write_text(text.replace(old, new, 1))
+    code = main(["import", str(tmp_path / "bad.qif"), "--feature", "DATUMA", "--normals", "from-feature",
+                 "--out", str(tmp_path / "out" / "t.toml")])
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and len(err.splitlines()) == 1 and "internal error" not in err, err
+    for w in words:
+        assert w in err, err
+    assert not (tmp_path / "out").exists()

@@ -103,6 +103,9 @@ class QifDocument:
                 raise InputError(f"feature {f.name} refers to point set {sid}, which the file does not "
                                  "hold", file=self.path, where=f"{f.kind}Feature id={f.id}")
             s = self.sets[sid]
+            if rng is not None and rng[1] > len(s.X_mm):
+                raise InputError(f"feature {f.name} takes points {rng[0]}-{rng[1]} of point set {sid}, which "
+                                 f"holds {len(s.X_mm)}", file=self.path, where=f"{f.kind}Feature id={f.id}")
             sl = slice(None) if rng is None else slice(rng[0] - 1, rng[1])
             parts.append((s, sl))
         X = np.vstack([s.X_mm[sl] for s, sl in parts])
@@ -152,7 +155,7 @@ def _linear_unit(path: Path, el, where: str) -> tuple[str, float] | None:
         return name, known[name.lower()]
     factor = _numbers(path, _child(conv, "Factor").text, f"{where}/UnitConversion/Factor")
     offset = _child(conv, "Offset")
-    if offset is not None and float(offset.text or 0) != 0:
+    if offset is not None and np.any(_numbers(path, offset.text or "0", f"{where}/UnitConversion/Offset") != 0):
         raise InputError("a length unit with an offset is not supported", file=path, where=where)
     if factor.size != 1 or factor[0] <= 0:
         raise InputError("UnitConversion/Factor must be one positive number", file=path, where=where)
@@ -255,7 +258,10 @@ def _read_set(doc: QifDocument, el) -> None:
     if pts is None:
         raise InputError("no Points", file=path, where=where)
     P = _numbers(path, pts.text, f"{where}/Points")
-    count = int(el.get("count", P.size // 3))
+    try:
+        count = int(el.get("count", P.size // 3))
+    except ValueError:
+        raise InputError(f"count = {el.get('count')!r} is not a whole number", file=path, where=where) from None
     if P.size != 3 * count:
         raise InputError(f"count = {count} but Points holds {P.size} numbers (expected {3 * count})",
                          file=path, where=where)
@@ -270,11 +276,31 @@ def _read_set(doc: QifDocument, el) -> None:
     radius = _child(el, "ProbeRadius")
     doc.sets[sid] = PointSet(sid, P.reshape(-1, 3) * mm, N,
                              None if comp is None else (comp.text or "").strip() == "true",
-                             None if radius is None else float(radius.text) * mm, where)
+                             None if radius is None else _radius(path, radius, where) * mm, where)
 
 
 #: a unit vector of the file (point normal, direction of a feature) may differ from length 1 by this
 UNIT_TOL = 1e-3
+
+
+def _radius(path: Path, el, where: str) -> float:
+    """A ``ProbeRadius``: one non-negative number (in the file's unit)."""
+    r = _numbers(path, el.text, f"{where}/ProbeRadius")
+    if r.size != 1 or r[0] < 0:
+        raise InputError("ProbeRadius must be one non-negative number", file=path, where=where)
+    return float(r[0])
+
+
+def _range(path: Path, text: str, where: str) -> tuple[int, int]:
+    """The ``range="first last"`` of a RangePointSetId: two whole numbers, 1 <= first <= last."""
+    parts = text.split()
+    try:
+        lo, hi = (int(x) for x in parts)
+    except ValueError:
+        raise InputError(f"range {text!r} is not two whole numbers 'first last'", file=path, where=where) from None
+    if not 1 <= lo <= hi:
+        raise InputError(f"range {text!r}: expected 1 <= first <= last", file=path, where=where)
+    return lo, hi
 
 
 def _unit(path: Path, N: np.ndarray, where: str) -> np.ndarray:
@@ -319,14 +345,15 @@ def _read_feature(doc: QifDocument, el, tag: str, items, nominal_def, definition
             normals = None if any(n is None for n in N) else _unit(path, np.array(N), where)
             doc.sets[sid] = PointSet(sid, np.array(X) * doc.mm_per_unit, normals,
                                      None if comp is None else (comp.text or "").strip() == "true",
-                                     None if radius is None else float(radius.text) * doc.mm_per_unit, where)
+                                     None if radius is None else _radius(path, radius, where) * doc.mm_per_unit,
+                                     where)
             set_ids.append((sid, None))
         for ref in plist:
             rt = _local(ref.tag)
             if rt == "WholePointSetId":
                 set_ids.append(((ref.text or "").strip(), None))
             elif rt == "RangePointSetId":
-                lo, hi = (int(x) for x in ref.get("range", "").split())
+                lo, hi = _range(path, ref.get("range", ""), f"{where}/RangePointSetId")
                 set_ids.append(((ref.text or "").strip(), (lo, hi)))
             elif rt == "SinglePointSetId":
                 why = ("its points are single points of other point sets (SinglePointSetId): constructed "
