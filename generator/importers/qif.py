@@ -395,8 +395,9 @@ def _geometry(path: Path, el, where: str, mm: float) -> dict:
             if abs(norm - 1.0) > UNIT_TOL:
                 # normalising it would hide a defect (Location and Normal swapped: the points'
                 # nominal positions would move by millimetres), as for the point normals
-                loc = geometry.get("Location", geometry.get("AxisPoint"))
-                swapped = (" (are Location and Normal swapped? the Location has length "
+                point = "Location" if "Location" in geometry else "AxisPoint"
+                loc = geometry.get(point)
+                swapped = (f" (are {point} and {key} swapped? the {point} has length "
                            f"{float(np.linalg.norm(loc / mm)):.6g})"
                            if loc is not None and abs(float(np.linalg.norm(loc / mm)) - 1.0) <= UNIT_TOL else "")
                 raise InputError(f"{key} ({v[0]:g}, {v[1]:g}, {v[2]:g}) has length {norm:.6g}, not 1: a direction "
