@@ -4,6 +4,7 @@ nothing, never over a file someone edited (unless forced, with a backup)."""
 from __future__ import annotations
 
 import csv
+import errno
 import hashlib
 import json
 import math
@@ -22,9 +23,9 @@ from openpyxl.utils.exceptions import IllegalCharacterError
 
 from xlfuncs.errors import ModelError
 
-from .errors import InputError
+from .errors import InputError, os_error_reason
 from .jobs import job
-from .taskfile import read_toml, task_kind_and_name
+from .taskfile import collecting_notes, read_toml, task_kind_and_name
 from .workbook import cache as cached_values
 from .workbook.atomic import write_text
 from .workbook.book import describing
@@ -60,13 +61,13 @@ def _locked(folder: Path):
 
 @contextmanager
 def _signals_held():
-    """Hold back Ctrl-C (SIGINT) and SIGTERM while the block runs, then deliver them."""
+    """Hold back Ctrl-C (SIGINT), SIGTERM and SIGHUP while the block runs, then deliver them."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
     pending: list[int] = []
     old = {}
-    for sig in (signal.SIGINT, signal.SIGTERM):
+    for sig in (signal.SIGINT, signal.SIGTERM, *([signal.SIGHUP] if hasattr(signal, "SIGHUP") else [])):
         try:
             old[sig] = signal.signal(sig, lambda s, _f: pending.append(s))
         except (ValueError, OSError):
@@ -147,10 +148,28 @@ class Staging:
                     with _locked(self.out_dir):
                         self._commit()
                         ok = True
+            except OSError as e:         # the commit could not write (full disk, ...)
+                if not self._writing_failed(e):
+                    raise
+                exc = e
             finally:
                 shutil.rmtree(self.tmp, ignore_errors=True)
                 if not ok:
                     self._remove_made_dirs()
+        if isinstance(exc, OSError) and self._writing_failed(exc):
+            # a full disk, a read-only folder: said of the output folder, not of a staging file
+            raise InputError(f"cannot write the outputs into this folder: {os_error_reason(exc)}; "
+                             "the previous output is unchanged", file=self.out_dir) from None
+
+    _WRITE_ERRNOS = frozenset({errno.ENOSPC, errno.EROFS, errno.EACCES, errno.EPERM, errno.EFBIG, errno.EIO,
+                               getattr(errno, "EDQUOT", errno.ENOSPC)})
+
+    def _writing_failed(self, e: OSError) -> bool:
+        """``e`` is a failure to write into the output folder (rather than, say, a broken pipe)."""
+        if e.errno in self._WRITE_ERRNOS:
+            return True
+        name = getattr(e, "filename", None)
+        return name is not None and Path(str(name)).parent in (self.out_dir, self.tmp)
 
     def _remove_made_dirs(self) -> None:
         """Remove the folders this run created, innermost first, only while they are empty."""
@@ -234,7 +253,8 @@ def build_task(task_path: Path, out_dir: Path, *, plots: bool = True, force: boo
     ``exact``: no approximation even for large tasks (the job's ``force_exact``, if it has one:
     a feature task's V_A; the other kinds are always exact)."""
     task_path = Path(task_path)
-    kind, mod, doc, task = load_task(task_path)
+    with collecting_notes() as notes:
+        kind, mod, doc, task = load_task(task_path)
     if exact and hasattr(mod, "force_exact"):
         mod.force_exact(task)
     try:
@@ -244,6 +264,7 @@ def build_task(task_path: Path, out_dir: Path, *, plots: bool = True, force: boo
     except ModelError as e:
         raise InputError(str(e), file=task_path) from None
 
+    results["warnings"] = list(notes)     # docs/cli.md: what was detected or looks implausible
     bad = non_finite(results)
     if bad is not None:
         raise InputError(f"the model gives {bad[1]!r} for {bad[0]}: check the inputs for extreme values "
@@ -264,6 +285,8 @@ def build_task(task_path: Path, out_dir: Path, *, plots: bool = True, force: boo
         made = [tmp / f"{name}.xlsx", tmp / f"{name}.json"]
         if plots:
             made += list(mod.write_plots(task, results, tmp))
+    for w in notes:
+        print(f"cmmwb: warning: {w}", file=sys.stderr)
     for b in staging.backups:
         print(f"cmmwb: kept a backup of the replaced file: {b}", file=sys.stderr)
     return results, [Path(out_dir) / p.name for p in made]

@@ -24,7 +24,7 @@ from xlfuncs.errors import ModelError
 from . import __version__
 from .build import build_task
 from .commands import add_command, examples_epilog
-from .errors import InputError
+from .errors import InputError, os_error_reason
 from .jobs import available, job
 from .taskfile import KINDS
 from .workbook.atomic import write_text
@@ -259,17 +259,31 @@ def parser() -> argparse.ArgumentParser:
     return p
 
 
+#: exit status when the reader of stdout left (``cmmwb recalc BOOK | head -1``): 128 + SIGPIPE, what
+#: the shell reports for any program stopped by a closed pipe; nothing is printed (docs/cli.md)
+EXIT_CLOSED_PIPE = 141
+
+
 def main(argv: list[str] | None = None) -> int:
-    args = parser().parse_args(argv)
+    try:
+        args = parser().parse_args(argv)
+    except SystemExit as e:      # --help, --version, a usage error: printed by argparse
+        if _stdout_flushed():
+            raise
+        return EXIT_CLOSED_PIPE
     previous_hook = sys.unraisablehook
     sys.unraisablehook = _quiet_unraisable
     previous_int = _catch_sigint()
+    previous_term = _catch_termination()
     try:
-        return _run(args)
+        code = _run(args)
+        return code if _stdout_flushed() else EXIT_CLOSED_PIPE
     finally:
         sys.unraisablehook = previous_hook
         if previous_int is not None:
             signal.signal(signal.SIGINT, previous_int)
+        for sig, handler in previous_term.items():
+            signal.signal(sig, handler)
 
 
 _interrupted = False
@@ -294,6 +308,33 @@ def _catch_sigint():
     return None
 
 
+_terminated_by = 0
+
+
+def _on_termination(signum, frame):
+    """SIGTERM or SIGHUP (``kill``, a closed terminal): end like Ctrl-C, so that a build removes
+    its staging folder instead of leaving it behind; exit status 128 + the signal's number."""
+    global _terminated_by
+    _terminated_by = signum
+    raise KeyboardInterrupt
+
+
+def _catch_termination() -> dict:
+    """Install :func:`_on_termination` for SIGTERM and SIGHUP where they have their default
+    disposition; the previous handlers, to restore."""
+    global _terminated_by
+    _terminated_by = 0
+    previous = {}
+    for name in ("SIGTERM", "SIGHUP"):
+        sig = getattr(signal, name, None)
+        try:
+            if sig is not None and signal.getsignal(sig) is signal.SIG_DFL:
+                previous[sig] = signal.signal(sig, _on_termination)
+        except ValueError:       # not the main thread
+            pass
+    return previous
+
+
 def _run(args) -> int:
     """Run a command; every failure a user can cause is one line on stderr and exit status 2
     (130 for Ctrl-C; a closed output pipe ends quietly), never a traceback."""
@@ -305,24 +346,21 @@ def _run(args) -> int:
         return _fail(str(e))
     except KeyboardInterrupt:
         print("cmmwb: interrupted", file=sys.stderr)
-        return 130
+        return 128 + _terminated_by if _terminated_by else 130
     except BrokenPipeError:
         _silence_stdout()        # `cmmwb recalc book.xlsx | head`: the reader left; nothing to say
-        return 0
+        return EXIT_CLOSED_PIPE
     except OSError as e:         # disk full, read-only folder, permission denied, ...
         where = f"{e.filename}: " if getattr(e, "filename", None) else ""
-        reason = e.strerror or str(e)
-        hint = {28: " (the disk is full)", 30: " (a read-only file system)", 13: " (permission denied)",
-                122: " (disk quota exceeded)", 27: " (over the file-size limit)"}.get(e.errno or 0, "")
-        return _fail(f"{where}cannot write or read: {reason}{hint}; the previous output is unchanged")
+        return _fail(f"{where}cannot write or read: {os_error_reason(e)}; the previous output is unchanged")
     except MemoryError:
         return _fail("not enough memory for this task (see docs/input_limits.md for the sizes that fit)")
     except RecursionError:
         return _fail("the input is nested too deeply to process")
     except Exception as e:  # a bug: say so plainly
-        if _interrupted:
+        if _interrupted or _terminated_by:
             print("cmmwb: interrupted", file=sys.stderr)
-            return 130
+            return 128 + _terminated_by if _terminated_by else 130
         if os.environ.get("CMMWB_DEBUG"):
             raise
         print(f"cmmwb: internal error ({type(e).__name__}: {e}); rerun with CMMWB_DEBUG=1 for a "
@@ -336,6 +374,19 @@ def _fail(message: str) -> int:
     except (OSError, ValueError):
         pass
     return 2
+
+
+def _stdout_flushed() -> bool:
+    """Flush stdout now, inside the command, rather than at interpreter exit (where a closed pipe
+    is 'Exception ignored ... BrokenPipeError' and exit status 120); False if the reader left."""
+    try:
+        sys.stdout.flush()
+        return True
+    except BrokenPipeError:
+        _silence_stdout()
+        return False
+    except (OSError, ValueError, AttributeError):
+        return True
 
 
 def _silence_stdout() -> None:

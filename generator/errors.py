@@ -13,3 +13,15 @@ class InputError(Exception):
     def __str__(self) -> str:
         loc = ", ".join(str(x) for x in (self.file, self.where) if x)
         return f"{loc}: {self.message}" if loc else self.message
+
+
+#: what an errno means for someone whose output could not be written
+_OS_HINTS = {28: "the disk is full", 30: "a read-only file system", 13: "permission denied",
+             122: "disk quota exceeded", 27: "over the file-size limit"}
+
+
+def os_error_reason(e: OSError) -> str:
+    """The reason of an OSError for a message: ``No space left on device (the disk is full)``."""
+    reason = e.strerror or str(e)
+    hint = _OS_HINTS.get(e.errno or 0)
+    return f"{reason} ({hint})" if hint else reason

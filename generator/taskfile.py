@@ -6,17 +6,21 @@ line, so the CLI can print it and exit with status 2.
 
 from __future__ import annotations
 
-import csv
-import io
 import math
+import re
 import tomllib
+from contextlib import contextmanager
+from contextvars import ContextVar
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Iterator
 
 import numpy as np
 
+from xlfuncs.csvtable import TableError
+from xlfuncs.csvtable import read_table as read_csv_table
 from xlfuncs.errors import ModelError
-from xlfuncs.limits import coordinate_problem
+from xlfuncs.limits import PLAUSIBLE, coordinate_problem, plausibility_problem
 from xlfuncs.pointcloud import Parameters, PointCloud, Probe
 
 from .errors import InputError
@@ -30,6 +34,31 @@ NORMAL_TOL = 1e-3
 
 MAX_DEPTH = 16           # tables and arrays nested deeper than this are refused
 MAX_INT = 2**63 - 1      # TOML integers are 64-bit (TOML 1.0, "Integer")
+
+
+_NOTES: ContextVar[list[str] | None] = ContextVar("cmmwb_input_notes", default=None)
+
+
+@contextmanager
+def collecting_notes() -> Iterator[list[str]]:
+    """Collect what the readers :func:`note` while the block runs (a build prints the notes on
+    stderr and lists them in its JSON ``warnings``)."""
+    notes: list[str] = []
+    token = _NOTES.set(notes)
+    try:
+        yield notes
+    finally:
+        _NOTES.reset(token)
+
+
+def note(message: str, *, file=None, where: str | None = None) -> None:
+    """Something the user should know about an accepted input (what was detected in a CSV file,
+    an implausible value): one line naming the file and the place, like an :class:`InputError`.
+    Kept once, in the order noted, when notes are being collected; dropped otherwise."""
+    notes = _NOTES.get()
+    text = str(InputError(message, file=file, where=where))
+    if notes is not None and text not in notes:
+        notes.append(text)
 
 
 def read_toml(path: Path) -> dict:
@@ -46,11 +75,54 @@ def read_toml(path: Path) -> dict:
         raise InputError(f"malformed TOML: {e}", file=path) from None
     except RecursionError:
         raise InputError(f"malformed TOML: arrays or tables nested too deeply (at most {MAX_DEPTH} levels)",
-                         file=path) from None
+                         file=path, where=_too_deep(text)) from None
     except ValueError as e:   # an integer of more than 4300 digits (Python's own limit)
         raise InputError(f"malformed TOML: an integer too large ({str(e).split(':')[0]})", file=path) from None
     _check_structure(path, doc, "", 0)
     return doc
+
+
+_TABLE_HEADER = re.compile(r"^\s*\[\[?\s*([^\]]*?)\s*\]\]?\s*(#.*)?$")
+_KEY = re.compile(r"^\s*([^=\[{#]+?)\s*=")
+
+
+def _too_deep(text: str) -> str | None:
+    """Where arrays or inline tables first nest deeper than :data:`MAX_DEPTH` (``line N, key K``
+    with the key under its table), found in the text: the parser itself only ran out of stack."""
+    depth, table, key, quote = 0, "", None, None
+    for n, line in enumerate(text.splitlines(), start=1):
+        if depth == 0 and quote is None:
+            m = _TABLE_HEADER.match(line)
+            if m:
+                table = m.group(1).strip()
+                continue
+            m = _KEY.match(line)
+            if m:
+                key = f"{table}.{m.group(1).strip()}" if table else m.group(1).strip()
+        k = 0
+        while k < len(line):
+            c = line[k]
+            if quote is not None:
+                if c == "\\" and quote == '"':
+                    k += 1
+                elif c == quote:
+                    quote = None
+            elif c in "\"'":
+                quote = c
+            elif c == "#":
+                break
+            elif c in "[{":
+                depth += 1
+                if depth > MAX_DEPTH:
+                    return f"line {n}" + (f", key {key}" if key else "")
+            elif c in "]}":
+                depth = max(depth - 1, 0)
+            k += 1
+        if quote == "'":            # literal strings end with their line; so do basic ones
+            quote = None
+        if quote == '"':
+            quote = None
+    return None
 
 
 def _check_structure(path: Path, value, where: str, depth: int) -> None:
@@ -163,6 +235,9 @@ def number(path: Path, tbl: dict, section: str, key: str, default: float | None 
         raise InputError(f"must be >= {lo:g}, got {value:g}", file=path, where=where)
     if positive and value <= 0:
         raise InputError(f"must be positive, got {value:g}", file=path, where=where)
+    problem = plausibility_problem(key, value) if key in tbl else None
+    if problem:
+        note(problem, file=path, where=where)
     return value
 
 
@@ -215,9 +290,18 @@ def read_parameters(path: Path, doc: dict) -> Parameters:
         raise InputError(str(e), file=path, where="[parameters]") from None
 
 
+#: what a missing probe offset means (a warning, docs/input_limits.md "Plausible values")
+NO_OFFSET = ("the stylus tip at the ram's reference point: the rotation errors (ER, Forbes 2025 eq. (25)) act "
+             "through the offset and then contribute nothing; give the probe's offset_mm")
+
+
 def read_probes(path: Path, doc: dict) -> tuple[Probe, ...]:
     raw = doc.get("probes")
     if raw is None:
+        er = doc.get("parameters", {}).get("sigma_ER_urad", 0) if isinstance(doc.get("parameters"), dict) else 0
+        if isinstance(er, (int, float)) and not isinstance(er, bool) and er > 0:
+            note(f"no [[probes]]: one probe P1 with offset [0, 0, 0] mm is assumed, {NO_OFFSET}", file=path,
+                 where="[[probes]]")
         return (Probe("P1"),)
     if not isinstance(raw, list) or not raw or not all(isinstance(p, dict) for p in raw):
         raise InputError("must be one or more [[probes]] tables", file=path, where="[[probes]]")
@@ -230,7 +314,17 @@ def read_probes(path: Path, doc: dict) -> tuple[Probe, ...]:
         if pid in seen:
             raise InputError(f"probe id {pid!r} used twice", file=path, where=f"{section} id")
         seen.add(pid)
-        offset = vector3(path, p, section, "offset_mm") if "offset_mm" in p else (0.0, 0.0, 0.0)
+        if "offset_mm" in p:
+            offset = vector3(path, p, section, "offset_mm")
+            length = math.sqrt(sum(v * v for v in offset))
+            if plausibility_problem("offset_mm", length):
+                note(f"offset_mm {list(offset)} is {length:g} mm long, longer than any stylus or ram offset "
+                     f"of a CMM (at most {PLAUSIBLE['offset_mm'][1]:g} mm); built as given -- is it in mm?",
+                     file=path, where=f"{section} (probe {pid}) offset_mm")
+        else:
+            offset = (0.0, 0.0, 0.0)
+            note(f"probe {pid} has no offset_mm: taken as [0, 0, 0] mm, {NO_OFFSET}", file=path,
+                 where=f"{section} (probe {pid})")
         over = {k: number(path, p, section, k, lo=0.0) for k in PROBE_OVERRIDES if k in p}
         probes.append(Probe(pid, offset, **over))
     return tuple(probes)
@@ -251,19 +345,6 @@ def check_label(label: str, path: Path, where: str) -> str:
         raise InputError(f"label {label[:40]!r} holds a control character ({ord(bad[0]):#04x})",
                          file=path, where=where)
     return label
-
-
-def _csv_rows(reader, path: Path, start: int):
-    """(file line, fields) of each record; a malformed record (e.g. a field over the csv
-    module's limit, an unclosed quote) is named by its line."""
-    while True:
-        try:
-            row = next(reader)
-        except StopIteration:
-            return
-        except csv.Error as e:
-            raise InputError(f"malformed CSV: {e}", file=path, where=f"line {start + reader.line_num}") from None
-        yield start + reader.line_num, row
 
 
 @dataclass(frozen=True)
@@ -296,10 +377,12 @@ class _PointRows:
         self.lines: list[int] = []
         self.seen: dict[str, str] = {}
 
+    number_text = staticmethod(float)     # a CSV table's own reading of a number's text (decimal comma)
+
     def number(self, raw, where: str) -> float:
         if isinstance(raw, str):
             try:
-                v = float(raw.strip())
+                v = self.number_text(raw.strip())
             except ValueError:
                 raise InputError(f"{raw.strip()!r} is not a number", file=self.path, where=where) from None
         elif isinstance(raw, bool) or not isinstance(raw, (int, float)):
@@ -354,21 +437,20 @@ class _PointRows:
 
 def read_points_csv(path: Path, probes: tuple[Probe, ...]) -> PointTable:
     """``id,x,y,z,nx,ny,nz,probe`` (mm; n = outward unit normal).  Lines starting with ``#``
-    before the header are comments.  ``probe`` may be omitted when the task has one probe."""
+    before the header are comments.  ``probe`` may be omitted when the task has one probe.
+    Comma-, semicolon- or tab-separated, header names in any letter case, decimal commas in
+    semicolon/tab files, empty columns dropped (:mod:`xlfuncs.csvtable`); what was detected is
+    noted (:func:`note`)."""
     path = Path(path)
     text = read_text(path, "points")
-    lines = text.splitlines()
-    start = 0
-    while start < len(lines) and (lines[start].lstrip().startswith("#") or not lines[start].strip()):
-        start += 1
-    if start == len(lines):
-        raise InputError("no header line", file=path)
-    reader = csv.reader(io.StringIO("\n".join(lines[start:])))
-    header = [h.strip() for h in next(reader)]
+    known = [a for aliases in POINT_COLUMNS.values() for a in aliases]
+    try:
+        tbl = read_csv_table(text, known)
+    except TableError as e:
+        raise InputError(e.message, file=path, where=None if e.line is None else f"line {e.line}") from None
+    header = list(tbl.header)
+    start = tbl.header_line - 1
     colmap: dict[str, int] = {}
-    for k, h in enumerate(header):
-        if h in header[:k]:
-            raise InputError(f"column {h!r} appears twice in the header", file=path, where=f"line {start + 1}")
     for key, aliases in POINT_COLUMNS.items():
         given = [a for a in aliases if a in header]
         if len(given) > 1:
@@ -378,26 +460,27 @@ def read_points_csv(path: Path, probes: tuple[Probe, ...]) -> PointTable:
             colmap[key] = header.index(given[0])
     for key in ("id", "x", "y", "z", "nx", "ny", "nz"):
         if key not in colmap:
-            raise InputError(f"missing column {POINT_COLUMNS[key][0]!r} (header: {','.join(header)})",
+            sep = tbl.delimiter if tbl.delimiter != "\t" else "\\t"
+            raise InputError(f"missing column {POINT_COLUMNS[key][0]!r} (header: {sep.join(header)})",
                              file=path, where=f"line {start + 1}")
     points = _PointRows(path, probes)
-    for offset, row in _csv_rows(reader, path, start):
-        if not row or all(not c.strip() for c in row):
-            continue
-        if len(row) != len(header):
-            hint = " (a decimal comma in a comma-separated file?)" if len(row) > len(header) else ""
-            raise InputError(f"{len(row)} fields, the header has {len(header)}{hint}", file=path,
-                             where=f"line {offset}")
+    points.number_text = tbl.number
+    try:
+        for offset, row in tbl.records():
 
-        def where(column, offset=offset):
-            if column is None:
-                return f"line {offset}"
-            name = header[colmap[column]] if column in colmap else column
-            return f"line {offset}, column {name!r}"
+            def where(column, offset=offset):
+                if column is None:
+                    return f"line {offset}"
+                name = header[colmap[column]] if column in colmap else column
+                return f"line {offset}, column {name!r}"
 
-        points.add(offset, f"on line {offset}", row[colmap["id"]],
-                   [row[colmap[k]] for k in ("x", "y", "z", "nx", "ny", "nz")],
-                   row[colmap["probe"]] if "probe" in colmap else None, where)
+            points.add(offset, f"on line {offset}", row[colmap["id"]],
+                       [row[colmap[k]] for k in ("x", "y", "z", "nx", "ny", "nz")],
+                       row[colmap["probe"]] if "probe" in colmap else None, where)
+    except TableError as e:
+        raise InputError(e.message, file=path, where=f"line {e.line}") from None
+    for message in tbl.notes:
+        note(message, file=path, where=f"line {tbl.header_line}")
     return points.table()
 
 
@@ -446,7 +529,14 @@ def read_point_cloud(path: Path, doc: dict) -> tuple[PointCloud, Parameters, Poi
         name = string(path, pts, "points", "file")
         if "\x00" in name:
             raise InputError("the file name contains a NUL character", file=path, where="[points] file")
-        tablep = read_points_csv(Path(path).parent / name, probes)
+        if not name.strip():
+            raise InputError("is empty: name the points table, a CSV file beside the task file "
+                             "(or give the points as [points] rows)", file=path, where="[points] file")
+        csv_path = Path(path).parent / name
+        if csv_path.is_dir():
+            raise InputError(f"{name!r} is a folder ({csv_path}), not a points table (CSV file)",
+                             file=path, where="[points] file")
+        tablep = read_points_csv(csv_path, probes)
     index = {p.id: k for k, p in enumerate(probes)}
     try:
         for p in probes:

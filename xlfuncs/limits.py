@@ -30,3 +30,49 @@ def coordinate_problem(value_mm: float) -> str | None:
         return (f"coordinate {value_mm:g} mm is outside the plausible machine range +-{MAX_COORDINATE_MM:g} mm "
                 f"(float64 resolves 1 nm only up to about 4e9 mm; is the unit mm?)")
     return None
+
+
+# -- plausible values of the model's inputs ------------------------------------------------------
+
+#: What coordinate measuring machines have, orders of magnitude wide (docs/input_limits.md,
+#: "Plausible values"): key -> (smallest, largest, unit).  A value outside is accepted (a task
+#: may study an extreme machine) but warned about, because the usual cause is a unit mix-up
+#: (µm for mm, m for mm) that would otherwise give wrong uncertainties silently.  Zero is never
+#: warned about: it switches a factor off.  Typical values (Forbes 2025 Table 3, MPE1): sigmas
+#: 0.1-0.3 µm, 0.7 ppm, 4 µrad; length scales 200-400 mm; lambda_P 0.5.
+PLAUSIBLE = {
+    "sigma_R_um": (0.001, 50.0, "µm"),
+    "sigma_PQ_um": (0.001, 50.0, "µm"),
+    "sigma_ET_um": (0.001, 50.0, "µm"),
+    "sigma_P0_um": (0.001, 50.0, "µm"),
+    "sigma_P_um": (0.001, 50.0, "µm"),
+    "sigma_S_ppm": (0.001, 100.0, "ppm"),
+    "sigma_Sa_ppm": (0.001, 100.0, "ppm"),
+    "sigma_Q_ppm": (0.001, 100.0, "ppm"),
+    "sigma_ER_urad": (0.01, 1000.0, "µrad"),
+    "lambda_ET_mm": (1.0, MAX_COORDINATE_MM, "mm"),
+    "lambda_ER_mm": (1.0, MAX_COORDINATE_MM, "mm"),
+    "lambda_P": (0.01, 10.0, "(unit normals)"),
+    "A_um": (0.05, 500.0, "µm"),
+    "B_mm": (10.0, 1e6, "mm"),
+    "offset_mm": (0.0, 2000.0, "mm"),      # the length of a probe's stylus offset
+}
+
+_UNIT_HINTS = {"µm": "a length in mm written as µm is 1000 times too large",
+               "mm": "mm, not m or µm",
+               "ppm": "1 µm/mm is 1000 ppm",
+               "µrad": "1 mrad is 1000 µrad"}
+
+
+def plausibility_problem(key: str, value: float) -> str | None:
+    """Why ``value`` of the input ``key`` is outside :data:`PLAUSIBLE`, or None (also for keys
+    without a range, and for 0)."""
+    if key not in PLAUSIBLE or value == 0 or not math.isfinite(value):
+        return None
+    lo, hi, unit = PLAUSIBLE[key]
+    if lo <= abs(value) <= hi:
+        return None
+    side = "larger" if abs(value) > hi else "smaller"
+    hint = _UNIT_HINTS.get(unit)
+    return (f"{key} = {value:g} {unit} is {side} than what coordinate measuring machines have "
+            f"({lo:g} to {hi:g} {unit}); built as given" + (f" -- check the unit: {hint}" if hint else ""))

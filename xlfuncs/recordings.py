@@ -25,6 +25,7 @@ from typing import Sequence
 
 import numpy as np
 
+from .csvtable import Table, TableError, read_table
 from .errors import ModelError
 from .limits import coordinate_problem
 
@@ -82,6 +83,7 @@ class Recordings:
     group: tuple[str, ...] | None = None
     extra: dict[str, list[str]] = field(default_factory=dict)   # unknown columns, kept as text
     comments: tuple[str, ...] = ()
+    notes: tuple[str, ...] = ()                # what was detected in the file (xlfuncs.csvtable)
 
     @property
     def n(self) -> int:
@@ -132,10 +134,10 @@ COORDINATE_COLUMNS = frozenset({"x1", "y1", "z1", "x2", "y2", "z2", "x_nom", "y_
                                 "px", "py", "pz"})
 
 
-def _number(text: str, line: int, column: str) -> float:
+def _number(text: str, line: int, column: str, table: Table | None = None) -> float:
     t = text.strip()
     try:
-        v = float(t)
+        v = table.number(t) if table is not None else float(t)
     except ValueError:
         raise RecordingsError(f"{t!r} is not a number", line, column) from None
     if not math.isfinite(v):
@@ -168,25 +170,17 @@ def read_recordings(path: str | Path) -> LengthRecords | PointRecords:
 
 
 def parse_recordings(text: str) -> LengthRecords | PointRecords:
-    lines = text.splitlines()
-    start = 0
-    comments = []
-    while start < len(lines) and (lines[start].lstrip().startswith("#") or not lines[start].strip()):
-        if lines[start].strip():
-            comments.append(lines[start].lstrip()[1:].strip())
-        start += 1
-    if start == len(lines):
-        raise RecordingsError("no header line")
-    header_line = start + 1
-    rows = list(csv.reader(io.StringIO("\n".join(lines[start:]))))
-    header = [h.strip() for h in rows[0]]
-    seen: dict[str, int] = {}
-    for k, h in enumerate(header):
-        if not h:
-            raise RecordingsError(f"empty column name (column {k + 1})", header_line)
-        if h in seen:
-            raise RecordingsError(f"column {h!r} appears twice in the header", header_line, h)
-        seen[h] = k
+    """Recordings from the file's text: comma-, semicolon- or tab-separated, header names in any
+    letter case, decimal commas in semicolon/tab files, empty columns dropped
+    (:mod:`xlfuncs.csvtable`, the parser of the points tables too)."""
+    try:
+        table = read_table(text, KNOWN_LENGTH | KNOWN_POINT)
+    except TableError as e:
+        raise RecordingsError(e.message, e.line, e.column) from None
+    comments = list(table.comments)
+    header_line = table.header_line
+    header = list(table.header)
+    seen = {h: k for k, h in enumerate(header)}
     if "measured_mm" in seen and "x_nom" in seen:
         raise RecordingsError("the header has both measured_mm (length records) and x_nom (point "
                               "records); one file holds one kind", header_line)
@@ -226,11 +220,11 @@ def parse_recordings(text: str) -> LengthRecords | PointRecords:
     ids: list[str] = []
     where: list[int] = []
     id_line: dict[str, int] = {}
-    for offset, row in enumerate(rows[1:], start=header_line + 1):
-        if not row or all(not c.strip() for c in row):
-            continue
-        if len(row) != len(header):
-            raise RecordingsError(f"{len(row)} fields, the header has {len(header)}", offset)
+    try:
+        records = list(table.records())
+    except TableError as e:
+        raise RecordingsError(e.message, e.line, e.column) from None
+    for offset, row in records:
         rid = row[seen["id"]].strip()
         if not rid:
             raise RecordingsError("empty record id", offset, "id")
@@ -240,7 +234,7 @@ def parse_recordings(text: str) -> LengthRecords | PointRecords:
         ids.append(rid)
         where.append(offset)
         for c in numeric:
-            values[c].append(_number(row[seen[c]], offset, c))
+            values[c].append(_number(row[seen[c]], offset, c, table))
             if c in COORDINATE_COLUMNS:
                 problem = coordinate_problem(values[c][-1])
                 if problem is not None:
@@ -257,6 +251,7 @@ def parse_recordings(text: str) -> LengthRecords | PointRecords:
 
     arr = {c: np.array(v, dtype=float) for c, v in values.items()}
     common = dict(ids=tuple(ids), lines=tuple(where), extra=extra, comments=tuple(comments),
+                  notes=tuple(f"line {header_line}: {n}" for n in table.notes),
                   temperature_C=arr.get("temperature_C"), time_s=arr.get("time_s"),
                   group=tuple(text_cols["group"]) if "group" in text_cols else None)
 

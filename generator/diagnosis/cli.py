@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import json
 import math
+import sys
 import time
 from pathlib import Path
 
@@ -140,8 +141,8 @@ def _read(path: Path):
 
 def run_diagnose(rec_path: Path, model: dg.Model, out_dir: Path, *, alpha: float = 0.01, plots: bool = True,
                  workbook: bool = True, source: str = "", rec=None, task_label: str = "",
-                 force: bool = False, exact: bool = False, alpha_name: float | None = None
-                 ) -> tuple[dict, list[Path]]:
+                 force: bool = False, exact: bool = False, alpha_name: float | None = None,
+                 warnings: list[str] | tuple[str, ...] = ()) -> tuple[dict, list[Path]]:
     """Diagnose ``rec_path`` into ``out_dir`` (all or nothing); returns the JSON and the files.
     ``exact``: the dense record covariance whatever the size (no structured approximation)."""
     from ..build import Staging as _Staging
@@ -167,7 +168,8 @@ def run_diagnose(rec_path: Path, model: dg.Model, out_dir: Path, *, alpha: float
         raise InputError(str(e), file=task_label or rec_path) from None
     result = diag.to_json()
     result = {"name": "diagnosis", "version": __version__,
-              "recordings": rec_path.name, "simulation": task_label, **result}
+              "recordings": rec_path.name, "simulation": task_label, **result,
+              "warnings": [*warnings, *(f"{rec_path}, {n}" for n in getattr(rec, "notes", ()))]}
     with _Staging(out_dir, force=force) as tmp:
         (tmp / "diagnosis.json").write_text(json.dumps(result, indent=1, ensure_ascii=False, allow_nan=False)
                                             + "\n", encoding="utf-8")
@@ -180,10 +182,16 @@ def run_diagnose(rec_path: Path, model: dg.Model, out_dir: Path, *, alpha: float
 
 
 def cmd_diagnose(args) -> int:
-    model, label = load_model(args.task, args.sigma_um)
+    from ..taskfile import collecting_notes
+
+    with collecting_notes() as notes:
+        model, label = load_model(args.task, args.sigma_um)
     result, files = run_diagnose(Path(args.recordings), model, Path(args.out), alpha=args.alpha,
                                  plots=not args.no_plots, workbook=not args.no_workbook, task_label=label,
-                                 force=args.force, exact=args.exact, alpha_name=args.alpha_name)
+                                 force=args.force, exact=args.exact, alpha_name=args.alpha_name,
+                                 warnings=notes)
+    for w in result["warnings"]:
+        print(f"cmmwb: warning: {w}", file=sys.stderr)
     print(result["summary"])
     for f in files:
         print(f"  -> {f}")

@@ -45,6 +45,16 @@ def _decode(raw: bytes) -> str:
     return raw.decode("latin-1")
 
 
+#: K2142 units that are lengths (AQDEF writes the unit as text; any letter case), in mm
+LENGTH_UNITS_MM = {"nm": 1e-6, "µm": 1e-3, "μm": 1e-3, "um": 1e-3, "mm": 1.0, "cm": 10.0, "dm": 100.0,
+                   "m": 1000.0, "in": 25.4, "inch": 25.4, '"': 25.4}
+
+
+def is_length_unit(unit: str | None) -> bool:
+    """A K2142 unit text names a length (``cm`` does; a missing unit does not)."""
+    return unit is not None and unit.strip().lower().replace("micron", "µm") in LENGTH_UNITS_MM
+
+
 def _number(text: str) -> float | None:
     try:
         return float(text.strip().replace(",", "."))
@@ -98,14 +108,22 @@ def import_aqdef(src: Path, out: Path, *, force: bool = False):
     part, chars = read_aqdef(paths)
     if not chars:
         raise InputError("no characteristics (no K2xxx fields and no values)", file=src)
-    lengths = [c for c in chars.values() if c.fields.get("K2142", "mm").strip().lower() in ("mm", "µm", "um")
-               and c.fields.get("K2004", "0").strip() == "0"]
-    listing = "; ".join(f"{c.name} ({len(c.values)} values"
-                        + (f", nominal {c.fields['K2101']} {c.fields.get('K2142', '')}".rstrip()
-                           if "K2101" in c.fields else "") + ")" for c in chars.values())
+    variable = [c for c in chars.values() if c.fields.get("K2004", "0").strip() == "0"]
+    lengths = [c for c in variable if is_length_unit(c.fields.get("K2142"))]
+    no_unit = [c for c in variable if not c.fields.get("K2142", "").strip()]
+
+    def described(c: Characteristic) -> str:
+        unit = c.fields.get("K2142", "").strip()
+        text = f"{c.name} ({len(c.values)} values"
+        if "K2101" in c.fields:
+            text += f", nominal {c.fields['K2101']}" + (f" {unit}" if unit else "")
+        return text + ("" if unit else ", no unit: K2142 missing") + ")"
+
+    listing = "; ".join(described(c) for c in chars.values())
+    unsaid = (f"; {len(no_unit)} without a unit (no K2142 field: not assumed to be mm)" if no_unit else "")
     raise InputError(
         f"AQDEF holds characteristic values, not point coordinates: {len(chars)} characteristics "
-        f"({len(lengths)} variable ones in length units): {listing}. Length recordings "
+        f"({len(lengths)} variable ones in length units{unsaid}): {listing}. Length recordings "
         "(recordings.md 1a) need x1,y1,z1,x2,y2,z2 of the two probed points of every length, which "
         "AQDEF does not carry; export the points (e.g. as QIF) or write the recordings CSV with the "
         "coordinates from the measurement program", file=src)

@@ -71,13 +71,28 @@ class QifDocument:
     sets: dict[str, PointSet] = field(default_factory=dict)
     features: list[Feature] = field(default_factory=list)
     not_read: list[str] = field(default_factory=list)
+    #: features in the file whose points cmmwb cannot import: (name, QIF kind, id, why)
+    unsupported: list[tuple[str, str, str, str]] = field(default_factory=list)
+    #: every FeatureItem (a feature of the part, measured or not): name -> (QIF kind, id)
+    items: dict[str, tuple[str, str]] = field(default_factory=dict)
 
     def feature(self, key: str) -> Feature:
         for f in self.features:
             if key in (f.name, f.id):
                 return f
+        for name, kind, fid, why in self.unsupported:
+            if key in (name, fid):
+                raise InputError(f"feature {name} is in the file (a {kind.lower()} feature, id {fid}) but not "
+                                 f"supported: {why}", file=self.path, where="--feature")
+        if key in self.items:
+            kind, iid = self.items[key]
+            raise InputError(f"feature {key} is in the file (a {kind.lower()} feature item, id {iid}) but has no "
+                             "measurement (no FeatureMeasurement or FeatureActual refers to it): no points to "
+                             "import", file=self.path, where="--feature")
         names = ", ".join(f"{f.name} ({f.kind.lower()}, id {f.id})" for f in self.features) or "none"
-        raise InputError(f"no feature named or numbered {key!r}; the file has: {names}",
+        other = "; not importable: " + ", ".join(f"{n} ({k.lower()})" for n, k, _, _ in self.unsupported) \
+            if self.unsupported else ""
+        raise InputError(f"no feature named or numbered {key!r}; the file has: {names}{other}",
                          file=self.path, where="--feature")
 
     def points_of(self, f: Feature) -> PointSet:
@@ -88,6 +103,9 @@ class QifDocument:
                 raise InputError(f"feature {f.name} refers to point set {sid}, which the file does not "
                                  "hold", file=self.path, where=f"{f.kind}Feature id={f.id}")
             s = self.sets[sid]
+            if rng is not None and rng[1] > len(s.X_mm):
+                raise InputError(f"feature {f.name} takes points {rng[0]}-{rng[1]} of point set {sid}, which "
+                                 f"holds {len(s.X_mm)}", file=self.path, where=f"{f.kind}Feature id={f.id}")
             sl = slice(None) if rng is None else slice(rng[0] - 1, rng[1])
             parts.append((s, sl))
         X = np.vstack([s.X_mm[sl] for s, sl in parts])
@@ -137,7 +155,7 @@ def _linear_unit(path: Path, el, where: str) -> tuple[str, float] | None:
         return name, known[name.lower()]
     factor = _numbers(path, _child(conv, "Factor").text, f"{where}/UnitConversion/Factor")
     offset = _child(conv, "Offset")
-    if offset is not None and float(offset.text or 0) != 0:
+    if offset is not None and np.any(_numbers(path, offset.text or "0", f"{where}/UnitConversion/Offset") != 0):
         raise InputError("a length unit with an offset is not supported", file=path, where=where)
     if factor.size != 1 or factor[0] <= 0:
         raise InputError("UnitConversion/Factor must be one positive number", file=path, where=where)
@@ -195,6 +213,7 @@ def read_qif(path: str | Path) -> QifDocument:
             nom = _child(el, "FeatureNominalId")
             items[el.get("id")] = ((name.text or "").strip() if name is not None else el.get("id"),
                                    None if nom is None else (nom.text or "").strip())
+            doc.items[items[el.get("id")][0]] = (tag.removesuffix("FeatureItem"), el.get("id"))
 
     # point sets (QIF 3) and point lists (QIF 2)
     for el in root.iter():
@@ -239,7 +258,10 @@ def _read_set(doc: QifDocument, el) -> None:
     if pts is None:
         raise InputError("no Points", file=path, where=where)
     P = _numbers(path, pts.text, f"{where}/Points")
-    count = int(el.get("count", P.size // 3))
+    try:
+        count = int(el.get("count", P.size // 3))
+    except ValueError:
+        raise InputError(f"count = {el.get('count')!r} is not a whole number", file=path, where=where) from None
     if P.size != 3 * count:
         raise InputError(f"count = {count} but Points holds {P.size} numbers (expected {3 * count})",
                          file=path, where=where)
@@ -254,12 +276,36 @@ def _read_set(doc: QifDocument, el) -> None:
     radius = _child(el, "ProbeRadius")
     doc.sets[sid] = PointSet(sid, P.reshape(-1, 3) * mm, N,
                              None if comp is None else (comp.text or "").strip() == "true",
-                             None if radius is None else float(radius.text) * mm, where)
+                             None if radius is None else _radius(path, radius, where) * mm, where)
+
+
+#: a unit vector of the file (point normal, direction of a feature) may differ from length 1 by this
+UNIT_TOL = 1e-3
+
+
+def _radius(path: Path, el, where: str) -> float:
+    """A ``ProbeRadius``: one non-negative number (in the file's unit)."""
+    r = _numbers(path, el.text, f"{where}/ProbeRadius")
+    if r.size != 1 or r[0] < 0:
+        raise InputError("ProbeRadius must be one non-negative number", file=path, where=where)
+    return float(r[0])
+
+
+def _range(path: Path, text: str, where: str) -> tuple[int, int]:
+    """The ``range="first last"`` of a RangePointSetId: two whole numbers, 1 <= first <= last."""
+    parts = text.split()
+    try:
+        lo, hi = (int(x) for x in parts)
+    except ValueError:
+        raise InputError(f"range {text!r} is not two whole numbers 'first last'", file=path, where=where) from None
+    if not 1 <= lo <= hi:
+        raise InputError(f"range {text!r}: expected 1 <= first <= last", file=path, where=where)
+    return lo, hi
 
 
 def _unit(path: Path, N: np.ndarray, where: str) -> np.ndarray:
     norm = np.linalg.norm(N, axis=1)
-    if np.any(np.abs(norm - 1) > 1e-3):
+    if np.any(np.abs(norm - 1) > UNIT_TOL):
         k = int(np.argmax(np.abs(norm - 1)))
         raise InputError(f"normal {k + 1} has length {norm[k]:.6g}, not 1", file=path, where=where)
     return N / norm[:, None]
@@ -299,18 +345,21 @@ def _read_feature(doc: QifDocument, el, tag: str, items, nominal_def, definition
             normals = None if any(n is None for n in N) else _unit(path, np.array(N), where)
             doc.sets[sid] = PointSet(sid, np.array(X) * doc.mm_per_unit, normals,
                                      None if comp is None else (comp.text or "").strip() == "true",
-                                     None if radius is None else float(radius.text) * doc.mm_per_unit, where)
+                                     None if radius is None else _radius(path, radius, where) * doc.mm_per_unit,
+                                     where)
             set_ids.append((sid, None))
         for ref in plist:
             rt = _local(ref.tag)
             if rt == "WholePointSetId":
                 set_ids.append(((ref.text or "").strip(), None))
             elif rt == "RangePointSetId":
-                lo, hi = (int(x) for x in ref.get("range", "").split())
+                lo, hi = _range(path, ref.get("range", ""), f"{where}/RangePointSetId")
                 set_ids.append(((ref.text or "").strip(), (lo, hi)))
             elif rt == "SinglePointSetId":
-                doc.not_read.append(f"{where} ({name}): single points of a set (SinglePointSetId) -- "
-                                    "constructed from other features' points; not imported")
+                why = ("its points are single points of other point sets (SinglePointSetId): constructed "
+                       "from other features' points, not imported")
+                doc.not_read.append(f"{where} ({name}): {why}")
+                doc.unsupported.append((name, kind, fid, why))
                 set_ids = []
                 break
     geometry = _geometry(path, el, where, doc.mm_per_unit)
@@ -318,6 +367,12 @@ def _read_feature(doc: QifDocument, el, tag: str, items, nominal_def, definition
         feature = Feature(kind, fid, name, set_ids, geometry, internal)
         feature.nominal_id = nominal
         doc.features.append(feature)
+    elif plist is None:      # e.g. a point given by its Location only (POINT3 of a CMM report)
+        given = ", ".join(k for k in ("Location", "Normal", "Direction", "AxisPoint") if k in geometry)
+        why = (f"measured without a point list (no PointList; the file gives only its {given or 'result'}): "
+               "no points to import")
+        doc.not_read.append(f"{where} ({name}): {why}")
+        doc.unsupported.append((name, kind, fid, why))
 
 
 def _geometry(path: Path, el, where: str, mm: float) -> dict:
@@ -333,10 +388,21 @@ def _geometry(path: Path, el, where: str, mm: float) -> dict:
         geometry["Direction"] = _vec(path, axis, "Direction", where)
     for key in ("Normal", "Direction"):
         if key in geometry and geometry[key] is not None:
-            norm = float(np.linalg.norm(geometry[key]))
+            v = geometry[key]
+            norm = float(np.linalg.norm(v))
             if not norm > 0:
                 raise InputError(f"{key} is the zero vector", file=path, where=where)
-            geometry[key] = geometry[key] / norm
+            if abs(norm - 1.0) > UNIT_TOL:
+                # normalising it would hide a defect (Location and Normal swapped: the points'
+                # nominal positions would move by millimetres), as for the point normals
+                point = "Location" if "Location" in geometry else "AxisPoint"
+                loc = geometry.get(point)
+                swapped = (f" (are {point} and {key} swapped? the {point} has length "
+                           f"{float(np.linalg.norm(loc / mm)):.6g})"
+                           if loc is not None and abs(float(np.linalg.norm(loc / mm)) - 1.0) <= UNIT_TOL else "")
+                raise InputError(f"{key} ({v[0]:g}, {v[1]:g}, {v[2]:g}) has length {norm:.6g}, not 1: a direction "
+                                 f"must be a unit vector{swapped}", file=path, where=where)
+            geometry[key] = v / norm
     return geometry
 
 

@@ -21,6 +21,11 @@ def replacing(path: str | Path, suffix: str = ".tmp") -> Iterator[Path]:
         yield Path(tmp)
         os.chmod(tmp, 0o644)
         os.replace(tmp, path)
+    except OSError as e:
+        if e.filename is not None and Path(e.filename) != Path(tmp):
+            raise
+        # a full disk while writing the hidden temporary file: said of the file being written
+        raise OSError(e.errno, e.strerror, str(path)) from None
     finally:
         if os.path.exists(tmp):
             os.unlink(tmp)

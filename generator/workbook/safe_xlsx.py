@@ -115,14 +115,14 @@ def check(path: Path, *, max_cells: int = MAX_CELLS) -> None:
             _check_any_dtd(data, info, path)
             if info.filename.lower().endswith(_XML_SUFFIXES) or _looks_like_xml(data):
                 _check_xml_prolog(zf, info, path)
-            _check_content(data, info.filename, path)
+            _check_content(data, info.filename, path, zf)
             cells += len(_CELL.findall(data))
             strings += len(_SHARED_STRING.findall(data))
             if cells > max_cells:
                 raise InputError(f"more than {max_cells:,} cells: too large for this command (see "
                                  "docs/input_limits.md)" + (" -- use --engine libreoffice"
                                                             if max_cells < MAX_CELLS else ""),
-                                 file=path, where=f"part {info.filename}")
+                                 file=path, where=part_place(zf, info.filename))
             if strings > MAX_SHARED_STRINGS:
                 raise InputError(f"more than {MAX_SHARED_STRINGS:,} shared strings: too large to read "
                                  "(see docs/input_limits.md)", file=path, where=f"part {info.filename}")
@@ -206,8 +206,24 @@ def _attrs(raw: bytes) -> dict[str, str]:
             .decode("utf-8", "replace") for m in _ATTR.finditer(raw)}
 
 
-def _check_content(data: bytes, name: str, path: Path) -> None:
-    """Relationships, content types, defined names and formulas of one part."""
+def part_place(zf: zipfile.ZipFile | None, name: str) -> str:
+    """Where a part is, for a message: ``sheet Data`` for a worksheet (its name in the workbook,
+    through xl/workbook.xml and its relationships), else ``part NAME``."""
+    if zf is not None and name.lower().startswith(("xl/worksheets/", "xl/chartsheets/")):
+        from .cache import sheet_parts
+
+        try:
+            for title, part in sheet_parts(zf).items():
+                if part == name:
+                    return f"sheet {title}"
+        except (KeyError, ValueError, UnicodeDecodeError, zipfile.BadZipFile, OSError):
+            pass
+    return f"part {name}"
+
+
+def _check_content(data: bytes, name: str, path: Path, zf: zipfile.ZipFile | None = None) -> None:
+    """Relationships, content types, defined names and formulas of one part (``zf``: the archive,
+    to name a worksheet by its sheet name)."""
     where = f"part {name}"
     low = name.lower()
     if low.endswith(".rels") or low == "[content_types].xml":
@@ -226,7 +242,7 @@ def _check_content(data: bytes, name: str, path: Path) -> None:
                                  file=path, where=where)
     if b"ddeLink" in data or b"oleLink" in data:
         raise InputError(f"the workbook contains a DDE/OLE link (a command run by another program): {_LINK_HINT}",
-                         file=path, where=where)
+                         file=path, where=part_place(zf, name))
     if b"definedName" in data:
         for m in _DEFINED_NAME.finditer(data):
             a = _attrs(m.group(1))
@@ -247,7 +263,7 @@ def _check_content(data: bytes, name: str, path: Path) -> None:
             if problem:
                 cell = _cell_of(data, m.start())
                 raise InputError(f"the formula ={text[:80]} {problem}", file=path,
-                                 where=f"{where}" + (f", cell {cell}" if cell else ""))
+                                 where=part_place(zf, name) + (f", cell {cell}" if cell else ""))
 
 
 _CELL_REF = re.compile(rb"""<(?:[A-Za-z_][\w.-]*:)?c\b[^>]*\br\s*=\s*["']([A-Z]+[0-9]+)["']""")
