@@ -58,7 +58,7 @@ from .partial import frame_from_axis
 
 __all__ = [
     "ELEMENTS", "MIN_POINTS", "FeatureFit", "FeatureUncertainty", "fit", "propagate",
-    "G_A_X", "local_model", "UM2_TO_MM2",
+    "G_A_X", "local_model", "UM2_TO_MM2", "update_frame",
 ]
 
 ELEMENTS: tuple[str, ...] = ("line", "plane", "circle", "sphere", "cylinder", "cone")
@@ -415,6 +415,14 @@ def _update(kind, origin, R, shape, delta):
         return (origin + R @ np.array([dx, dy, 0.0]), R @ _rot_xy(rx, ry),
                 (shape[0] + dr, shape[1] + dphi))
     raise ModelError(kind)
+
+
+def update_frame(kind: str, origin, R, shape, delta):
+    """The element moved by small changes ``delta`` of its local parameters (the paper's order,
+    LOCAL_NAMES): (origin, R, shape) -- the Gauss-Newton update, public for the
+    characteristics (xlfuncs.characteristics) that differentiate through it."""
+    return _update(kind, np.asarray(origin, float), np.asarray(R, float), tuple(shape),
+                   np.asarray(delta, float))
 
 
 def _gauss_newton(kind, X, w, origin, R, shape, scale, max_iter):
