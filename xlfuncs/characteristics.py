@@ -394,6 +394,12 @@ def _form(ctx, c, consts, frozen):
         raise ModelError(f"{c.name}: straightness needs the zone direction (the surface's normal)")
     if c.type == "roundness" and ctx.jf.fits[c.features[0]].kind != "circle":
         raise ModelError(f"{c.name}: roundness needs a circle in a coordinate plane")
+    if frozen is not None and "delta" in frozen:
+        # the minimum zone's own (iterated) feature: the contact weights belong to it
+        name = c.features[0]
+        base = ctx.deltas.get(name)
+        delta = frozen["delta"] if base is None else base + frozen["delta"]
+        ctx = _Context(ctx.jf, ctx.frame_specs, deltas={name: delta}, X=ctx.X, B=ctx.B)
     d, g = _form_residuals(ctx, c)
     if frozen is not None:
         return d @ frozen["w"], frozen
@@ -422,7 +428,7 @@ def _mz_exact(ctx, c, consts):
             break
         delta = delta.copy()
         delta[0, list(free)] += zone.p
-    return np.array([zone.h]), {"w": zone.w, "zone": zone, "iterations": its}
+    return np.array([zone.h]), {"w": zone.w, "zone": zone, "iterations": its, "delta": delta}
 
 
 def _datum_direction(ctx, c):
