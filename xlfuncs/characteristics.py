@@ -572,6 +572,8 @@ def _sensitivities(jf, frames, c, consts, frozen):
         deltas[name] = d
     v, _ = fn(_Context(jf, frames, deltas=deltas, B=2 * n), c, consts, frozen)
     s_A = (v[:n] - v[n:]) / (2 * STEP)
+    # central-difference rounding of parameters the value does not depend on: exactly zero
+    s_A[np.abs(s_A) <= 1e-9 * np.abs(s_A).max(initial=0.0)] = 0.0
     s_Xd = np.zeros(3 * jf.m)
     if frozen is not None and "w" in frozen:
         cols = _point_columns(jf, c.features[0], np.flatnonzero(frozen["w"]))

@@ -1,0 +1,80 @@
+"""The `characteristic` workbook (the plate example): Results recalculated by `formulas` and by
+LibreOffice agree with the JSON to 1e-9; u of the smooth characteristics is a live MMULT of the
+sensitivity row and the joint V_A; the bonus, zone and margin of a position follow the size."""
+
+import json
+
+import openpyxl
+import pytest
+
+from conftest import ENGINES, EXAMPLES, REL, close
+from generator.build import build_task
+from generator.workbook.recalc import recalculate, results_rows
+
+KEYS = ("value", "u", "tolerance_mm", "bonus_mm", "zone_mm", "margin_mm", "u_margin_um")
+
+
+@pytest.fixture(scope="module")
+def built(tmp_path_factory):
+    out = tmp_path_factory.mktemp("plate")
+    results, files = build_task(EXAMPLES / "characteristic_plate.toml", out, plots=False)
+    book = next(f for f in files if f.suffix == ".xlsx")
+    return results, book
+
+
+@pytest.mark.parametrize("engine", ENGINES)
+def test_results_agree_with_the_json(built, engine):
+    results, book = built
+    values = recalculate(book, engine)
+    errors = [(s, c, v) for s, cells in values.items() for c, v in cells.items()
+              if isinstance(v, str) and v.startswith("#")]
+    assert not errors, errors[:3]
+    rows = results_rows(values)
+    chars = results["characteristics"]
+    assert [r["name"] for r in rows] == [c["name"] for c in chars]
+    checked = 0
+    for r, c in zip(rows, chars):
+        for k in KEYS:
+            if c[k] is None:
+                assert r[k] in (None, ""), (c["name"], k)
+                continue
+            assert close(float(r[k]), float(c[k]), rel=REL, floor=1e-15), (engine, c["name"], k, r[k], c[k])
+            checked += 1
+    assert checked >= 2 * len(chars) + 8
+
+
+def test_smooth_u_is_a_live_formula_and_form_u_is_a_noted_core_value(built):
+    _, book = built
+    ws = openpyxl.load_workbook(book)["Characteristics"]
+    by_name = {ws.cell(row=r, column=1).value: r for r in range(2, ws.max_row + 1)}
+    u_pos = ws.cell(row=by_name["pos_H1_MMC"], column=6).value
+    assert "MMULT" in u_pos.text and "V_A" in u_pos.text
+    form = ws.cell(row=by_name["flat_A_MZ"], column=6)
+    assert isinstance(form.value, float) and "active-set" in form.comment.text
+    assert ws.cell(row=by_name["pos_H1_MMC"], column=13).value.startswith("=MAX(0,")
+
+
+def test_the_bonus_follows_the_size_limit(built, tmp_path):
+    """Raising the hole's lower size limit (its MMC size) by 0.01 mm takes 0.01 mm off the bonus,
+    the zone and the margin of its position at MMC."""
+    results, book = built
+    wb = openpyxl.load_workbook(book)
+    ws = wb["Characteristics"]
+    by_name = {ws.cell(row=r, column=1).value: r for r in range(2, ws.max_row + 1)}
+    ws.cell(row=by_name["dia_H1"], column=9).value = 10.01
+    edited = tmp_path / "edited.xlsx"
+    wb.save(edited)
+    rows = {r["name"]: r for r in results_rows(recalculate(edited, "formulas"))}
+    ref = {c["name"]: c for c in results["characteristics"]}["pos_H1_MMC"]
+    assert rows["pos_H1_MMC"]["bonus_mm"] == pytest.approx(ref["bonus_mm"] - 0.01, abs=1e-12)
+    assert rows["pos_H1_MMC"]["margin_mm"] == pytest.approx(ref["margin_mm"] - 0.01, abs=1e-12)
+
+
+def test_the_json_carries_tolerances_for_the_decision_rules(built):
+    results, _ = built
+    c = {c["name"]: c for c in results["characteristics"]}
+    assert c["dia_H1"]["lsl"] == 10.0 and c["dia_H1"]["usl"] == 10.05
+    assert c["flat_A_MZ"]["tolerance_mm"] == 0.01 and c["flat_A_MZ"]["method"] == "MZ"
+    p = c["pos_H1_MMC"]
+    assert p["material_condition"] == "MMC" and p["zone_mm"] == pytest.approx(0.05 + p["bonus_mm"])
+    json.dumps(results)
