@@ -32,15 +32,20 @@ def test_results_agree_with_the_json(built, engine):
     rows = results_rows(values)
     chars = results["characteristics"]
     assert [r["name"] for r in rows] == [c["name"] for c in chars]
-    checked = 0
     for r, c in zip(rows, chars):
-        for k in KEYS:
+        for k in ("value", "u"):
+            assert close(float(r[k]), float(c[k]), rel=REL), (engine, c["name"], k, r[k], c[k])
+    # tolerance, bonus, zone, margin and its u on 'Characteristics'
+    cells = values["Characteristics"]
+    checked = 0
+    for row, c in enumerate(chars, start=2):
+        for col, k in zip("KMNOP", KEYS[2:]):
             if c[k] is None:
-                assert r[k] in (None, ""), (c["name"], k)
                 continue
-            assert close(float(r[k]), float(c[k]), rel=REL, floor=1e-15), (engine, c["name"], k, r[k], c[k])
+            got = cells[f"{col}{row}"]
+            assert close(float(got), float(c[k]), rel=REL, floor=1e-15), (engine, c["name"], k, got)
             checked += 1
-    assert checked >= 2 * len(chars) + 8
+    assert checked == sum(c[k] is not None for c in chars for k in KEYS[2:]) >= 20
 
 
 def test_smooth_u_is_a_live_formula_and_form_u_is_a_noted_core_value(built):
@@ -64,10 +69,12 @@ def test_the_bonus_follows_the_size_limit(built, tmp_path):
     ws.cell(row=by_name["dia_H1"], column=9).value = 10.01
     edited = tmp_path / "edited.xlsx"
     wb.save(edited)
-    rows = {r["name"]: r for r in results_rows(recalculate(edited, "formulas"))}
+    cells = recalculate(edited, "formulas")["Characteristics"]
     ref = {c["name"]: c for c in results["characteristics"]}["pos_H1_MMC"]
-    assert rows["pos_H1_MMC"]["bonus_mm"] == pytest.approx(ref["bonus_mm"] - 0.01, abs=1e-12)
-    assert rows["pos_H1_MMC"]["margin_mm"] == pytest.approx(ref["margin_mm"] - 0.01, abs=1e-12)
+    r = by_name["pos_H1_MMC"]
+    assert cells[f"M{r}"] == pytest.approx(ref["bonus_mm"] - 0.01, abs=1e-12)
+    assert cells[f"N{r}"] == pytest.approx(ref["zone_mm"] - 0.01, abs=1e-12)
+    assert cells[f"O{r}"] == pytest.approx(ref["margin_mm"] - 0.01, abs=1e-12)
 
 
 def test_the_json_carries_tolerances_for_the_decision_rules(built):

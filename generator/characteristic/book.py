@@ -53,46 +53,14 @@ def write_characteristic_book(task, results: dict, path, jf, res, V) -> None:
     va = _write_V_A(book, jf, V)
     srows = _write_sensitivity(book, jf, res)
     crows = _write_characteristics(book, res, va, srows, task)
-    cols = ["name", "type", "value", "unit", "u", "u_unit", "tolerance_mm", "bonus_mm", "zone_mm",
-            "margin_mm", "u_margin_um"]
-    src = {"value": 4, "u": 6, "tolerance_mm": 11, "bonus_mm": 13, "zone_mm": 14, "margin_mm": 15,
-           "u_margin_um": 16}
-    rows = []
-    for r, row in zip(res, crows):
-        out = []
-        for c in cols:
-            if c == "name":
-                out.append(r.name)
-            elif c == "type":
-                out.append(r.spec.type)
-            elif c == "unit":
-                out.append(r.unit)
-            elif c == "u_unit":
-                out.append(r.u_unit)
-            elif _present(r, c):
-                out.append(Formula(f"={cell(row, src[c], 'Characteristics')}"))
-            else:
-                out.append("")
-        rows.append(out)
-    book.results(cols, rows, notes=[None, None, "measured value in 'unit'", "mm or deg",
-                                    "standard uncertainty in u_unit", "um or urad",
-                                    "tolerance zone width, mm", "bonus, mm", "zone, mm",
-                                    "zone - value, mm", "u of the margin, µm"])
+    # the contract's Results: one complete row per characteristic (tolerance, bonus, zone and
+    # margin, which not every characteristic has, are on 'Characteristics' and in the JSON)
+    rows = [[r.name, r.spec.type, Formula(f"={cell(row, 4, 'Characteristics')}"), r.unit,
+             Formula(f"={cell(row, 6, 'Characteristics')}"), r.u_unit] for r, row in zip(res, crows)]
+    book.results(["name", "type", "value", "unit", "u", "u_unit"], rows,
+                 notes=[None, None, "measured value in 'unit'", "mm or deg",
+                        "standard uncertainty in u_unit", "um or urad"])
     book.save(path)
-
-
-def _present(r: ch.Result, c: str) -> bool:
-    if c in ("value", "u"):
-        return True
-    if c == "tolerance_mm":
-        return r.spec.tolerance_mm is not None
-    if c in ("bonus_mm",):
-        return r.bonus_mm is not None
-    if c in ("zone_mm", "margin_mm"):
-        return r.zone_mm is not None
-    if c == "u_margin_um":
-        return r.u_margin_um is not None
-    return False
 
 
 def _instructions(book: Book, task, jf, res) -> None:

@@ -277,10 +277,20 @@ sigma_P0_um = 0.1
 id = "P1"
 offset_mm = [0.0, 0.0, -50.0]
 
-[[features]]
+[[features]]              # a face: its points are those whose id starts with "A."
 name = "A"
 type = "plane"
 id_prefix = "A."
+
+[[features]]
+name = "B"
+type = "plane"
+id_prefix = "B."
+
+[[frames]]                # datum reference frame A|B (primary plane, secondary plane)
+name = "AB"
+primary = "A"
+secondary = "B"
 
 [[characteristics]]
 name = "flatness_A"
@@ -288,4 +298,25 @@ type = "flatness"
 features = ["A"]
 method = "MZ"            # LS (peak-to-valley to the least-squares plane) or MZ (minimum zone)
 tolerance_mm = 0.01
+
+[[characteristics]]
+name = "perpendicularity_B"
+type = "perpendicularity"
+features = ["B"]
+frame = "AB"
+tolerance_mm = 0.02
 '''
+
+NEW_TASK_FILES = {"points.csv": '''# A face A (z = 0, outward normal -z) and a side face B (x = 0, outward -x), mm
+id,x,y,z,nx,ny,nz,probe
+A.1,10,10,0.0012,0,0,-1,P1
+A.2,90,10,-0.0008,0,0,-1,P1
+A.3,90,70,0.0021,0,0,-1,P1
+A.4,10,70,-0.0015,0,0,-1,P1
+A.5,50,40,0.0004,0,0,-1,P1
+A.6,30,55,-0.0002,0,0,-1,P1
+B.1,0.0011,10,3,-1,0,0,P1
+B.2,-0.0006,70,3,-1,0,0,P1
+B.3,0.0031,40,7,-1,0,0,P1
+B.4,0.0019,20,7,-1,0,0,P1
+'''}

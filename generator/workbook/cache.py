@@ -67,9 +67,8 @@ def results_table(kind: str, results: dict) -> list[dict[str, Any]]:
         fe = results["feature"]
         return [{"parameter": n, "value": fe["parameters"][n], "u": fe["u"][n]} for n in fe["parameter_names"]]
     if kind == "characteristic":
-        keys = ("value", "u", "tolerance_mm", "bonus_mm", "zone_mm", "margin_mm", "u_margin_um")
-        return [{"name": c["name"], "type": c["type"], "unit": c["unit"], "u_unit": c["u_unit"],
-                 **{k: c[k] for k in keys if c[k] is not None}} for c in results["characteristics"]]
+        return [{"name": c["name"], "type": c["type"], "value": c["value"], "unit": c["unit"],
+                 "u": c["u"], "u_unit": c["u_unit"]} for c in results["characteristics"]]
     if kind == "diagnose":
         # the diagnosis book's Results rows, built by generator.diagnosis.book from the same numbers
         # as diagnosis.json (the core's GLS estimates)
