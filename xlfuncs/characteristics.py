@@ -50,7 +50,7 @@ __all__ = [
 
 FORM_TYPES = ("flatness", "straightness", "roundness", "cylindricity")
 ORIENTATION_TYPES = ("perpendicularity", "parallelism", "angularity")
-SIZE_TYPES = ("diameter", "width")
+SIZE_TYPES = ("diameter", "width", "cone_angle")
 TYPES = SIZE_TYPES + ("distance", "angle") + FORM_TYPES + ORIENTATION_TYPES + ("position",)
 #: the types whose value is a smooth function of the features' parameters only
 SMOOTH_TYPES = SIZE_TYPES + ("distance", "angle", "position")
@@ -92,7 +92,8 @@ class FrameSpec:
 class CharacteristicSpec:
     """A characteristic of the drawing.
 
-    ``type``: diameter (circle, cylinder, sphere), width (two planes), distance (locating point
+    ``type``: diameter (circle, cylinder, sphere), width (two planes), cone_angle (a cone's
+    included angle 2 phi, deg), distance (locating point
     of the second feature to the first element), angle (between the two fitted directions --
     normals outward, axes as oriented -- 0 to 180 deg),
     flatness/straightness/roundness/cylindricity (``method`` "LS" peak-to-valley of the
@@ -327,6 +328,11 @@ def _perp_unit(v, ref, fallback):
 
 
 def _size(ctx, c, consts, frozen):
+    if c.type == "cone_angle":
+        g = ctx.geom(c.features[0])
+        if g.kind != "cone":
+            raise ModelError(f"{c.name}: a cone angle needs a cone, not {g.kind}")
+        return 2.0 * np.degrees(np.abs(g.shape[:, 1])), frozen
     if c.type == "diameter":
         g = ctx.geom(c.features[0])
         if g.kind not in ("circle", "circle_space", "cylinder", "sphere"):
@@ -509,7 +515,7 @@ def _position(ctx, c, consts, frozen):
     return 2.0 * np.hypot(q[:, 0] - nom[0], q[:, 1] - nom[1]), frozen
 
 
-_VALUE = {"diameter": _size, "width": _size, "distance": _distance, "angle": _angle,
+_VALUE = {"diameter": _size, "width": _size, "cone_angle": _size, "distance": _distance, "angle": _angle,
           "flatness": _form, "straightness": _form, "roundness": _form, "cylindricity": _form,
           "perpendicularity": _orientation, "parallelism": _orientation,
           "angularity": _orientation, "position": _position}
@@ -643,7 +649,8 @@ def evaluate(jf: JointFit, frames: Sequence[FrameSpec] | Mapping[str, FrameSpec]
         active = np.array([], int)
         if frozen is not None and "w" in frozen:
             active = _point_columns(jf, c.features[0], np.flatnonzero(frozen["w"]))
-        res = Result(spec=c, value=value, unit="deg" if c.type == "angle" else "mm", s_A=s_A,
+        res = Result(spec=c, value=value, unit="deg" if c.type in ("angle", "cone_angle") else "mm",
+                     s_A=s_A,
                      s_X=s_X, smooth=c.type in SMOOTH_TYPES or (
                          c.type in ORIENTATION_TYPES and role(ctx.geom(c.features[0])) == AXIS),
                      active=active, zone_iterations=its)
