@@ -144,3 +144,19 @@ def test_a_broken_reference_is_an_input_error(tmp_path):
     bad.write_text(text, encoding="utf-8")
     with pytest.raises(InputError, match="unknown nominal '9999'"):
         qc.read_characteristics(bad)
+
+
+def test_cmmwb_import_to_a_qif_file_writes_the_annotated_copy_and_lists_the_characteristics(tmp_path):
+    from generator.importers import run_import
+
+    out = tmp_path / "with_u.qif"
+    files, report = run_import(NIST, out)
+    assert files == [out] and out.is_file()
+    assert report[0].startswith("QIF 2.1.0: 38 characteristics, 20 measured part(s)")
+    assert "points: none in the file" in report[1]
+    assert "combinedUncertainty written on 740 measured values" in report
+    assert "not supported: UserDefinedLinear (1 definition)" in report
+    assert any(r.startswith("Cone Angle 3 [Angle]: tolerance 89 .. 91; part 117: 88.953 FAIL; u = ")
+               for r in report)
+    with pytest.raises(InputError, match="exists"):
+        run_import(NIST, out)

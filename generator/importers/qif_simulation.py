@@ -30,7 +30,11 @@ import numpy as np
 from xlfuncs import characteristics as ch
 from xlfuncs import pointcloud as pc
 
-from .qif_characteristics import QifCharacteristics
+from pathlib import Path
+
+from ..errors import InputError
+from ..workbook.atomic import replacing
+from .qif_characteristics import QifCharacteristics, read_characteristics, write_uncertainties
 
 #: the Forbes 2025 point-cloud model of the stand-in measurement (MPE1-like, Table 3)
 PARAMS = pc.Parameters(sigma_R_um=0.2, sigma_S_ppm=0.7, sigma_Sa_ppm=0.8, sigma_Q_ppm=0.9,
@@ -156,3 +160,37 @@ def uncertainties(doc: QifCharacteristics, seed: int = 1):
         r = by[cname]
         u[iid] = r.u * 1e-3 if r.unit == "mm" else r.u * 1e-6 * 180.0 / np.pi
     return u, res, skipped
+
+
+def annotate_file(src: Path, out: Path, *, force: bool = False) -> tuple[list[Path], list[str]]:
+    """``cmmwb import FILE.qif --out COPY.qif``: the characteristics of ``src`` listed, their u
+    from the stand-in measurement of this module (the file's own points are not used yet), and a
+    copy with ``combinedUncertainty`` on every supported measured value."""
+    src, out = Path(src), Path(out)
+    if out.exists() and not force:
+        raise InputError("exists (use --force to replace it)", file=out)
+    doc = read_characteristics(src)
+    u, res, skipped = uncertainties(doc)
+    with replacing(out, ".qif.tmp") as tmp:
+        n = write_uncertainties(src, u, tmp)
+    report = [f"QIF {doc.version}: {len(doc.items)} characteristics, {len(doc.parts)} measured "
+              f"part(s); units: {doc.units}",
+              "points: " + ("the file has points; their characteristics are not yet rebuilt from "
+                            "them -- u below is from the stand-in measurement" if doc.has_points
+                            else "none in the file -- u from a simulated measurement of a stand-in "
+                            "part with the file's nominals (generator/importers/qif_simulation.py)"),
+              f"combinedUncertainty written on {n} measured values"]
+    report += [f"not supported: {k} ({v} definition{'s' if v > 1 else ''})"
+               for k, v in sorted(doc.unsupported.items())]
+    report += [f"not simulated: {name} ({why})" for name, why in skipped]
+    first = {a.item.id: a for a in doc.parts[0].actuals} if doc.parts else {}
+    for it in doc.items:
+        d = it.definition
+        tol = (f"zone {d.tolerance:g}" if d.tolerance is not None else
+               f"{it.lsl:g} .. {it.usl:g}" if it.lsl is not None and it.usl is not None else "-")
+        a = first.get(it.id)
+        val = "-" if a is None or a.value is None else f"{a.value:g} {a.status or ''}".strip()
+        uu = "-" if it.id not in u else f"u = {u[it.id]:.3g}"
+        report.append(f"{it.name} [{d.kind}]: tolerance {tol}; part {doc.parts[0].id if doc.parts else '-'}: "
+                      f"{val}; {uu}")
+    return [out], report
