@@ -243,39 +243,17 @@ def joint_V_A(jf: JointFit, V_X_um2: Mapping[str, np.ndarray] | np.ndarray) -> d
 # geometry of (perturbed) features, batched
 # ------------------------------------------------------------------------------------------
 
-def _rot_xy(rx, ry):
-    """R_y(ry) R_x(rx) for arrays of angles (B,) -> (B, 3, 3), as xlfuncs.features."""
-    cx, sx, cy, sy = np.cos(rx), np.sin(rx), np.cos(ry), np.sin(ry)
-    z, o = np.zeros_like(rx), np.ones_like(rx)
-    return np.stack([np.stack([cy, sy * sx, sy * cx], -1), np.stack([z, cx, -sx], -1),
-                     np.stack([-sy, cy * sx, cy * cx], -1)], -2)
-
-
 def _geometry(f: ft.FeatureFit, delta=None, B: int = 1) -> Geometry:
-    """The feature moved by local parameter changes delta (B x n) -- the Gauss-Newton update of
-    xlfuncs.features.update_frame, batched."""
-    o = np.broadcast_to(f.origin_mm, (B, 3)).copy()
-    R = np.broadcast_to(f.R, (B, 3, 3)).copy()
-    sh = np.broadcast_to(np.asarray(f.shape, float), (B, len(f.shape))).copy()
-    if delta is not None:
-        d = np.asarray(delta, float)
-        k = f.kind
-        if k == "sphere":
-            o, sh = o + d[:, :3], sh + d[:, 3:4]
-        elif k == "circle":
-            o = o + np.einsum("bij,bj->bi", R[:, :, :2], d[:, :2])
-            sh = sh + d[:, 2:3]
-        elif k == "plane":
-            o = o + R[:, :, 2] * d[:, :1]
-            R = R @ _rot_xy(d[:, 1], d[:, 2])
-        elif k == "circle_space":
-            o = o + np.einsum("bij,bj->bi", R, d[:, :3])
-            R = R @ _rot_xy(d[:, 3], d[:, 4])
-            sh = sh + d[:, 5:6]
-        else:   # line, cylinder, cone
-            o = o + np.einsum("bij,bj->bi", R[:, :, :2], d[:, :2])
-            R = R @ _rot_xy(d[:, 2], d[:, 3])
-            sh = sh + d[:, 4:]
+    """The feature moved by local parameter changes delta (B x n): xlfuncs.features.update_frame."""
+    if delta is None:
+        o = np.broadcast_to(f.origin_mm, (B, 3)).copy()
+        R = np.broadcast_to(f.R, (B, 3, 3)).copy()
+        sh = np.broadcast_to(np.asarray(f.shape, float), (B, len(f.shape))).copy()
+    else:
+        o, R, sh = ft.update_frame(f.kind, f.origin_mm, f.R, f.shape, delta)
+        if o.shape[0] != B:       # one change for a batch of point sets
+            o, R = np.broadcast_to(o, (B, 3)), np.broadcast_to(R, (B, 3, 3))
+            sh = np.broadcast_to(sh, (B, sh.shape[1]))
     return Geometry(element=f.element, kind=f.kind, point=o, R=R, shape=sh)
 
 

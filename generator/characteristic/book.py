@@ -17,6 +17,7 @@ from __future__ import annotations
 from xlfuncs import characteristics as ch
 
 from .. import __version__
+from ..pointcloud.vx_sheets import explain_inputs, write_inputs, write_points
 from ..workbook.book import Book, Formula
 from ..workbook.xlref import Block, cell
 
@@ -49,6 +50,8 @@ CHAR_NOTES = [
 def write_characteristic_book(task, results: dict, path, jf, res, V) -> None:
     book = Book("characteristic", task.name, f"Characteristics of a drawing — {task.name}")
     _instructions(book, task, jf, res)
+    _, probe_rows = write_inputs(book, task.params, task.cloud)
+    write_points(book, task.cloud, probe_rows)
     _write_features(book, jf)
     va = _write_V_A(book, jf, V)
     srows = _write_sensitivity(book, jf, res)
@@ -90,12 +93,15 @@ def _instructions(book: Book, task, jf, res) -> None:
         "The fit, V_A and the sensitivities are grey values computed by cmmwb's core "
         f"(cmmwb {__version__}); rebuild from the task file to change points or the CMM model "
         "(`cmmwb build`). The feature kind's workbook shows V_A = G V_X G^T of one feature as "
-        "native formulas.",
+        "native formulas. 'Inputs' (the CMM model) and 'Points' are the task's inputs: edit them, "
+        "then `cmmwb read THIS.xlsx --out TASK.toml` and `cmmwb build` recompute everything.",
         "3. Conventions (docs/characteristics.md): least-squares datum features; datum frame z into "
         "the material from the primary plane, x from the secondary; the size of a feature of size "
         "is its least-squares diameter; position and orientation of an axis are taken over the "
         "extent of its points; minimum zones are exact (iterated small-angle LPs).")
-    book.para(*task.notes)
+    if task.notes:
+        book.para(*task.notes)
+    explain_inputs(book)
 
 
 def _write_features(book: Book, jf) -> None:

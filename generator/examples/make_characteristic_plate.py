@@ -3,6 +3,8 @@ C front; flatness, perpendicularity, position at MMC ...) as a task file and its
 (run from this folder)."""
 from pathlib import Path
 
+import numpy as np
+
 from xlfuncs import plate
 
 HERE = Path(__file__).parent
@@ -19,6 +21,18 @@ def _toml_value(v):
     return repr(float(v))
 
 
+def _stable_unit(n):
+    """n normalised until normalising again changes no bit (cmmwb normalises every normal it
+    reads; a normal that is a fixed point makes build -> read -> build exact)."""
+    n = np.asarray(n, float)
+    for _ in range(10):
+        m = n / np.linalg.norm(n)
+        if np.array_equal(m, n):
+            break
+        n = m
+    return n
+
+
 def main():
     X, N, feats, frames, chars = plate.plate()
     label = {}
@@ -29,7 +43,7 @@ def main():
             "id,x,y,z,nx,ny,nz,probe"]
     for i in range(len(X)):
         rows.append(f"{label[i]}," + ",".join(f"{v:.9f}" for v in X[i]) + ","
-                    + ",".join(f"{v:.12g}" for v in N[i]) + ",P1")
+                    + ",".join(repr(float(v)) for v in _stable_unit(N[i])) + ",P1")
     (HERE / f"{NAME}.csv").write_text("\n".join(rows) + "\n")
     out = ["# A plate 100 x 80 x 10 mm with two holes: flatness of datum A, perpendicularity, "
            "parallelism,",
