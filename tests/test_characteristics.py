@@ -250,14 +250,16 @@ def test_the_minimum_zone_sensitivity_is_the_contact_points_weights(plate):
 # ------------------------------------------------------------------------------------------
 
 def test_every_characteristic_agrees_with_a_monte_carlo_over_V_X(plate):
-    """Least squares and minimum zone both: the plate's planted form puts its extreme points
+    """Least squares and minimum zone both, and the margin of a position at MMC (its bonus from
+    the drawn size, correlated with the position): the plate's planted form puts its extreme points
     well apart (1 µm and more against 0.3 µm point noise), so the active sets are stable.
     Measured (seed 1, 62000 draws, ~60 s under load): every u within 1 % of the Monte Carlo."""
     res = plate["results"]
     r = ch.monte_carlo(plate["jf"], plate["frames"], plate["chars"], res, plate["cloud"], PARAMS,
                        rng=np.random.default_rng(1), batch=2000)
     assert r.converged and np.all(2 * r.s_u <= r.tolerance)
-    lin = np.array([x.u for x in res])
+    lin = np.array([x.u for x in res] + [x.u_margin_um for x in res if x.u_margin_um is not None])
+    assert r.names[-2:] == ["pos_H1_MMC margin", "pos_H2 margin"]
     bad = [(n, a, b) for n, a, b, t in zip(r.names, lin, r.u, r.tolerance) if abs(a - b) > 2 * t]
     assert not bad
 

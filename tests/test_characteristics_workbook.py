@@ -85,3 +85,25 @@ def test_the_json_carries_tolerances_for_the_decision_rules(built):
     p = c["pos_H1_MMC"]
     assert p["material_condition"] == "MMC" and p["zone_mm"] == pytest.approx(0.05 + p["bonus_mm"])
     json.dumps(results)
+
+
+@pytest.mark.parametrize("edit, message", [
+    (('features = ["H1"]\ntolerance_mm = 0.01', 'features = ["H9"]\ntolerance_mm = 0.01'),
+     "unknown feature 'H9'"),
+    (('type = "flatness"', 'type = "wobble"'), "unknown type 'wobble'"),
+    (('id_prefix = "A."', 'id_prefix = "Q."'), "no point id starts with 'Q.'"),
+    (('tolerance_mm = 0.05', 'tolerance_mm = "wide"'), "must be a number"),
+])
+def test_bad_tasks_are_input_errors_that_name_the_problem(tmp_path, edit, message):
+    from generator.errors import InputError
+
+    src = (EXAMPLES / "characteristic_plate.toml").read_text(encoding="utf-8")
+    assert edit[0] in src
+    task = tmp_path / "plate.toml"
+    task.write_text(src.replace(edit[0], edit[1], 1), encoding="utf-8")
+    (tmp_path / "characteristic_plate.csv").write_text(
+        (EXAMPLES / "characteristic_plate.csv").read_text(encoding="utf-8"), encoding="utf-8")
+    with pytest.raises(InputError, match=message) as err:
+        build_task(task, tmp_path / "out", plots=False)
+    assert "plate.toml" in str(err.value)
+    assert not (tmp_path / "out").exists() or not any((tmp_path / "out").iterdir())

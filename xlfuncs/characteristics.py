@@ -681,7 +681,9 @@ def monte_carlo(jf: JointFit, frames, chars: Sequence[CharacteristicSpec], resul
     every feature is refitted (Gauss-Newton from the reference, xlfuncs.montecarlo.refit_batch)
     and every characteristic evaluated anew: the extreme points found again, the minimum zone
     solved again (small-angle LP about the draw's least-squares feature, warm-started from the
-    reference's contact points).  Returns the MCResult, u in the results' units (µm, µrad)."""
+    reference's contact points).  Returns the MCResult, u in the results' units (µm, µrad), then
+    the margin (zone - value, µm) of every position with a tolerance, its MMC/LMC bonus taken
+    from the drawn size."""
     from . import montecarlo as mc
 
     frames = frames if isinstance(frames, Mapping) else {f.name: f for f in frames}
@@ -720,7 +722,27 @@ def monte_carlo(jf: JointFit, frames, chars: Sequence[CharacteristicSpec], resul
                 for b in np.flatnonzero(~ok):
                     h[b] = chebyshev_zone(ds[b], gs[b], basis=ref_basis[ci]).h
                 out[s0:s0 + Mb, ci] = h
-        return {"total": (out - ref_values) * conv}
+        cols = [(out - ref_values) * conv]
+        for ci, si, sign, lim in margins:      # zone - value, the bonus from the drawn size
+            bonus = np.clip(sign * (out[:, si] - lim), 0.0, None)
+            cols.append(((chars[ci].tolerance_mm + bonus - out[:, ci]) - ref_margin[ci])[:, None] * 1e3)
+        return {"total": np.hstack(cols)}
 
-    names = [c.name for c in chars]
+    # the margins of positions with a tolerance (MMC/LMC bonus from the size characteristic)
+    by_name = {c.name: i for i, c in enumerate(chars)}
+    margins = []
+    for ci, (c, r) in enumerate(zip(chars, results)):
+        if c.type != "position" or c.tolerance_mm is None:
+            continue
+        if c.material_condition == "RFS":
+            margins.append((ci, ci, 0.0, 0.0))
+            continue
+        size = chars[by_name[c.size]]
+        mmc = c.material_condition == "MMC"
+        lim = (size.lsl if c.internal else size.usl) if mmc else (size.usl if c.internal else size.lsl)
+        margins.append((ci, by_name[c.size], (1.0 if c.internal else -1.0) * (1.0 if mmc else -1.0), lim))
+    ref_margin = {ci: c.tolerance_mm + max(0.0, sign * (ref_values[si] - lim)) - ref_values[ci]
+                  for ci, si, sign, lim in margins for c in [chars[ci]]}
+
+    names = [c.name for c in chars] + [f"{chars[ci].name} margin" for ci, *_ in margins]
     return mc.adaptive(one_batch, names, n_dig=n_dig, batch=batch, max_draws=max_draws, rng=rng)

@@ -56,6 +56,7 @@ def write_characteristic_book(task, results: dict, path, jf, res, V) -> None:
     va = _write_V_A(book, jf, V)
     srows = _write_sensitivity(book, jf, res)
     crows = _write_characteristics(book, res, va, srows, task)
+    _write_chart(book, res, crows)
     # the contract's Results: one complete row per characteristic (tolerance, bonus, zone and
     # margin, which not every characteristic has, are on 'Characteristics' and in the JSON)
     rows = [[r.name, r.spec.type, Formula(f"={cell(row, 4, 'Characteristics')}"), r.unit,
@@ -102,6 +103,29 @@ def _instructions(book: Book, task, jf, res) -> None:
     if task.notes:
         book.para(*task.notes)
     explain_inputs(book)
+
+
+def _write_chart(book: Book, res, crows) -> None:
+    """'Chart': u of the length characteristics (µm), one bar each, from 'Characteristics'."""
+    from openpyxl.chart import Reference
+
+    ws = book.sheet("Chart")
+    book.header(ws, 1, 1, ["characteristic", "u_um"],
+                [None, "standard uncertainty, µm (from 'Characteristics')"])
+    r = 2
+    for x, row in zip(res, crows):
+        if x.unit != "mm":
+            continue
+        book.text(ws, r, 1, x.name)
+        book.formula(ws, r, 2, f"={cell(row, 6, 'Characteristics')}", fmt=FMT_U)
+        r += 1
+    if r == 2:
+        return
+    cats = Reference(ws, min_col=1, min_row=2, max_row=r - 1)
+    vals = Reference(ws, min_col=2, min_row=1, max_row=r - 1)
+    book.bars(ws, "D2", "u of each characteristic under V_X", "u (µm)", cats, [vals],
+              height=max(7.5, 0.75 * (r - 2) + 3))
+    book.print_setup(ws, landscape=True)
 
 
 def _write_features(book: Book, jf) -> None:

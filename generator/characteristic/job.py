@@ -20,7 +20,7 @@ Tolerances are carried into the JSON and the Results sheet; no conformity decisi
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -56,6 +56,8 @@ class Task:
     characteristics: list[ch.CharacteristicSpec]
     path: Path
     points_file: str | None = None
+    #: (joint fit, results, V_X components), computed once by :func:`fitted`
+    cache: tuple | None = field(default=None, repr=False, compare=False)
 
 
 def _array_of_tables(path, doc, key, required=True):
@@ -160,30 +162,21 @@ def load(path: Path, doc: dict) -> Task:
     return task
 
 
-_FIT_CACHE: dict[int, tuple] = {}
-
-
 def fitted(task: Task):
-    """(joint fit, results with u) of a task; computed once per task object."""
-    key = id(task)
-    hit = _FIT_CACHE.get(key)
-    if hit is not None and hit[0] is task:
-        return hit[1], hit[2], hit[3]
-    jf = ch.fit_features(task.cloud.X_mm, task.cloud.N, task.features)
-    V = pc.V_X_components(task.cloud, task.params)
-    res = ch.evaluate(jf, task.frames, task.characteristics, V)
-    _FIT_CACHE.clear()
-    _FIT_CACHE[key] = (task, jf, res, V)
-    return jf, res, V
+    """(joint fit, results with u, V_X components) of a task; computed once per task."""
+    if task.cache is None:
+        jf = ch.fit_features(task.cloud.X_mm, task.cloud.N, task.features)
+        V = pc.V_X_components(task.cloud, task.params)
+        task.cache = (jf, ch.evaluate(jf, task.frames, task.characteristics, V), V)
+    return task.cache
 
 
 def _row(r: ch.Result) -> dict:
     c = r.spec
-    scale = 1.0
     out = {
         "name": c.name, "type": c.type, "method": c.method if c.type in ch.FORM_TYPES else None,
         "features": list(c.features), "frame": c.frame,
-        "value": r.value * scale, "unit": r.unit, "u": r.u, "u_unit": r.u_unit,
+        "value": r.value, "unit": r.unit, "u": r.u, "u_unit": r.u_unit,
         "smooth": bool(r.smooth),
         "components": {k: v for k, v in r.u_factors.items()},
         "nominal": c.nominal, "lsl": c.lsl, "usl": c.usl, "tolerance_mm": c.tolerance_mm,
