@@ -160,3 +160,23 @@ def test_cmmwb_import_to_a_qif_file_writes_the_annotated_copy_and_lists_the_char
                for r in report)
     with pytest.raises(InputError, match="exists"):
         run_import(NIST, out)
+
+
+def test_a_file_with_points_gives_its_form_and_size_characteristics_u_from_them(tmp_path):
+    """QIF 3.0 sample: flatness, circularity, cylinder and circle diameters of one measured
+    feature each get u from the file's own points (normals from the measured elements, stated);
+    the positions from the stand-in plate; LinearCoordinate and PointProfile are named."""
+    from generator.importers import run_import
+
+    out = tmp_path / "sample_u.qif"
+    files, report = run_import(SAMPLE, out)
+    assert report[1].startswith("points: the file has points: 7 characteristics of one measured feature")
+    assert "combinedUncertainty written on 11 measured values" in report
+    assert any(r.startswith("FLATA: u from the file's 6 points of DATUMA") for r in report)
+    assert any(r.startswith("RND_2: u from the file's 219 points of CIRCLE2") for r in report)
+    assert not any(r.startswith("not simulated: RND_2") for r in report)
+    vals = {a.find("{*}CharacteristicItemId").text: a.find("{*}Value").get("combinedUncertainty")
+            for a in ET.parse(out).getroot().iter() if a.tag.endswith("CharacteristicMeasurement")}
+    flat_item = next(i.id for i in qc.read_characteristics(SAMPLE).items if i.name == "FLATA")
+    assert 0.0001 < float(vals[flat_item]) < 0.001          # mm: a few tenths of a µm
+    assert sum(v is not None for v in vals.values()) == 11

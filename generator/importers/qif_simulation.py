@@ -162,27 +162,82 @@ def uncertainties(doc: QifCharacteristics, seed: int = 1):
     return u, res, skipped
 
 
+#: QIF feature kinds -> cmmwb elements, and the characteristic types built from one feature's points
+POINT_ELEMENTS = {"Plane": "plane", "Circle": "circle", "Cylinder": "cylinder", "Sphere": "sphere"}
+POINT_TYPES = {"flatness": ("plane",), "roundness": ("circle",), "cylindricity": ("cylinder",),
+               "diameter": ("circle", "cylinder", "sphere")}
+
+
+def from_points(src: Path, doc: QifCharacteristics) -> tuple[dict[str, float], list[str]]:
+    """u (file units) of the characteristics of one measured feature whose points the file holds
+    (QIF 3 ``FeatureMeasurementIds``): flatness, circularity (a circle in a coordinate plane),
+    cylindricity, diameter -- fitted to the file's points under the stand-in V_X
+    (:data:`PARAMS`), normals from the file or from the measured element
+    (generator.importers.qif.normals_from_feature).  Returns (u by item id, report lines)."""
+    from . import qif
+
+    if not doc.has_points or not doc.parts:
+        return {}, []
+    qd = qif.read_qif(src)
+    feats = {f.id: f for f in qd.features}
+    u, lines = {}, []
+    for a in doc.parts[0].actuals:
+        t = a.item.definition.type
+        if t not in POINT_TYPES or len(a.feature_ids) != 1 or a.feature_ids[0] not in feats:
+            continue
+        f = feats[a.feature_ids[0]]
+        el = POINT_ELEMENTS.get(f.kind)
+        if el not in POINT_TYPES[t]:
+            continue
+        ps = qd.points_of(f)
+        N, note = (ps.N, "normals from the file") if ps.N is not None else \
+            qif.normals_from_feature(qd, f, ps)
+        plane = "xy"
+        if el == "circle":
+            n = np.abs(np.asarray(f.geometry.get("Normal", (0.0, 0.0, 1.0)), float))
+            axis = int(np.argmax(n))
+            if n[axis] < (1 - 1e-9) * np.linalg.norm(n):
+                continue                      # roundness needs a circle in a coordinate plane
+            plane = ("yz", "zx", "xy")[axis]
+        spec = ch.FeatureSpec("F", el, tuple(range(len(ps.X_mm))), circle_plane=plane)
+        kw = {"method": "MZ"} if t in ("flatness", "roundness", "cylindricity") else {}
+        c = ch.CharacteristicSpec("c", t, ("F",), **kw)
+        cloud = pc.PointCloud(ps.X_mm, N, np.zeros(len(ps.X_mm), int), PROBES)
+        r = ch.evaluate(ch.fit_features(ps.X_mm, N, [spec]), [], [c],
+                        pc.V_X_components(cloud, PARAMS))[0]
+        u[a.item.id] = r.u * 1e-3
+        lines.append(f"{a.item.name}: u from the file's {len(ps.X_mm)} points of {f.name} "
+                     f"({note}; {'tip centres' if ps.compensated is False else 'surface points'})")
+    return u, lines
+
+
 def annotate_file(src: Path, out: Path, *, force: bool = False) -> tuple[list[Path], list[str]]:
     """``cmmwb import FILE.qif --out COPY.qif``: the characteristics of ``src`` listed, their u
-    from the stand-in measurement of this module (the file's own points are not used yet), and a
-    copy with ``combinedUncertainty`` on every supported measured value."""
+    from the file's own points where a characteristic is of one measured feature with points
+    (:func:`from_points`), else from the stand-in measurement of this module, and a copy with
+    ``combinedUncertainty`` on every supported measured value."""
     src, out = Path(src), Path(out)
     if out.exists() and not force:
         raise InputError("exists (use --force to replace it)", file=out)
     doc = read_characteristics(src)
     u, res, skipped = uncertainties(doc)
+    u_pts, pts_lines = from_points(src, doc)
+    u.update(u_pts)
     with replacing(out, ".qif.tmp") as tmp:
         n = write_uncertainties(src, u, tmp)
     report = [f"QIF {doc.version}: {len(doc.items)} characteristics, {len(doc.parts)} measured "
               f"part(s); units: {doc.units}",
-              "points: " + ("the file has points; their characteristics are not yet rebuilt from "
-                            "them -- u below is from the stand-in measurement" if doc.has_points
-                            else "none in the file -- u from a simulated measurement of a stand-in "
+              "points: " + (f"the file has points: {len(u_pts)} characteristics of one measured "
+                            "feature get u from them, the others from the stand-in measurement"
+                            if doc.has_points else
+                            "none in the file -- u from a simulated measurement of a stand-in "
                             "part with the file's nominals (generator/importers/qif_simulation.py)"),
               f"combinedUncertainty written on {n} measured values"]
     report += [f"not supported: {k} ({v} definition{'s' if v > 1 else ''})"
                for k, v in sorted(doc.unsupported.items())]
-    report += [f"not simulated: {name} ({why})" for name, why in skipped]
+    from_file = {it.name for it in doc.items if it.id in u_pts}
+    report += [f"not simulated: {name} ({why})" for name, why in skipped if name not in from_file]
+    report += pts_lines
     first = {a.item.id: a for a in doc.parts[0].actuals} if doc.parts else {}
     for it in doc.items:
         d = it.definition
