@@ -11,7 +11,6 @@ from scipy.optimize import linprog
 
 from xlfuncs import characteristics as ch
 from xlfuncs import features as ft
-from xlfuncs import montecarlo as mc
 from xlfuncs import plate as pl
 from xlfuncs import pointcloud as pc
 from xlfuncs.errors import ModelError

@@ -4,8 +4,7 @@ values and the file's own pass/fail; their u from a documented simulated measure
 back as combinedUncertainty; the QIF 3.0 community sample's flatness reproduced from its points
 by the minimum zone."""
 
-import math
-import shutil
+from pathlib import Path
 from xml.etree import ElementTree as ET
 
 import numpy as np
@@ -16,9 +15,6 @@ from generator.importers import qif
 from generator.importers import qif_characteristics as qc
 from generator.importers import qif_simulation as qs
 from xlfuncs import characteristics as ch
-
-from conftest import EXAMPLES  # noqa: F401  (tests/ on sys.path)
-from pathlib import Path
 
 DATA = Path(__file__).parent / "data" / "qif"
 NIST = DATA / "nist_sms_plate_results.qif"

@@ -448,7 +448,13 @@ def _orientation(ctx, c, consts, frozen):
     zd, datum_plane = _datum_direction(ctx, c)
     a = _alpha(c) * RAD
     v = g.direction
-    fallback = ctx.frame(c.frame).R[:, :, 0] if c.frame else _unit(np.cross(zd, [0.0, 0.0, 1.0] if abs(zd[0, 2]) < 0.9 else [1.0, 0.0, 0.0]))
+    # t: the direction of the feature's tilt from the datum direction (where there is none, the
+    # frame's x axis, or any direction orthogonal to the datum)
+    if c.frame:
+        fallback = ctx.frame(c.frame).R[:, :, 0]
+    else:
+        helper = np.array([0.0, 0.0, 1.0]) if abs(zd[0, 2]) < 0.9 else np.array([1.0, 0.0, 0.0])
+        fallback = _unit(np.cross(zd, helper))
     t = _perp_unit(v, zd, fallback)
     # the zone's normal (planar) makes alpha with a datum plane's normal ...
     e = (np.cos(a) * zd + np.sin(a) * t) if datum_plane else (np.sin(a) * zd + np.cos(a) * t)

@@ -239,12 +239,11 @@ def write_plots(task: Task, results: dict, out_dir: Path) -> list[Path]:
 def summary(results: dict) -> list[str]:
     lines = []
     for r in results["characteristics"]:
-        v = r["value"] * (1e3 if r["unit"] == "mm" and r["type"] not in ch.SIZE_TYPES + ("distance",) else 1)
-        unit = ("µm" if r["unit"] == "mm" and r["type"] not in ch.SIZE_TYPES + ("distance",)
-                else r["unit"])
+        small = r["unit"] == "mm" and r["type"] not in ch.SIZE_TYPES + ("distance",)
+        v, unit = (r["value"] * 1e3, "µm") if small else (r["value"], r["unit"])
+        u_unit = "µm" if r["u_unit"] == "um" else "µrad"
         extra = f", zone {r['zone_mm'] * 1e3:.1f} µm" if r["zone_mm"] is not None else ""
-        lines.append(f"{r['name']}: {v:.4f} {unit}, u = {r['u']:.3f} {'µm' if r['u_unit'] == 'um' else 'µrad'}"
-                     f"{extra}")
+        lines.append(f"{r['name']}: {v:.4f} {unit}, u = {r['u']:.3f} {u_unit}{extra}")
     return lines
 
 
