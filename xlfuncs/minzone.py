@@ -201,8 +201,11 @@ def basis_is_optimal(d, g, basis, tol: float = 1e-9, feasibility: float = 1e-6):
     b = np.zeros(k + 2)
     b[:2] = 1.0
     cB = d[:, idx] * sign
-    xB = np.linalg.solve(AB, np.broadcast_to(b, (M, k + 2))[..., None])[..., 0]
-    y = np.linalg.solve(np.transpose(AB, (0, 2, 1)), cB[..., None])[..., 0]
+    try:
+        xB = np.linalg.solve(AB, np.broadcast_to(b, (M, k + 2))[..., None])[..., 0]
+        y = np.linalg.solve(np.transpose(AB, (0, 2, 1)), cB[..., None])[..., 0]
+    except np.linalg.LinAlgError:      # a draw made the basis singular: solve every draw afresh
+        return np.zeros(M, bool), np.zeros(M), np.zeros((M, m))
     # reduced costs: lambda_i: d_i - y0 - g_i.y2 ; mu_i: -d_i - y1 + g_i.y2
     gy = np.einsum("Mik,Mk->Mi", g, y[:, 2:])
     r_l = d - y[:, :1] - gy
