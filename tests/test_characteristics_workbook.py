@@ -107,3 +107,27 @@ def test_bad_tasks_are_input_errors_that_name_the_problem(tmp_path, edit, messag
         build_task(task, tmp_path / "out", plots=False)
     assert "plate.toml" in str(err.value)
     assert not (tmp_path / "out").exists() or not any((tmp_path / "out").iterdir())
+
+
+def test_a_tolerance_typed_in_the_workbook_goes_back_to_the_task_file(built, tmp_path):
+    """cmmwb read: the flatness tolerance typed on 'Characteristics' is in the task file read
+    back, and that task builds with it (the zone, not the value, changes)."""
+    import tomllib
+
+    from generator.read_cli import read_to_files
+
+    results, book = built
+    wb = openpyxl.load_workbook(book)
+    ws = wb["Characteristics"]
+    row = next(r for r in range(2, ws.max_row + 1) if ws.cell(row=r, column=1).value == "flat_A_MZ")
+    ws.cell(row=row, column=11).value = 0.02
+    edited = tmp_path / "edited.xlsx"
+    wb.save(edited)
+    files = read_to_files(edited, tmp_path / "back" / "task.toml")
+    doc = tomllib.loads(files[0].read_text(encoding="utf-8"))
+    c = next(c for c in doc["characteristics"] if c["name"] == "flat_A_MZ")
+    assert c["tolerance_mm"] == 0.02 and c["method"] == "MZ"
+    again, _ = build_task(files[0], tmp_path / "again", plots=False)
+    ref = {c["name"]: c for c in results["characteristics"]}["flat_A_MZ"]
+    new = {c["name"]: c for c in again["characteristics"]}["flat_A_MZ"]
+    assert new["tolerance_mm"] == 0.02 and new["value"] == ref["value"] and new["u"] == ref["u"]
