@@ -98,7 +98,9 @@ class CharacteristicSpec:
     normals outward, axes as oriented -- 0 to 180 deg),
     flatness/straightness/roundness/cylindricity (``method`` "LS" peak-to-valley of the
     residuals to the least-squares feature, or "MZ" minimum zone), perpendicularity/parallelism/
-    angularity (to the primary datum of ``frame``, or to the feature ``datum``; ``zone``
+    angularity (to the primary datum of ``frame``, or to the feature ``datum``; a plane's zone
+    oriented by its least-squares normal, or with ``method`` "MZ" turned about the datum
+    direction to its minimum; ``zone``
     "planar" for a surface, "diametral" for an axis; angularity's ``nominal`` angle in deg),
     position (of an axis or centre in ``frame``, at ``nominal_position_mm`` in frame
     coordinates, diametral zone; ``material_condition`` MMC/LMC with the bonus from the size
@@ -441,7 +443,8 @@ def _alpha(c):
 def _orientation(ctx, c, consts, frozen):
     """ISO 1101 18.9-18.11: the zone at the nominal angle alpha to the datum (0 parallel, 90
     perpendicular), its own orientation about the datum taken from the feature's least-squares
-    direction.  A plane: the points' extent along the zone normal (form included).  An axis:
+    direction (``method`` "MZ": turned about the datum direction to the minimum zone).  A plane:
+    the points' extent along the zone normal (form included).  An axis:
     the axis segment over the points' extent -- diametral zone: its length projected orthogonal
     to the zone axis; planar zone: along the zone normal."""
     g = ctx.geom(c.features[0])
@@ -459,10 +462,14 @@ def _orientation(ctx, c, consts, frozen):
     # the zone's normal (planar) makes alpha with a datum plane's normal ...
     e = (np.cos(a) * zd + np.sin(a) * t) if datum_plane else (np.sin(a) * zd + np.cos(a) * t)
     if role(g) == PLANE:
-        h = np.einsum("bmi,bi->bm", ctx.points(c.features[0]), e)
+        pts = ctx.points(c.features[0])
         if frozen is not None:
-            return h @ frozen["w"], frozen
-        return _extremes(h)
+            if "phi" in frozen:
+                e = _rotate(e, zd, frozen["phi"])
+            return np.einsum("bmi,bi->bm", pts, e) @ frozen["w"], frozen
+        if c.method == "MZ":
+            return _orientation_zone(pts, e, zd)
+        return _extremes(np.einsum("bmi,bi->bm", pts, e))
     if role(g) != AXIS:
         raise ModelError(f"{c.name}: {c.type} needs a plane or an axis feature")
     L = consts["length_mm"]
@@ -471,6 +478,42 @@ def _orientation(ctx, c, consts, frozen):
         za = (np.sin(a) * zd + np.cos(a) * t) if datum_plane else (np.cos(a) * zd + np.sin(a) * t)
         return L * np.linalg.norm(v - _dot(v, za)[:, None] * za, axis=-1), frozen
     return L * np.abs(_dot(v, e)), frozen
+
+
+def _rotate(e, axis, phi):
+    """e (B x 3) rotated by phi about the unit axis (B x 3) (Rodrigues)."""
+    c, s = np.cos(phi), np.sin(phi)
+    return e * c + np.cross(axis, e) * s + axis * (_dot(axis, e) * (1 - c))[:, None]
+
+
+def _orientation_zone(pts, e, zd):
+    """Minimum zone of a plane's points with the orientation constraint (ISO 1101: the zone at
+    the nominal angle to the datum, free to turn about the datum direction): the small-angle LP
+    in the one rotation phi about zd (h_i(phi) = x_i.e + phi x_i.(zd x e)), iterated to the
+    exact rotation for the reference (B = 1), one LP per draw otherwise.  Where the zone cannot
+    turn (parallelism to a plane: e = zd) it is the peak-to-valley."""
+    B = max(pts.shape[0], e.shape[0])
+    pts = np.broadcast_to(pts, (B,) + pts.shape[1:])
+    e = np.broadcast_to(e, (B, 3))
+    zd = np.broadcast_to(zd, (B, 3))
+    if np.all(np.linalg.norm(np.cross(zd, e), axis=1) < 1e-12):
+        return _extremes(np.einsum("bmi,bi->bm", pts, e))
+    vals = np.empty(B)
+    out = None
+    for b in range(B):
+        eb, zb, phi = e[b:b + 1], zd[b:b + 1], 0.0
+        for _ in range(20 if B == 1 else 1):
+            er = _rotate(eb, zb, phi)
+            d = pts[b] @ er[0]
+            g = -(pts[b] @ np.cross(zb, er)[0])[:, None]
+            zone = chebyshev_zone(d, g)
+            phi += float(zone.p[0])
+            if abs(zone.p[0]) <= 1e-12:
+                break
+        vals[b] = zone.h
+        if b == 0:
+            out = {"w": zone.w, "phi": phi}
+    return vals, out
 
 
 def _position(ctx, c, consts, frozen):
