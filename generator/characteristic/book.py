@@ -35,7 +35,8 @@ CHAR_COLUMNS = ["characteristic", "type", "method", "value", "unit", "u", "u_uni
                 "u_margin_um", "contact points"]
 CHAR_NOTES = [
     None, "ISO 1101 / ASME Y14.5 characteristic", "form: LS = peak-to-valley of the residuals to "
-    "the least-squares feature, MZ = minimum zone (Chebyshev)",
+    "the least-squares feature, MZ = minimum zone (Chebyshev); orientation: LS-oriented or turned "
+    "to its minimum zone",
     "measured value, in 'unit' (grey: computed by the core)", "mm or deg",
     "standard uncertainty under V_X, in u_unit (a formula of 'Sensitivity' and 'V_A' where the "
     "characteristic is smooth; grey core value with a note where not)", "µm or µrad",
@@ -224,7 +225,7 @@ def _write_characteristics(book: Book, res, va: Block, srows: dict, task) -> lis
         c = x.spec
         book.text(ws, r, 1, x.name)
         book.text(ws, r, 2, c.type)
-        book.text(ws, r, 3, c.method if c.type in ch.FORM_TYPES else "")
+        book.text(ws, r, 3, c.method if c.type in ch.FORM_TYPES + ch.ORIENTATION_TYPES else "")
         book.number(ws, r, 4, x.value, fmt=FMT_MM, computed=True)
         book.text(ws, r, 5, x.unit)
         scale = U_FACTOR[x.unit]

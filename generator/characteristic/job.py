@@ -174,7 +174,8 @@ def fitted(task: Task):
 def _row(r: ch.Result) -> dict:
     c = r.spec
     out = {
-        "name": c.name, "type": c.type, "method": c.method if c.type in ch.FORM_TYPES else None,
+        "name": c.name, "type": c.type,
+        "method": c.method if c.type in ch.FORM_TYPES + ch.ORIENTATION_TYPES else None,
         "features": list(c.features), "frame": c.frame,
         "value": r.value, "unit": r.unit, "u": r.u, "u_unit": r.u_unit,
         "smooth": bool(r.smooth),
