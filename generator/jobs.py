@@ -9,6 +9,7 @@ JOB_MODULES = {
     "pointcloud": "generator.pointcloud.job",
     "budget": "generator.budget.job",
     "feature": "generator.feature.job",
+    "characteristic": "generator.characteristic.job",
 }
 
 

@@ -42,7 +42,7 @@ from .workbook.readback import Cells, ReadTask
 from .workbook.tasksheet import TASK_INFO_FORMAT, TASK_SHEET
 
 #: the sheets `read` takes values from (the others are not even loaded)
-INPUT_SHEETS = {"Instructions", "Inputs", "Points", "Local", "Planning", TASK_SHEET}
+INPUT_SHEETS = {"Instructions", "Inputs", "Points", "Local", "Planning", "Characteristics", TASK_SHEET}
 
 
 # -- reading the task information -------------------------------------------------------------------
@@ -107,6 +107,10 @@ def read_workbook(path: Path, points_file: str = "points.csv") -> ReadTask:
         from .budget.reader import read_budget
 
         read_budget(cells, rt)
+    elif kind == "characteristic":
+        from .characteristic.reader import read_characteristic
+
+        read_characteristic(cells, rt, points_file)
     else:
         from .feature.reader import read_feature
 

@@ -26,7 +26,7 @@ from xlfuncs.pointcloud import Parameters, PointCloud, Probe
 from .errors import InputError
 from .workbook.guarded import MAX_BYTES, read_text
 
-KINDS = ("pointcloud", "budget", "feature")
+KINDS = ("pointcloud", "budget", "feature", "characteristic")
 MAX_TASK_BYTES = MAX_BYTES["task"]
 MAX_CSV_BYTES = MAX_BYTES["points"]
 NORMAL_TOL = 1e-3

@@ -35,6 +35,8 @@ NUMERIC_MODULES = {
     "test_templates", "test_roundtrip", "test_lowrank", "test_diagnose_structured", "test_import",
     "test_diagnose_second", "test_exact_option", "test_diagnose_discrepancy", "test_kernels", "test_diagnose_new_candidates",
     "test_field_csv", "test_field_plausibility",
+    "test_characteristics", "test_reference_fits", "test_characteristics_workbook",
+    "test_qif_characteristics",
 }
 
 

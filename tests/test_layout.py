@@ -39,7 +39,7 @@ def test_every_package_in_the_tree_is_installed():
 
 import ast  # noqa: E402
 
-TASK_KINDS = ("pointcloud", "budget", "feature", "diagnosis")
+TASK_KINDS = ("pointcloud", "budget", "feature", "diagnosis", "characteristic")
 
 
 def _is_private(name: str) -> bool:

@@ -94,7 +94,7 @@ def test_fitted_cylinder_direct_and_monte_carlo_agree():
 
 def test_what_monte_carlo_does_not_handle_is_a_model_error():
     cloud = sphere_cloud(40)
-    with pytest.raises(ModelError, match="handles plane, sphere, cylinder"):
-        mc.feature(ft.fit("circle", cloud.X_mm), cloud, PARAMS)
+    with pytest.raises(ModelError, match="handles plane, sphere, cylinder, line, circle, not circle_space"):
+        mc.feature(ft.fit("circle", cloud.X_mm, circle_plane=None), cloud, PARAMS)
     with pytest.raises(ModelError, match="up to 3000 points"):
         mc.PointCloudSampler(sphere_cloud(3001), PARAMS)

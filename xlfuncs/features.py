@@ -58,7 +58,7 @@ from .partial import frame_from_axis
 
 __all__ = [
     "ELEMENTS", "MIN_POINTS", "FeatureFit", "FeatureUncertainty", "fit", "propagate",
-    "G_A_X", "local_model", "UM2_TO_MM2",
+    "G_A_X", "local_model", "UM2_TO_MM2", "update_frame", "rot_xy_batch",
 ]
 
 ELEMENTS: tuple[str, ...] = ("line", "plane", "circle", "sphere", "cylinder", "cone")
@@ -414,6 +414,39 @@ def _update(kind, origin, R, shape, delta):
         dx, dy, rx, ry, dr, dphi = delta
         return (origin + R @ np.array([dx, dy, 0.0]), R @ _rot_xy(rx, ry),
                 (shape[0] + dr, shape[1] + dphi))
+    raise ModelError(kind)
+
+
+def rot_xy_batch(rx, ry) -> np.ndarray:
+    """R_y(ry) R_x(rx) for arrays of angles (B,) -> (B, 3, 3), as :func:`_rot_xy`."""
+    cx, sx, cy, sy = np.cos(rx), np.sin(rx), np.cos(ry), np.sin(ry)
+    z = np.zeros_like(rx)
+    return np.stack([np.stack([cy, sy * sx, sy * cx], -1), np.stack([z, cx, -sx], -1),
+                     np.stack([-sy, cy * sx, cy * cx], -1)], -2)
+
+
+def update_frame(kind: str, origin, R, shape, delta):
+    """The element moved by small changes of its local parameters (the paper's order,
+    LOCAL_NAMES) -- the Gauss-Newton update of :func:`_update` for a batch: ``delta`` (B x n),
+    ``origin`` (3,), ``R`` (3 x 3), ``shape`` (s,) -> origin (B x 3), R (B x 3 x 3),
+    shape (B x s).  Used by xlfuncs.characteristics to differentiate through the geometry."""
+    d = np.asarray(delta, float)
+    B = d.shape[0]
+    o = np.broadcast_to(np.asarray(origin, float), (B, 3)).copy()
+    Rb = np.broadcast_to(np.asarray(R, float), (B, 3, 3)).copy()
+    sh = np.broadcast_to(np.asarray(shape, float), (B, len(shape))).copy()
+    if kind == "sphere":
+        return o + d[:, :3], Rb, sh + d[:, 3:4]
+    if kind == "circle":
+        return o + np.einsum("bij,bj->bi", Rb[:, :, :2], d[:, :2]), Rb, sh + d[:, 2:3]
+    if kind == "plane":
+        return o + Rb[:, :, 2] * d[:, :1], Rb @ rot_xy_batch(d[:, 1], d[:, 2]), sh
+    if kind == "circle_space":
+        return (o + np.einsum("bij,bj->bi", Rb, d[:, :3]), Rb @ rot_xy_batch(d[:, 3], d[:, 4]),
+                sh + d[:, 5:6])
+    if kind in ("line", "cylinder", "cone"):
+        return (o + np.einsum("bij,bj->bi", Rb[:, :, :2], d[:, :2]),
+                Rb @ rot_xy_batch(d[:, 2], d[:, 3]), sh + d[:, 4:])
     raise ModelError(kind)
 
 

@@ -296,7 +296,7 @@ def _rot_xy_batch(rx: np.ndarray, ry: np.ndarray) -> np.ndarray:
     return Ry @ Rx
 
 
-FIT_KINDS = ("plane", "sphere", "cylinder")
+FIT_KINDS = ("plane", "sphere", "cylinder", "line", "circle")
 
 
 def refit_batch(fit, X_mm: np.ndarray, *, max_iter: int = 20) -> np.ndarray:
@@ -329,6 +329,12 @@ def refit_batch(fit, X_mm: np.ndarray, *, max_iter: int = 20) -> np.ndarray:
         elif kind == "plane":
             o = o + R[:, :, 2] * step[:, :1]
             R = R @ _rot_xy_batch(step[:, 1], step[:, 2])
+        elif kind == "circle":   # in a coordinate plane: x0, y0, r0
+            o = o + np.einsum("bij,bj->bi", R[:, :, :2], step[:, :2])
+            r = r + step[:, 2]
+        elif kind == "line":
+            o = o + np.einsum("bij,bj->bi", R[:, :, :2], step[:, :2])
+            R = R @ _rot_xy_batch(step[:, 2], step[:, 3])
         else:  # cylinder
             o = o + np.einsum("bij,bj->bi", R[:, :, :2], step[:, :2])
             R = R @ _rot_xy_batch(step[:, 2], step[:, 3])
@@ -338,6 +344,8 @@ def refit_batch(fit, X_mm: np.ndarray, *, max_iter: int = 20) -> np.ndarray:
     # the refitted element in the reference frame
     if kind == "sphere":
         return np.column_stack([o, r])
+    if kind == "circle":
+        return np.column_stack([(o @ fit.R)[:, :2], r])
     q = np.einsum("bi,ij->bj", o - fit.origin_mm, fit.R)     # a point of the element, ref. frame
     v = np.einsum("bi,ij->bj", R[:, :, 2], fit.R)             # its axis / normal, ref. frame
     v = v * np.sign(v[:, 2:3])
@@ -348,6 +356,8 @@ def refit_batch(fit, X_mm: np.ndarray, *, max_iter: int = 20) -> np.ndarray:
         return np.column_stack([z_A, rot_x, rot_y])
     t = q[:, 2] / v[:, 2]
     xy = q[:, :2] - t[:, None] * v[:, :2]
+    if kind == "line":
+        return np.column_stack([xy, rot_x, rot_y])
     return np.column_stack([xy, rot_x, rot_y, r])
 
 
@@ -356,7 +366,7 @@ def feature(fit, cloud: pc.PointCloud, params: pc.Parameters, *, components: boo
             rng: np.random.Generator | None = None, sampler: PointCloudSampler | None = None,
             progress=None) -> MCResult:
     """Monte Carlo u of the local parameters (``fit.local_names``; mm, rad) of a least-squares
-    element refitted to every draw of the perturbed points (plane, sphere, cylinder)."""
+    element refitted to every draw of the perturbed points (``FIT_KINDS``)."""
     if fit.kind not in FIT_KINDS:
         raise ModelError(f"the Monte Carlo refit handles {', '.join(FIT_KINDS)}, not {fit.kind}")
     if cloud.m != fit.m:

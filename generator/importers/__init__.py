@@ -37,6 +37,9 @@ def run_import(src: Path, out: Path, *, features: list[str] | None = None, kind:
     if suffix not in QIF_SUFFIXES:
         raise InputError(f"unknown file type {src.suffix!r}: cmmwb imports QIF (.qif) and Q-DAS AQDEF "
                          "(.dfq, .dfd + .dfx)", file=src)
+    if out.suffix.lower() == ".qif":      # characteristics: a copy of the file with their u
+        from .qif_simulation import annotate_file
+        return annotate_file(src, out, force=force)
     from . import qif
 
     doc = qif.read_qif(src)

@@ -66,6 +66,9 @@ def results_table(kind: str, results: dict) -> list[dict[str, Any]]:
     if kind == "feature":
         fe = results["feature"]
         return [{"parameter": n, "value": fe["parameters"][n], "u": fe["u"][n]} for n in fe["parameter_names"]]
+    if kind == "characteristic":
+        return [{"name": c["name"], "type": c["type"], "value": c["value"], "unit": c["unit"],
+                 "u": c["u"], "u_unit": c["u_unit"]} for c in results["characteristics"]]
     if kind == "diagnose":
         # the diagnosis book's Results rows, built by generator.diagnosis.book from the same numbers
         # as diagnosis.json (the core's GLS estimates)

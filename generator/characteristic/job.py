@@ -1,0 +1,315 @@
+"""The ``characteristic`` task: the characteristics of a drawing (size, distance, angle, form,
+orientation, position at MMC/LMC) from several least-squares features fitted in one task, with
+their uncertainty under the full point-cloud V_X of Forbes 2025 (xlfuncs.characteristics).
+
+Task file::
+
+    [task]              kind = "characteristic", name, notes
+    [points]            file = "points.csv"    (id,x,y,z,nx,ny,nz,probe)  -- or -- rows
+    [parameters], [[probes]]                    the point-cloud model (Forbes 2025 Table 3 names)
+    [[features]]        name, type (line | plane | circle | sphere | cylinder | cone),
+                        ids = [...] or id_prefix = "H1.", circle_plane, axis_hint
+    [[frames]]          name, primary, secondary, tertiary      (datum reference frames)
+    [[characteristics]] name, type, features = [...], method (LS | MZ), frame, datum, nominal,
+                        nominal_position_mm, zone (planar | diametral), material_condition
+                        (RFS | MMC | LMC), size, internal, direction, lsl, usl, tolerance_mm
+
+Tolerances are carried into the JSON and the Results sheet; no conformity decision is taken.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from xlfuncs import characteristics as ch
+from xlfuncs import features as ft
+from xlfuncs import pointcloud as pc
+from xlfuncs.errors import ModelError
+
+from .. import __version__
+from ..errors import InputError
+from ..taskfile import (check_keys, number, read_point_cloud, string, table, task_kind_and_name,
+                        text_list, vector3)
+
+KIND = "characteristic"
+EXAMPLES = ["characteristic_plate.toml"]
+
+FEATURE_KEYS = {"name", "type", "ids", "id_prefix", "circle_plane", "axis_hint"}
+FRAME_KEYS = {"name", "primary", "secondary", "tertiary"}
+CHAR_KEYS = {"name", "type", "features", "method", "frame", "datum", "nominal",
+             "nominal_position_mm", "zone", "material_condition", "size", "internal",
+             "direction", "lsl", "usl", "tolerance_mm"}
+
+
+@dataclass
+class Task:
+    name: str
+    notes: list[str]
+    cloud: pc.PointCloud
+    params: pc.Parameters
+    features: list[ch.FeatureSpec]
+    frames: list[ch.FrameSpec]
+    characteristics: list[ch.CharacteristicSpec]
+    path: Path
+    points_file: str | None = None
+    #: (joint fit, results, V_X components), computed once by :func:`fitted`
+    cache: tuple | None = field(default=None, repr=False, compare=False)
+
+
+def _array_of_tables(path, doc, key, required=True):
+    raw = doc.get(key)
+    if raw is None:
+        if required:
+            raise InputError(f"missing [[{key}]]", file=path, where=f"[[{key}]]")
+        return []
+    if not isinstance(raw, list) or not all(isinstance(t, dict) for t in raw):
+        raise InputError(f"must be one or more [[{key}]] tables", file=path, where=f"[[{key}]]")
+    return raw
+
+
+def _names(path, tbl, section, key):
+    v = tbl.get(key)
+    if isinstance(v, str):
+        v = [v]
+    if not isinstance(v, list) or not v or not all(isinstance(x, str) for x in v):
+        raise InputError("must be a feature name or a list of feature names", file=path,
+                         where=f"{section} {key}")
+    return tuple(v)
+
+
+def load(path: Path, doc: dict) -> Task:
+    _, name = task_kind_and_name(path, doc)
+    notes = text_list(path, table(path, doc, "task"), "task", "notes")
+    check_keys(path, doc, "file", {"task", "points", "parameters", "probes", "features", "frames",
+                                   "characteristics"})
+    cloud, params, tbl = read_point_cloud(path, doc)
+    labels = list(cloud.labels)
+    index = {lab: i for i, lab in enumerate(labels)}
+    feats = []
+    for n, t in enumerate(_array_of_tables(path, doc, "features"), start=1):
+        sec = f"[[features]] #{n}"
+        check_keys(path, t, sec, FEATURE_KEYS)
+        fname = string(path, t, sec, "name")
+        el = string(path, t, sec, "type")
+        if el not in ft.ELEMENTS:
+            raise InputError(f"unknown feature type {el!r}; known: {', '.join(ft.ELEMENTS)}",
+                             file=path, where=f"{sec} type")
+        if ("ids" in t) == ("id_prefix" in t):
+            raise InputError("give either ids = [...] or id_prefix", file=path, where=sec)
+        if "ids" in t:
+            ids = t["ids"]
+            if not isinstance(ids, list) or not all(isinstance(i, str) for i in ids):
+                raise InputError("must be a list of point ids", file=path, where=f"{sec} ids")
+            bad = [i for i in ids if i not in index]
+            if bad:
+                raise InputError(f"unknown point id {bad[0]!r}", file=path, where=f"{sec} ids")
+            idx = tuple(index[i] for i in ids)
+        else:
+            pre = string(path, t, sec, "id_prefix")
+            idx = tuple(i for i, lab in enumerate(labels) if lab.startswith(pre))
+            if not idx:
+                raise InputError(f"no point id starts with {pre!r}", file=path,
+                                 where=f"{sec} id_prefix")
+        plane = t.get("circle_plane", "xy")
+        if plane not in ("xy", "yz", "zx", "space"):
+            raise InputError("must be xy, yz, zx or space", file=path, where=f"{sec} circle_plane")
+        hint = vector3(path, t, sec, "axis_hint") if "axis_hint" in t else None
+        feats.append(ch.FeatureSpec(fname, el, idx, None if plane == "space" else plane, hint))
+    frames = []
+    for n, t in enumerate(_array_of_tables(path, doc, "frames", required=False), start=1):
+        sec = f"[[frames]] #{n}"
+        check_keys(path, t, sec, FRAME_KEYS)
+        frames.append(ch.FrameSpec(string(path, t, sec, "name"), string(path, t, sec, "primary"),
+                                   t.get("secondary"), t.get("tertiary")))
+    chars = []
+    for n, t in enumerate(_array_of_tables(path, doc, "characteristics"), start=1):
+        sec = f"[[characteristics]] #{n}"
+        check_keys(path, t, sec, CHAR_KEYS)
+        kw = {}
+        for k in ("nominal", "lsl", "usl", "tolerance_mm"):
+            if k in t:
+                kw[k] = number(path, t, sec, k)
+        for k in ("method", "frame", "datum", "zone", "material_condition", "size"):
+            if k in t:
+                kw[k] = string(path, t, sec, k)
+        if "internal" in t:
+            if not isinstance(t["internal"], bool):
+                raise InputError("must be true or false", file=path, where=f"{sec} internal")
+            kw["internal"] = t["internal"]
+        if "direction" in t:
+            kw["direction"] = vector3(path, t, sec, "direction")
+        if "nominal_position_mm" in t:
+            v = t["nominal_position_mm"]
+            if (not isinstance(v, list) or len(v) not in (2, 3) or
+                    not all(isinstance(x, (int, float)) and not isinstance(x, bool) and
+                            math.isfinite(x) for x in v)):
+                raise InputError("must be two or three numbers (frame coordinates, mm)",
+                                 file=path, where=f"{sec} nominal_position_mm")
+            kw["nominal_position_mm"] = tuple(float(x) for x in v)
+        chars.append(ch.CharacteristicSpec(string(path, t, sec, "name"), string(path, t, sec, "type"),
+                                           _names(path, t, sec, "features"), **kw))
+    pts = table(path, doc, "points")
+    task = Task(name, notes, cloud, params, feats, frames, chars, Path(path),
+                pts.get("file") if isinstance(pts.get("file"), str) else None)
+    try:
+        fitted(task)
+    except ModelError as e:
+        raise InputError(str(e), file=path) from None
+    return task
+
+
+def fitted(task: Task):
+    """(joint fit, results with u, V_X components) of a task; computed once per task."""
+    if task.cache is None:
+        jf = ch.fit_features(task.cloud.X_mm, task.cloud.N, task.features)
+        V = pc.V_X_components(task.cloud, task.params)
+        task.cache = (jf, ch.evaluate(jf, task.frames, task.characteristics, V), V)
+    return task.cache
+
+
+def _row(r: ch.Result) -> dict:
+    c = r.spec
+    out = {
+        "name": c.name, "type": c.type,
+        "method": c.method if c.type in ch.FORM_TYPES + ch.ORIENTATION_TYPES else None,
+        "features": list(c.features), "frame": c.frame,
+        "value": r.value, "unit": r.unit, "u": r.u, "u_unit": r.u_unit,
+        "smooth": bool(r.smooth),
+        "components": {k: v for k, v in r.u_factors.items()},
+        "nominal": c.nominal, "lsl": c.lsl, "usl": c.usl, "tolerance_mm": c.tolerance_mm,
+        "material_condition": c.material_condition,
+        "bonus_mm": r.bonus_mm, "zone_mm": r.zone_mm, "margin_mm": r.margin_mm,
+        "u_margin_um": r.u_margin_um,
+        "contact_points": [],
+    }
+    return out
+
+
+def compute(task: Task) -> dict:
+    jf, res, V = fitted(task)
+    rows = []
+    for r in res:
+        row = _row(r)
+        row["contact_points"] = [task.cloud.labels[i] for i in r.active]
+        rows.append(row)
+    feats = {}
+    for name, f in jf.fits.items():
+        feats[name] = {"type": f.element, "m": f.m, "parameters": f.values_dict(),
+                       "rms_residual_um": f.rms_mm * 1e3}
+    return {"kind": KIND, "name": task.name, "version": __version__, "notes": task.notes,
+            "features": feats, "parameter_names": list(jf.param_names),
+            "characteristics": rows}
+
+
+def write_book(task: Task, results: dict, path: Path) -> None:
+    from .book import write_characteristic_book
+
+    jf, res, V = fitted(task)
+    write_characteristic_book(task, results, path, jf, res, V)
+
+
+def write_plots(task: Task, results: dict, out_dir: Path) -> list[Path]:
+    from ..workbook.plots import pyplot
+
+    plt = pyplot()
+    rows = results["characteristics"]
+    fig, ax = plt.subplots(figsize=(7.5, 0.38 * len(rows) + 1.6), dpi=110)
+    names = [r["name"] for r in rows]
+    left = np.zeros(len(rows))
+    for fac in pc.FACTORS:
+        share = np.array([(r["components"].get(fac, 0.0) / r["u"]) ** 2 if r["u"] > 0 else 0.0
+                          for r in rows])
+        ax.barh(names, share, left=left, label=fac)
+        left += share
+    ax.set_xlim(0, 1)
+    ax.invert_yaxis()
+    ax.set_xlabel("share of u^2 per influence factor")
+    ax.set_title(f"{results['name']}: {len(rows)} characteristics")
+    ax.legend(fontsize=8, ncol=6, loc="lower center", bbox_to_anchor=(0.5, 1.06))
+    fig.tight_layout()
+    p = out_dir / f"{task.name}_factors.png"
+    fig.savefig(p)
+    plt.close(fig)
+    return [p]
+
+
+def summary(results: dict) -> list[str]:
+    lines = []
+    for r in results["characteristics"]:
+        small = r["unit"] == "mm" and r["type"] not in ch.SIZE_TYPES + ("distance",)
+        v, unit = (r["value"] * 1e3, "µm") if small else (r["value"], r["unit"])
+        u_unit = "µm" if r["u_unit"] == "um" else "µrad"
+        extra = f", zone {r['zone_mm'] * 1e3:.1f} µm" if r["zone_mm"] is not None else ""
+        lines.append(f"{r['name']}: {v:.4f} {unit}, u = {r['u']:.3f} {u_unit}{extra}")
+    return lines
+
+
+NEW_TASK = '''# cmmwb characteristic task: characteristics of a drawing from least-squares features fitted
+# in one task, with u under the six-factor point-cloud model (Forbes 2025).
+# Units: coordinates mm, uncertainties µm in [parameters]; results: mm / deg, u in µm / µrad.
+# Build with:  cmmwb build THIS.toml --out DIR
+
+[task]
+kind = "characteristic"
+name = "my_part"
+
+[points]
+file = "points.csv"      # id,x,y,z,nx,ny,nz,probe  (nx..nz: outward unit normal)
+
+[parameters]
+sigma_R_um = 0.2
+sigma_S_ppm = 0.7
+sigma_PQ_um = 0.2
+sigma_P0_um = 0.1
+
+[[probes]]
+id = "P1"
+offset_mm = [0.0, 0.0, -50.0]
+
+[[features]]              # a face: its points are those whose id starts with "A."
+name = "A"
+type = "plane"
+id_prefix = "A."
+
+[[features]]
+name = "B"
+type = "plane"
+id_prefix = "B."
+
+[[frames]]                # datum reference frame A|B (primary plane, secondary plane)
+name = "AB"
+primary = "A"
+secondary = "B"
+
+[[characteristics]]
+name = "flatness_A"
+type = "flatness"
+features = ["A"]
+method = "MZ"            # LS (peak-to-valley to the least-squares plane) or MZ (minimum zone)
+tolerance_mm = 0.01
+
+[[characteristics]]
+name = "perpendicularity_B"
+type = "perpendicularity"
+features = ["B"]
+frame = "AB"
+tolerance_mm = 0.02
+'''
+
+NEW_TASK_FILES = {"points.csv": '''# A face A (z = 0, outward normal -z) and a side face B (x = 0, outward -x), mm
+id,x,y,z,nx,ny,nz,probe
+A.1,10,10,0.0012,0,0,-1,P1
+A.2,90,10,-0.0008,0,0,-1,P1
+A.3,90,70,0.0021,0,0,-1,P1
+A.4,10,70,-0.0015,0,0,-1,P1
+A.5,50,40,0.0004,0,0,-1,P1
+A.6,30,55,-0.0002,0,0,-1,P1
+B.1,0.0011,10,3,-1,0,0,P1
+B.2,-0.0006,70,3,-1,0,0,P1
+B.3,0.0031,40,7,-1,0,0,P1
+B.4,0.0019,20,7,-1,0,0,P1
+'''}
