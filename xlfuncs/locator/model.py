@@ -13,6 +13,7 @@ import numpy as np
 
 from .. import effects as fx
 from .. import pointcloud as pc
+from .. import structured_lengths as sl
 from ..errors import ModelError
 from ..recordings import LengthRecords, PointRecords, RecordingsError
 
@@ -171,19 +172,19 @@ STRUCTURED_MIN_OBS = 6000
 
 
 def uses_structured(rec: LengthRecords | PointRecords, model: Model, structured: bool | None = None) -> bool:
-    """Whether :func:`prepare` takes the structured covariance for these records."""
-    if isinstance(rec, LengthRecords):
-        return False
+    """Whether :func:`prepare` takes the structured covariance for these records (length
+    records: unless their probings do not allow it, see
+    :func:`xlfuncs.structured_lengths.structure_check`, then dense)."""
     if structured is not None:
         return bool(structured)
-    dims = 2 if rec.planar else 3
+    dims = 1 if isinstance(rec, LengthRecords) else 2 if rec.planar else 3
     return rec.n * dims > STRUCTURED_MIN_OBS and model.params.sigma_R_um > 0
 
 
 def prepare(rec: LengthRecords | PointRecords, model: Model, structured: bool | None = None) -> Prepared:
-    """The linear model of the records.  ``structured``: for point records, the covariance as the
-    operator of :mod:`xlfuncs.structured` (True), dense (False), or dense up to
-    ``STRUCTURED_MIN_OBS`` observations (None)."""
+    """The linear model of the records.  ``structured``: the covariance as the operator of
+    :mod:`xlfuncs.structured` (point records) or :mod:`xlfuncs.structured_lengths` (length
+    records) (True), dense (False), or dense up to ``STRUCTURED_MIN_OBS`` observations (None)."""
     ids_per_end, probe_ids, probes, offsets_given = resolve_probes(rec, model)
     index = {p: k for k, p in enumerate(probe_ids)}
     offsets = np.array([p.offset_mm for p in probes], dtype=float).reshape(-1, 3)
@@ -199,7 +200,16 @@ def prepare(rec: LengthRecords | PointRecords, model: Model, structured: bool | 
         design = fx.Design("length", probe_ids, offsets_given, T=T, t=t, na=na,
                            U1=rec.X1_mm - P1, U2=rec.X2_mm - P2, N1=rec.N1, N2=rec.N2, k1=k1, k2=k2,
                            P1=P1, P2=P2, ref=rec.reference_mm, extent_mm=float(np.max(rec.reference_mm)))
-        C = length_covariance(cloud, model.params, I, J)
+        if uses_structured(rec, model, structured):
+            why = sl.structure_check(I, J, cloud.m)
+            if why is None:
+                C = sl.LengthCovariance(cloud, model.params, I, J)
+            elif structured:
+                raise ModelError(why + "; diagnose with the dense covariance (--exact)")
+            else:
+                C = length_covariance(cloud, model.params, I, J)
+        else:
+            C = length_covariance(cloud, model.params, I, J)
         n = rec.n
         return Prepared(rec, design, cloud, rec.residual_um.copy(), C, np.zeros((n, 0)), [],
                         np.arange(n), -np.ones(n, dtype=int), ends=(I, J))
@@ -276,10 +286,7 @@ def length_covariance(cloud: pc.PointCloud, params: pc.Parameters, I: np.ndarray
     s = pa["sigma_PQ_um"]
     out["PQ"] = four(lambda a, b: (kp[a][:, None] == kp[b][None, :]) * np.outer(s[a], s[b])) * NN
     # S (eqs. 11-14): rank 7 at the ram positions
-    du = U[J] - U[I]
-    nx, ny, nz = na.T
-    ux, uy, uz = du.T
-    g7 = np.column_stack([nx * ux + ny * uy + nz * uz, nx * ux, ny * uy, nz * uz, nx * uy, nx * uz, ny * uz])
+    g7 = sl.scale_rows(na, U[J] - U[I])
     out["S"] = (g7 * pc.V_S_diag_um_per_mm2(params)) @ g7.T
     D2 = None
     if params.sigma_ET_um > 0 or params.sigma_ER_urad > 0:
