@@ -67,11 +67,14 @@ __all__ = ["diagnose", "diagnose_prepared", "effect_covariance", "check_alphas",
 
 
 def diagnose(rec: LengthRecords | PointRecords, model: Model, alpha: float = 0.01,
-             structured: bool | None = None, alpha_name: float | None = None) -> Diagnosis:
+             structured: bool | None = None, alpha_name: float | None = None, *, backend=None) -> Diagnosis:
     """The analysis of docs/recordings.md section 3 on validated recordings (``structured``: see
-    :func:`prepare`; ``alpha_name``: see :func:`diagnose_prepared`)."""
+    :func:`prepare`; ``alpha_name``: see :func:`diagnose_prepared`; ``backend``: where the passes
+    of the structured length covariance run, :mod:`xlfuncs.distributed`, same numbers)."""
     alpha_name = check_alphas(alpha, alpha_name)
     prep = prepare(rec, model, structured)
+    if backend is not None and hasattr(prep.C, "backend"):
+        prep.C.backend = backend
     return diagnose_prepared(prep, alpha, alpha_name)
 
 

@@ -64,6 +64,11 @@ def _kernel(A, B, inv_lam2):
     return np.exp(K, out=K)
 
 
+def unit_kernel(A: np.ndarray, B: np.ndarray, inv_lam2: float) -> np.ndarray:
+    """The unit squared-exponential kernel exp(-|a - b|^2 inv_lam2), rows A, columns B."""
+    return _kernel(A, B, inv_lam2)
+
+
 def pivots(Z: np.ndarray, inv_lam2: float, *, tol: float = PIVOT_TOL, max_rank: int = MAX_RANK,
            pool: np.ndarray | None = None) -> np.ndarray:
     """Indices into ``Z`` of the pivots of a greedy pivoted Cholesky of the unit SE kernel on the

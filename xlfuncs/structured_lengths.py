@@ -40,15 +40,19 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.linalg import cho_factor, cho_solve
+from scipy.linalg import cho_factor, cho_solve, solve_triangular
+from scipy.linalg.blas import dsyrk
 
 from . import lowrank as lr
 from . import pointcloud as pc
 from .errors import ModelError
+from .execution import ThreadBackend
 from .structured import GramWhitener
 
 #: records per block of the passes over U
 BLOCK_RECORDS = 4096
+#: records per task of the passes (a task's result is k x k: few tasks, streamed in order)
+TASK_RECORDS = 8 * BLOCK_RECORDS
 #: most columns of U (k); beyond, the structured path is refused with what fits
 MAX_COLUMNS = 4000
 
@@ -91,6 +95,8 @@ class LengthCovariance:
     pivot_tol: float = lr.PIVOT_TOL
     ranks: dict = field(default_factory=dict)
     eps_C: float = 0.0
+    #: where :meth:`whitener` runs its passes (None: local threads; a Dask backend)
+    backend: object = field(default=None, repr=False, compare=False)
 
     def __post_init__(self):
         p, cloud = self.params, self.cloud
@@ -165,13 +171,21 @@ class LengthCovariance:
         """(n, n): the size of the matrix it stands for (never formed)."""
         return (self.n, self.n)
 
+    def __getstate__(self):
+        """What a worker process needs (the backend and the cached core factor stay here)."""
+        state = dict(self.__dict__)
+        state["backend"] = None
+        state["_core"] = None
+        state["_diag"] = None
+        return state
+
     # -- U in row blocks ---------------------------------------------------------------------
-    def U_rows(self, a0: int, a1: int) -> np.ndarray:
-        """Rows a0 .. a1-1 of U (one per record): (a1 - a0) x k."""
+    def U_rows(self, sel) -> np.ndarray:
+        """The rows of U (one per record) of the records ``sel`` (a slice or indices): b x k."""
         p, cloud = self.params, self.cloud
-        I, J = self.I[a0:a1], self.J[a0:a1]
-        na = self.na[a0:a1]
-        b = a1 - a0
+        I, J = self.I[sel], self.J[sel]
+        na = self.na[sel]
+        b = len(I)
         rows = np.arange(b)
         U = np.zeros((b, self.k))
         kp, ram, N = cloud.probe_index, cloud.ram_mm, cloud.N
@@ -183,7 +197,9 @@ class LengthCovariance:
         U[:, self.off_S:self.off_S + 7] = scale_rows(na, ram[J] - ram[I]) * self.w_S
         if "ET" in self.facs:
             fac = self.facs["ET"]
-            dL = (fac.rows(ram[J]) - fac.rows(ram[I])).T * p.sigma_ET_um          # b x r
+            # l_J - l_I = C^-1 (k_P(u_J) - k_P(u_I)): one triangular solve
+            kd = lr.unit_kernel(fac.Zp, ram[J], fac.inv_lam2) - lr.unit_kernel(fac.Zp, ram[I], fac.inv_lam2)
+            dL = solve_triangular(fac.C, kd, lower=True, check_finite=False).T * p.sigma_ET_um   # b x r
             U[:, self.off_ET:self.off_ET + 3 * fac.rank] = (dL[:, :, None] * na[:, None, :]).reshape(b, -1)
         if "ER" in self.facs:
             fac = self.facs["ER"]
@@ -214,10 +230,13 @@ class LengthCovariance:
     def blocks(self):
         for a0 in range(0, self.n, BLOCK_RECORDS):
             a1 = min(a0 + BLOCK_RECORDS, self.n)
-            yield a0, a1, self.U_rows(a0, a1)
+            yield a0, a1, self.U_rows(slice(a0, a1))
 
     # -- the operator --------------------------------------------------------------------------
     def diagonal(self) -> np.ndarray:
+        """The variances of the records (µm²), diag(C) (kept from the whitener's pass)."""
+        if getattr(self, "_diag", None) is not None:
+            return self._diag.copy()
         out = np.empty(self.n)
         for a0, a1, U in self.blocks():
             out[a0:a1] = self.D[a0:a1] + np.einsum("ik,ik->i", U, U)
@@ -272,11 +291,14 @@ class LengthCovariance:
         return self.eps_C / float(np.min(self.D))
 
     # -- what the diagnosis needs ------------------------------------------------------------
-    def whitener(self, B: np.ndarray, group_rows: dict | None = None) -> GramWhitener:
+    def whitener(self, B: np.ndarray, group_rows: dict | None = None, *, backend=None) -> GramWhitener:
         """The whitener on the span of the columns of B (n x c) (see
         :meth:`xlfuncs.structured.StructuredCovariance.whitener`); ``group_rows``: {key: record
         indices} whose Woodbury Grams are accumulated in the same pass, by cells (records with
-        the same label in every grouping) summed into groups."""
+        the same label in every grouping) summed into groups.  ``backend``: where the passes
+        over U run (:mod:`xlfuncs.execution`, :mod:`xlfuncs.distributed`; default
+        ``self.backend``, else local threads); the numbers do not depend on it."""
+        backend = self.backend if backend is None else backend
         n, c = B.shape
         D = self.D
         keys = list(group_rows or {})
@@ -287,29 +309,68 @@ class LengthCovariance:
             by_row = {by: r for r, by in enumerate(dict.fromkeys(g[0] for g in keys))}
             for j, g in enumerate(keys):
                 labels[by_row[g[0]], group_rows[g]] = j
-            uniq, first, cell = np.unique(labels, axis=1, return_index=True, return_inverse=True)
+            uniq, cell = np.unique(labels, axis=1, return_inverse=True)
             cell = cell.reshape(-1)
             members = [[None] + [keys[j] for j in uniq[:, u] if j >= 0] for u in range(uniq.shape[1])]
-        ncell = len(members)
         grams = {None: [np.zeros((self.k, self.k)), np.zeros((self.k, c))]}
         for g in keys:
             grams[g] = [np.zeros((self.k, self.k)), np.zeros((self.k, c))]
-        for a0, a1, U in self.blocks():
-            UD = U / D[a0:a1, None]
-            cb = cell[a0:a1]
-            for j in (np.unique(cb) if ncell > 1 else [0]):
-                sel = np.flatnonzero(cb == j) if ncell > 1 else slice(None)
-                UU = UD[sel].T @ U[sel]
-                UB = UD[sel].T @ B[a0:a1][sel]
-                for t in members[j]:
+        # records cell by cell (a stable order): each cell's Gram is added once to its groups;
+        # the blocks run on ``backend`` (local threads or Dask) and are summed in block order
+        order = np.argsort(cell, kind="stable")
+        items = []
+        for rows in np.split(order, np.flatnonzero(np.diff(cell[order])) + 1):
+            for b0 in range(0, len(rows), TASK_RECORDS):
+                items.append(rows[b0:b0 + TASK_RECORDS])
+        shared = {"C": self, "B": B}
+        runner = backend or ThreadBackend()
+        UU = UB = None
+        for q, (UUb, UBb) in enumerate(runner.map(_gram_block, items, shared)):
+            UU, UB = (UUb, UBb) if UU is None else (UU + UUb, UB + UBb)
+            last = q + 1 == len(items) or cell[items[q + 1][0]] != cell[items[q][0]]
+            if last:
+                for t in members[int(cell[items[q][0]])]:
                     grams[t][0] += UU
                     grams[t][1] += UB
+                UU = UB = None
         UtU, UtB = grams[None]
         self._core = cho_factor(np.eye(self.k) + UtU, lower=True)
         Z = cho_solve(self._core, UtB)                       # (I + U^T D^-1 U)^-1 U^T D^-1 B
         Gamma = B.T @ (B / D[:, None]) - UtB.T @ Z
         P = B / D[:, None]
-        for a0, a1, U in self.blocks():
-            P[a0:a1] -= (U @ Z) / D[a0:a1, None]
+        items = [(a0, min(a0 + TASK_RECORDS, n)) for a0 in range(0, n, TASK_RECORDS)]
+        diag = np.empty(n)
+        for (a0, a1), (UZ, dg) in zip(items, runner.map(_solve_block, items, {"C": self, "Z": Z})):
+            P[a0:a1] -= UZ / D[a0:a1, None]
+            diag[a0:a1] = D[a0:a1] + dg
+        self._diag = diag
         groups = {g: (grams[g][0], grams[g][1], np.asarray(group_rows[g])) for g in keys}
         return GramWhitener(0.5 * (Gamma + Gamma.T), P, n, B, D, groups)
+
+
+def _gram_block(rows: np.ndarray, shared) -> tuple[np.ndarray, np.ndarray]:
+    """U_r^T D_r^-1 U_r and U_r^T D_r^-1 B_r for the records ``rows`` (one task; sub-blocks of
+    BLOCK_RECORDS summed in order)."""
+    C, B = shared["C"], shared["B"]
+    UU, UB = np.zeros((C.k, C.k)), np.zeros((C.k, B.shape[1]))
+    for b0 in range(0, len(rows), BLOCK_RECORDS):
+        r = rows[b0:b0 + BLOCK_RECORDS]
+        W = C.U_rows(r) / np.sqrt(C.D[r])[:, None]                  # D^-1/2 U
+        UU = dsyrk(1.0, W, beta=1.0, c=UU, trans=1, lower=1, overwrite_c=1)    # += W^T W (lower)
+        UB += W.T @ (B[r] / np.sqrt(C.D[r])[:, None])
+    il = np.triu_indices(C.k, 1)
+    UU[il] = UU.T[il]
+    return UU, UB
+
+
+def _solve_block(item, shared) -> tuple[np.ndarray, np.ndarray]:
+    """U_r Z and the diagonal of U_r U_r^T for the records a0 .. a1-1 (one task of the second
+    pass)."""
+    a0, a1 = item
+    C, Z = shared["C"], shared["Z"]
+    UZ, dg = [], []
+    for b0 in range(a0, a1, BLOCK_RECORDS):
+        U = C.U_rows(slice(b0, min(b0 + BLOCK_RECORDS, a1)))
+        UZ.append(U @ Z)
+        dg.append(np.einsum("ik,ik->i", U, U))
+    return np.vstack(UZ), np.concatenate(dg)
