@@ -136,7 +136,7 @@ class LengthCovariance:
             if idx.size and sp[idx[0]] > 0:
                 terms.append((f"P{q}", cloud.N[idx], 1 / lam[idx[0]] ** 2, sp[idx[0]] ** 2, 1.0))
         for name, Z, il2, s, w2 in terms:
-            fac, tr = lr.controlled_factor(Z, il2, self.pivot_tol)
+            fac, tr = lr.controlled_factor(Z, il2, self.pivot_tol, name=name)
             self.facs[name] = fac
             self.ranks[name] = fac.rank
             self.eps_C += 2.0 * self.c_max * s * tr * w2

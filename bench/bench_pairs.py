@@ -1,0 +1,148 @@
+"""All-pairs distance uncertainties at m = 3,000 (4,498,500 distances, six components, two probes;
+Forbes 2025 eqs. 29-30) against the dense numpy reference, in one run (issue 26).
+
+Cases, each in a fresh subprocess (peak = its ru_maxrss, interpreter and numpy included), run
+alternately so that each sees the same load:
+
+* ``streamed``  :func:`xlfuncs.pointcloud.iter_distance_components`: blocks of 32,768 pairs in
+                float64, each written to eight raw float64 files (all 8 m(m-1)/2 numbers kept,
+                on disk) -- memory a few blocks (goal <= 300 MB);
+* ``arrays``    :func:`xlfuncs.pointcloud.distance_components`: the eight arrays in memory
+                (288 MB of output by themselves);
+* ``dense``     the reference: V_X formed densely (:func:`xlfuncs.pointcloud.V_X`, 3m x 3m) and
+                u(d_ij)^2 = n^T (V_ii + V_jj - V_ij - V_ji) n for every pair with numpy, row by row.
+
+``--source DIR`` runs the non-dense cases on another checkout's ``xlfuncs`` (the "before" rows).
+The 2-core machine is shared with other jobs: every row gives the 1-minute load average; the
+speed-up is the ratio of the dense reference's best time to the case's best time in the same run.
+Results: bench/results/pairs.md.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import statistics
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+
+SETUP = """
+import time, resource, json, os, tempfile
+import numpy as np
+from xlfuncs import pointcloud as pc
+rng = np.random.default_rng(1)
+m = 3000
+X = rng.uniform(0, 800, (m, 3)); N = rng.normal(size=(m, 3)); N /= np.linalg.norm(N, axis=1)[:, None]
+probes = (pc.Probe("P1", (0, 0, -50.0)), pc.Probe("P2", (0, 40.0, -30.0), sigma_PQ_um=0.3))
+cloud = pc.PointCloud(X, N, np.arange(m) % 2, probes)
+params = pc.Parameters(0.2, 0.7, 0.7, 0.7, 0.2, 0.2, 200, 4.0, 400, 0.1, 0.1, 0.5)
+"""
+
+CASES = {
+    "streamed": SETUP + """
+tmp = tempfile.mkdtemp()
+t = time.perf_counter()
+files = None
+count = 0
+for sl, part in pc.iter_distance_components(cloud, params):
+    if files is None:
+        files = {k: open(os.path.join(tmp, k + ".f64"), "wb") for k in part}
+    for k, v in part.items():
+        v.tofile(files[k])
+    count += sl.stop - sl.start
+for f in files.values():
+    f.close()
+seconds = time.perf_counter() - t
+assert count == m * (m - 1) // 2 and os.path.getsize(os.path.join(tmp, "u_um.f64")) == 8 * count
+u = np.fromfile(os.path.join(tmp, "u_um.f64"))
+check = [float(u[0]), float(u[count // 2]), float(u[-1])]
+for k in files:
+    os.remove(os.path.join(tmp, k + ".f64"))
+os.rmdir(tmp)
+""",
+    "arrays": SETUP + """
+t = time.perf_counter()
+r = pc.distance_components(cloud, params)
+seconds = time.perf_counter() - t
+u = r["u_um"]
+check = [float(u[0]), float(u[len(u) // 2]), float(u[-1])]
+""",
+    "dense": SETUP + """
+t = time.perf_counter()
+V = pc.V_X(cloud, params)
+V4 = V.reshape(m, 3, m, 3)
+Vd = np.einsum("iaib->iab", V4)
+u = np.empty(m * (m - 1) // 2)
+pos = 0
+for i in range(m - 1):
+    dx = X[i + 1:] - X[i]
+    n = dx / np.linalg.norm(dx, axis=1)[:, None]
+    var = (np.einsum("ja,ab,jb->j", n, Vd[i], n) + np.einsum("ja,jab,jb->j", n, Vd[i + 1:], n)
+           - 2.0 * np.einsum("aj,jab,jb->j", n.T, V4[i, :, i + 1:, :].transpose(1, 0, 2), n))
+    u[pos:pos + var.size] = np.sqrt(var)
+    pos += var.size
+seconds = time.perf_counter() - t
+check = [float(u[0]), float(u[len(u) // 2]), float(u[-1])]
+""",
+}
+
+TAIL = """
+print("RESULT", json.dumps({"seconds": seconds, "peak_MB": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
+                            "check": check}))
+"""
+
+
+def run(case: str, source: Path) -> dict:
+    env = dict(os.environ, PYTHONPATH=str(source))
+    p = subprocess.run([sys.executable, "-c", textwrap.dedent(CASES[case]) + TAIL], cwd=source,
+                       capture_output=True, text=True, env=env)
+    if p.returncode != 0:
+        raise RuntimeError(p.stderr)
+    r = json.loads([ln for ln in p.stdout.splitlines() if ln.startswith("RESULT")][-1][7:])
+    r["load"] = os.getloadavg()[0]
+    return r
+
+
+def main(argv: list[str]) -> int:
+    repeats = int(os.environ.get("BENCH_REPEATS", "2"))
+    source, label = ROOT, "this checkout"
+    for a in argv:
+        if a.startswith("--source="):
+            source, label = Path(a.split("=", 1)[1]).resolve(), a.split("=", 1)[1]
+    cases = ["streamed", "arrays"] if source == ROOT else ["arrays"]
+    res: dict[str, list[dict]] = {c: [] for c in cases + ["dense"]}
+    for _ in range(repeats):
+        for c in cases:
+            res[c].append(run(c, source))
+            print(c, res[c][-1], flush=True)
+        res["dense"].append(run("dense", ROOT))
+        print("dense", res["dense"][-1], flush=True)
+    ref = res["dense"][0]["check"]
+    for c in cases:
+        for r in res[c]:
+            assert max(abs(a - b) / b for a, b in zip(r["check"], ref)) < 1e-12, (c, r["check"], ref)
+    best_dense = min(r["seconds"] for r in res["dense"])
+    out = ROOT / "bench" / "results" / "pairs.md"
+    lines = out.read_text(encoding="utf-8").splitlines() if out.exists() else [
+        "Measured by `python bench/bench_pairs.py` on the 2-core machine shared with other jobs (each row "
+        "a fresh process; the cases of one run alternate; peak = ru_maxrss; load = 1-minute load average "
+        "after the run, 2.0 = both cores busy).  m = 3,000: 4,498,500 distances, eight float64 outputs "
+        "each (288 MB if held).", "",
+        "| code | case | time / s best | median | peak MB best | dense reference best / s (same run) | speed-up vs dense | load |",
+        "|---|---|---|---|---|---|---|---|"]
+    for c in cases + ["dense"]:
+        ts = [r["seconds"] for r in res[c]]
+        lines.append(f"| {label} | {c} | {min(ts):.2f} | {statistics.median(ts):.2f} | "
+                     f"{min(r['peak_MB'] for r in res[c]):.0f} | {best_dense:.2f} | "
+                     f"{best_dense / min(ts):.1f}x | {max(r['load'] for r in res[c]):.1f} |")
+    out.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    print("\n".join(lines))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))
