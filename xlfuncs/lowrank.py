@@ -68,6 +68,9 @@ class RankError(ModelError):
     """A kernel needs more pivots than :data:`MAX_RANK`: the low-rank path is refused, with what fits."""
 
 
+#: most work m r^2 of a low-rank factor (the projection of m points on r pivots; 5e11 is a few
+#: minutes on one core): m = 10^6 points allow r = 707 pivots, m = 125,000 the whole MAX_RANK
+WORK_LIMIT = 5e11
 #: side of the cells (in correlation lengths) whose count over the points estimates the pivots a
 #: kernel needs at PIVOT_TOL (measured at lambda = 30 mm: 3.7 pivots per lambda on a line, 15-17
 #: per lambda^2 on a plane, 75-120 per lambda^3 in a volume, i.e. about one per cell of lambda/4)
@@ -81,12 +84,13 @@ def occupied_cells(Z: np.ndarray, side: float) -> int:
 
 
 def rank_estimate(Z: np.ndarray, inv_lam2: float) -> tuple[int, float]:
-    """(estimated pivots, effective dimension of the points at the scale of lambda): the cells of
-    side CELL lambda that the points occupy, and log2 of the ratio to cells twice as large."""
+    """(estimated pivots, dimension of the points at the scale of lambda): the cells of side
+    CELL lambda that the points occupy, and log2 of the ratio of the cells of side lambda/2 to
+    those of side lambda (coarse enough to be filled by a scan)."""
     lam = 1.0 / np.sqrt(inv_lam2)
     n1 = occupied_cells(Z, CELL * lam)
-    n2 = occupied_cells(Z, 2 * CELL * lam)
-    return n1, float(min(3.0, max(1.0, np.log2(max(n1, 1) / max(n2, 1)))))
+    n2, n4 = occupied_cells(Z, 0.5 * lam), occupied_cells(Z, lam)
+    return n1, float(min(3.0, max(1.0, np.log2(max(n2, 1) / max(n4, 1)))))
 
 
 def check_rank(Z: np.ndarray, inv_lam2: float, name: str, max_rank: int | None = None,
@@ -94,21 +98,25 @@ def check_rank(Z: np.ndarray, inv_lam2: float, name: str, max_rank: int | None =
     """Refuse (:class:`RankError`) a kernel whose rank would exceed ``max_rank``: by the cell
     estimate before any pivoting (time O(m)), or when the pivots actually ran into the limit
     (``found``); the message says what fits (a section, a correlation length, the exact path)."""
+    m = len(Z)
     max_rank = MAX_RANK if max_rank is None else max_rank
+    limit = max(1, min(max_rank, int(np.sqrt(WORK_LIMIT / max(m, 1)))))
     est, dim = rank_estimate(Z, inv_lam2)
-    if found is None and est <= 1.25 * max_rank:
+    if found is None and est <= 1.25 * limit:
         return
+    max_rank = limit if found is None else max_rank
     lam = 1.0 / np.sqrt(inv_lam2)
     ext = np.ptp(Z, axis=0)
     need = max(est, found or 0)
     share = (max_rank / need) ** (1.0 / dim)
-    sizes = " x ".join(f"{v * share:.0f}" for v in ext if v > CELL * lam)
+    sizes = " x ".join(f"{v * share:.0f}" for v in ext if v > lam)
     how = (f"ran into the limit of {max_rank:,} pivots with residual left" if found is not None
            else f"needs about {est:,} pivots (points in {est:,} cells of lambda/4 = {CELL * lam:.3g} mm)")
     raise RankError(
         f"{name}: the correlation length {lam:g} mm is short against the extent of the "
         f"{len(Z):,} points ({' x '.join(f'{v:.0f}' for v in ext)} mm): the low-rank factor {how}, "
-        f"more than the {max_rank:,} it allows for the pivot tolerance {PIVOT_TOL:g}. What fits: a "
+        f"more than the {max_rank:,} it allows for {m:,} points (pivot tolerance {PIVOT_TOL:g}, work "
+        f"m r^2 <= {WORK_LIMIT:.0e}). What fits: a "
         f"section of about {sizes or '-'} mm, or a correlation length of at least about "
         f"{lam / share:.0f} mm, or the exact O(m^2) path (--exact, va_method = \"exact\"; about 10^5 points "
         "in minutes)")
