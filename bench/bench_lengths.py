@@ -13,7 +13,7 @@ Usage: ``python bench/bench_lengths.py [equal] [scale] [--records 20000,200000]`
 
 Every run is a fresh subprocess with one BLAS thread (OPENBLAS_NUM_THREADS=1: the 2-core machine
 is shared with other jobs; the load average is printed with each row).  Results:
-bench/results/lengths.md.
+bench/results/lengths_equal.md and lengths_scale.md.
 """
 
 from __future__ import annotations
@@ -94,14 +94,14 @@ def main(argv: list[str]) -> int:
     for a in argv:
         if a.startswith("--records="):
             sizes = [int(v) for v in a.split("=", 1)[1].split(",")]
-    lines = ["Measured by `python bench/bench_lengths.py` on the 2-core machine shared with other jobs "
+    head = ["Measured by `python bench/bench_lengths.py` on the 2-core machine shared with other jobs "
              "(each row a fresh process, one BLAS thread; peak = ru_maxrss; load = 1-minute load average "
              "after the run, 2.0 = both cores busy; CPU = user + system time of the process, simulation of the "
              "records included, the share of the wall time this process got).", ""]
     if "equal" in parts:
         r = run(EQUAL.format(n=5000, structured=True))
         print("equal", r, flush=True)
-        lines += ["## structured against dense, 5,000 length records (largest relative difference)", "",
+        lines = head + ["## structured against dense, 5,000 length records (largest relative difference)", "",
                   "| records | chosen (structured / dense) | chi2 before | chi2 after | log p before | "
                   "candidates' Δχ² | estimates | their u | records' u | stated chi2 bound | peak MB (both runs) |",
                   "|---|---|---|---|---|---|---|---|---|---|---|",
@@ -109,8 +109,9 @@ def main(argv: list[str]) -> int:
                   f"{r['chi2_before']:.1e} | {r['chi2_after']:.1e} | {r['logp_before']:.1e} | "
                   f"{r['candidates_delta_chi2']:.1e} | {r['beta']:.1e} | {r['u_beta']:.1e} | "
                   f"{r['u_records']:.1e} | {r['bound']:.1e} | {r['peak_MB']:.0f} |", ""]
+        write("equal", lines)
     if "scale" in parts:
-        lines += ["## diagnose on ISO 10360-2 style length records (planted squareness_xy 15 µrad, ECZ 200 µrad)", "",
+        lines = head + ["## diagnose on ISO 10360-2 style length records (planted squareness_xy 15 µrad, ECZ 200 µrad)", "",
                   "| path | records | time / s | CPU / s (whole process) | peak MB | load | chosen | estimates (u) | k (ranks) | chi2 rel. bound |",
                   "|---|---|---|---|---|---|---|---|---|---|"]
         for n in sizes:
@@ -121,10 +122,14 @@ def main(argv: list[str]) -> int:
             lines.append(f"| structured | {r['n']:,} | {r['seconds']:.1f} | {r['cpu_s']:.1f} | {r['peak_MB']:.0f} | {r['load']:.1f} | "
                          f"{' + '.join(r['chosen'])} | {est} | {r['k']} ({ranks}) | {r['bound']:.1e} |")
         lines.append("")
-    out = ROOT / "bench" / "results" / "lengths.md"
+        write("scale", lines)
+    return 0
+
+
+def write(part: str, lines: list[str]) -> None:
+    out = ROOT / "bench" / "results" / f"lengths_{part}.md"
     out.write_text("\n".join(lines) + "\n", encoding="utf-8")
     print(out.read_text())
-    return 0
 
 
 if __name__ == "__main__":

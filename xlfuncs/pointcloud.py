@@ -358,9 +358,12 @@ def pair_arrays(cloud: PointCloud, pa: dict) -> dict:
     """Per-point arrays of the all-pairs kernel :func:`rect_variances`, coordinate-major and
     contiguous (row slices broadcast without strided gathers); ``pa``: :func:`probe_arrays`."""
     P = cloud.offsets_mm
+    lam = pa["lambda_P"]
     return {"Xt": np.ascontiguousarray(cloud.X_mm.T), "Nt": np.ascontiguousarray(cloud.N.T),
+            "Ut": np.ascontiguousarray(cloud.ram_mm.T),
             "Pt": np.ascontiguousarray(P.T), "p2": np.einsum("ij,ij->i", P, P),
-            "sPQ2": pa["sigma_PQ_um"] ** 2, "sP2": pa["sigma_P0_um"] ** 2 + pa["sigma_P_um"] ** 2}
+            "sPQ2": pa["sigma_PQ_um"] ** 2, "sP2": pa["sigma_P0_um"] ** 2 + pa["sigma_P_um"] ** 2,
+            "ilamP": 1.0 / np.where(lam > 0, lam, 1.0)}
 
 
 def rect_variances(cloud: PointCloud, params: Parameters, pa: dict, I: slice, J: slice):
@@ -393,22 +396,30 @@ def rect_variances(cloud: PointCloud, params: Parameters, pa: dict, I: slice, J:
     kj = cloud.probe_index[J][None, :]
     same = ki == kj
     var["PQ"] = np.where(same, 0.0, pa["sPQ2"][I][:, None] + pa["sPQ2"][J][None, :])
-    # ram differences u_j - u_i = d n - (p_j - p_i)
-    ux, uy, uz = (d * nk - (col(P, k) - row(P, k)) for k, nk in enumerate((nx, ny, nz)))
+    # ram differences u_j - u_i (eq. 11: G is linear in the ram position)
+    U = pa["Ut"]
+    ux, uy, uz = (col(U, k) - row(U, k) for k in range(3))
     c = V_S_diag_um_per_mm2(params)
     a0 = nx * ux
     a0 += ny * uy
     a0 += nz * uz
+    ux2, uy2, uz2 = ux * ux, uy * uy, uz * uz
+    # sum_k c_k g_k^2 with g = (n.u, nx ux, ny uy, nz uz, nx uy, nx uz, ny uz), grouped by n_a^2
     S = c[0] * a0 * a0
-    for ck, (nk, ul) in zip(c[1:], ((nx, ux), (ny, uy), (nz, uz), (nx, uy), (nx, uz), (ny, uz))):
-        t = nk * ul
-        t *= t
-        t *= ck
-        S += t
+    t = c[1] * ux2 + c[4] * uy2 + c[5] * uz2
+    t *= nx * nx
+    S += t
+    t = c[2] * uy2 + c[6] * uz2
+    t *= ny * ny
+    S += t
+    t = nz * nz
+    t *= uz2
+    t *= c[3]
+    S += t
     var["S"] = S
-    du2 = ux * ux
-    du2 += uy * uy
-    du2 += uz * uz
+    du2 = ux2
+    du2 += uy2
+    du2 += uz2
     if params.sigma_ET_um > 0:
         e = np.expm1(du2 * (-1.0 / params.lambda_ET_mm**2))
         e *= -2.0 * params.sigma_ET_um**2
@@ -433,12 +444,14 @@ def rect_variances(cloud: PointCloud, params: Parameters, pa: dict, I: slice, J:
     oj = nx * col(N, 0)
     oj += ny * col(N, 1)
     oj += nz * col(N, 2)
-    s0, sp, lam = pa["sigma_P0_um"], pa["sigma_P_um"], pa["lambda_P"]
+    s0, sp = pa["sigma_P0_um"], pa["sigma_P_um"]
     s0i, s0j = s0[I][:, None], s0[J][None, :]
     spi, spj = sp[I][:, None], sp[J][None, :]
     dn2 = sum((col(N, k) - row(N, k)) ** 2 for k in range(3))
-    lam2 = lam[I][:, None] * lam[J][None, :]
-    kern = np.exp(-dn2 / np.where(lam2 > 0, lam2, 1.0))
+    # exp(-|n_i - n_j|^2 / (lambda_i lambda_j)); only pairs of one probe (one lambda) use it
+    dn2 *= -pa["ilamP"][I][:, None]
+    dn2 *= pa["ilamP"][J][None, :]
+    kern = np.exp(dn2, out=dn2)
     cross = np.where(same, s0i * s0j + spi * spj * kern, 0.0)
     Pv = pa["sP2"][I][:, None] * oi * oi + pa["sP2"][J][None, :] * oj * oj
     Pv -= 2.0 * cross * oi * oj
@@ -504,7 +517,6 @@ def iter_distance_components(cloud: PointCloud, params: Parameters, *, block: in
     (default: one per core), at most two blocks ahead of the consumer per thread."""
     pa = probe_arrays(cloud, params)
     pa.update(pair_arrays(cloud, pa))
-    blocks = row_blocks(cloud.m, block)
 
     def work(b):
         d, var = _all_pairs_block(cloud, params, pa, b)
@@ -514,6 +526,12 @@ def iter_distance_components(cloud: PointCloud, params: Parameters, *, block: in
         store_distances(part, slice(0, d.size), d, var)
         return slice(b[2], b[2] + d.size), part
 
+    yield from _ordered_blocks(work, row_blocks(cloud.m, block), workers)
+
+
+def _ordered_blocks(work, blocks, workers):
+    """work(b) for every block on ``workers`` threads (default one per core), in order, at most
+    two blocks ahead of the consumer per thread."""
     workers = min(len(blocks), workers or os.cpu_count() or 1)
     if workers <= 1:
         yield from map(work, blocks)
@@ -549,11 +567,16 @@ def distance_components(cloud: PointCloud, params: Parameters, pairs: np.ndarray
         out = {"d_mm": np.empty(total), "u_um": np.empty(total)}
         for f in FACTORS:
             out[f"u_{f}_um"] = np.empty(total)
+        pa.update(pair_arrays(cloud, pa))
+
+        def work(b):                      # each block writes its own rows of the outputs
+            d, var = _all_pairs_block(cloud, params, pa, b)
+            store_distances(out, slice(b[2], b[2] + d.size), d, var)
+            return d.size
+
         done = 0
-        for sl, part in iter_distance_components(cloud, params, block=block):
-            for key, v in part.items():
-                out[key][sl] = v
-            done += sl.stop - sl.start
+        for size in _ordered_blocks(work, row_blocks(m, block), None):
+            done += size
             if progress is not None:
                 progress(done, total)
         return out
