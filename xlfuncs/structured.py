@@ -402,5 +402,6 @@ class GramWhitener:
             core[k:, :k] = Ut_A.T
             core[k:, k:] = Ag.T @ (Ag / np.reshape(dg, (-1, 1))) - np.linalg.inv(cov0)
         rhs = np.concatenate([Ut_e, Ag.T @ (e / dg)]) if p0 else Ut_e
-        sol = np.linalg.solve(core, rhs)
+        # without alignment columns the core I + U_g^T D_g^-1 U_g is positive definite: Cholesky
+        sol = cho_solve(cho_factor(core, lower=True), rhs) if not p0 else np.linalg.solve(core, rhs)
         return float(e @ (e / dg) - rhs @ sol)

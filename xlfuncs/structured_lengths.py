@@ -309,9 +309,13 @@ class LengthCovariance:
             by_row = {by: r for r, by in enumerate(dict.fromkeys(g[0] for g in keys))}
             for j, g in enumerate(keys):
                 labels[by_row[g[0]], group_rows[g]] = j
-            uniq, cell = np.unique(labels, axis=1, return_inverse=True)
+            code = np.zeros(n, dtype=np.int64)                 # one integer per label combination
+            for r in labels:
+                loc = np.unique(r, return_inverse=True)[1].reshape(-1)
+                code = np.unique(code * (int(loc.max()) + 1) + loc, return_inverse=True)[1].reshape(-1)
+            _u, first, cell = np.unique(code, return_index=True, return_inverse=True)
             cell = cell.reshape(-1)
-            members = [[None] + [keys[j] for j in uniq[:, u] if j >= 0] for u in range(uniq.shape[1])]
+            members = [[None] + [keys[j] for j in labels[:, a] if j >= 0] for a in first]
         grams = {None: [np.zeros((self.k, self.k)), np.zeros((self.k, c))]}
         for g in keys:
             grams[g] = [np.zeros((self.k, self.k)), np.zeros((self.k, c))]

@@ -122,8 +122,9 @@ def _unique_probings(rec: LengthRecords, k1: np.ndarray, k2: np.ndarray):
     N1 = rec.N1 if rec.N1 is not None else np.zeros_like(rec.X1_mm)
     N2 = rec.N2 if rec.N2 is not None else np.zeros_like(rec.X2_mm)
     rows = np.vstack([np.column_stack([rec.X1_mm, N1, k1]), np.column_stack([rec.X2_mm, N2, k2])])
-    rows = rows + 0.0                                   # -0.0 and 0.0 are the same coordinate
-    _u, first, inv = np.unique(rows, axis=0, return_index=True, return_inverse=True)
+    rows = np.ascontiguousarray(rows + 0.0)             # -0.0 and 0.0 are the same coordinate
+    keys = rows.view(np.dtype((np.void, rows.dtype.itemsize * rows.shape[1]))).ravel()
+    _u, first, inv = np.unique(keys, return_index=True, return_inverse=True)   # equal bytes = equal row
     inv = inv.reshape(-1)
     order = np.argsort(first, kind="stable")            # unique rows by first use
     q_of = np.empty(len(first), dtype=int)
@@ -131,8 +132,8 @@ def _unique_probings(rec: LengthRecords, k1: np.ndarray, k2: np.ndarray):
     idx = q_of[inv].reshape(2, n)
     src = first[order]
     X, N, K = rows[src, :3], rows[src, 3:6], rows[src, 6].astype(int)
-    pair = np.sort(idx, axis=0).T
-    _p, pfirst, pinv = np.unique(pair, axis=0, return_index=True, return_inverse=True)
+    pair = np.sort(idx, axis=0).astype(np.int64)
+    _p, pfirst, pinv = np.unique(pair[0] * len(first) + pair[1], return_index=True, return_inverse=True)
     b_of = pfirst[pinv.reshape(-1)]
     bad = np.flatnonzero((np.abs(rec.measured_mm - rec.measured_mm[b_of]) > 1e-9)
                          | (np.abs(rec.reference_mm - rec.reference_mm[b_of]) > 1e-9))
