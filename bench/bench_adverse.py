@@ -95,7 +95,8 @@ def run(case: str, m: int, a: float, b: float) -> dict:
     except subprocess.TimeoutExpired:
         return {"timeout": TIMEOUT, "load": os.getloadavg()[0]}
     if p.returncode != 0:
-        raise RuntimeError(p.stderr)
+        last = p.stderr.strip().splitlines()[-1] if p.stderr.strip() else "failed"
+        return {"failed": last, "load": os.getloadavg()[0]}
     r = json.loads([ln for ln in p.stdout.splitlines() if ln.startswith("RESULT")][-1][7:])
     r["load"] = os.getloadavg()[0]
     return r
@@ -139,6 +140,10 @@ def main(argv: list[str]) -> int:
         case = "verify" if m == 10_000 else "lowrank"
         r = run(case, m, a, b)
         print(case, m, r, flush=True)
+        if "failed" in r:
+            lines.append(f"| {a:.0f} x {b:.0f} | {m:,} | low-rank | failed: {r['failed'].replace('|', '/')} | | "
+                         f"{r['load']:.1f} | | | | |")
+            continue
         if "timeout" in r:
             lines.append(f"| {a:.0f} x {b:.0f} | {m:,} | low-rank | not finished in {r['timeout']} s | | "
                          f"{r['load']:.1f} | | | | |")

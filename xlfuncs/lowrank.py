@@ -71,6 +71,8 @@ class RankError(ModelError):
 #: most work m r^2 of a low-rank factor (the projection of m points on r pivots; 5e11 is a few
 #: minutes on one core): m = 10^6 points allow r = 707 pivots, m = 125,000 the whole MAX_RANK
 WORK_LIMIT = 5e11
+#: the section proposed in a refusal aims at this share of the pivots allowed (the estimate is rough)
+SECTION_SHARE = 0.8
 #: side of the cells (in correlation lengths) whose count over the points estimates the pivots a
 #: kernel needs at PIVOT_TOL (measured at lambda = 30 mm: 3.7 pivots per lambda on a line, 15-17
 #: per lambda^2 on a plane, 75-120 per lambda^3 in a volume, i.e. about one per cell of lambda/4)
@@ -83,14 +85,19 @@ def occupied_cells(Z: np.ndarray, side: float) -> int:
     return int(len(np.unique(keys, axis=0)))
 
 
-def rank_estimate(Z: np.ndarray, inv_lam2: float) -> tuple[int, float]:
-    """(estimated pivots, dimension of the points at the scale of lambda): the cells of side
-    CELL lambda that the points occupy, and log2 of the ratio of the cells of side lambda/2 to
-    those of side lambda (coarse enough to be filled by a scan)."""
+def rank_estimate(Z: np.ndarray, inv_lam2: float) -> tuple[int, float, int]:
+    """(estimated pivots, dimension of the points at the scale of lambda, pivots of the region
+    once densely filled): the cells of side CELL lambda that the points occupy; the dimension is
+    the smaller of the number of directions along which the points extend beyond lambda and log2
+    of the ratio of the cells of side lambda to those of side 2 lambda (a surface in space counts
+    2); the filled estimate scales the cells of side lambda by (1/CELL)^dimension."""
     lam = 1.0 / np.sqrt(inv_lam2)
     n1 = occupied_cells(Z, CELL * lam)
-    n2, n4 = occupied_cells(Z, 0.5 * lam), occupied_cells(Z, lam)
-    return n1, float(min(3.0, max(1.0, np.log2(max(n2, 1) / max(n4, 1)))))
+    n2, n4 = occupied_cells(Z, lam), occupied_cells(Z, 2.0 * lam)
+    axes = int(np.count_nonzero(np.linalg.svd(Z - Z.mean(axis=0), compute_uv=False) / np.sqrt(len(Z))
+                                > lam / np.sqrt(12.0))) if len(Z) > 1 else 1
+    dim = float(min(3.0, max(1.0, min(axes, np.log2(max(n2, 1) / max(n4, 1))))))
+    return n1, dim, int(max(n1, n2 * (1.0 / CELL) ** dim))
 
 
 def check_rank(Z: np.ndarray, inv_lam2: float, name: str, max_rank: int | None = None,
@@ -101,14 +108,14 @@ def check_rank(Z: np.ndarray, inv_lam2: float, name: str, max_rank: int | None =
     m = len(Z)
     max_rank = MAX_RANK if max_rank is None else max_rank
     limit = max(1, min(max_rank, int(np.sqrt(WORK_LIMIT / max(m, 1)))))
-    est, dim = rank_estimate(Z, inv_lam2)
-    if found is None and est <= 1.25 * limit:
+    est, dim, filled = rank_estimate(Z, inv_lam2)
+    if found is None and est <= limit:
         return
     max_rank = limit if found is None else max_rank
     lam = 1.0 / np.sqrt(inv_lam2)
     ext = np.ptp(Z, axis=0)
-    need = max(est, found or 0)
-    share = (max_rank / need) ** (1.0 / dim)
+    need = max(filled, found or 0)                 # a section is measured as densely
+    share = (SECTION_SHARE * max_rank / need) ** (1.0 / dim)
     sizes = " x ".join(f"{v * share:.0f}" for v in ext if v > lam)
     how = (f"ran into the limit of {max_rank:,} pivots with residual left" if found is not None
            else f"needs about {est:,} pivots (points in {est:,} cells of lambda/4 = {CELL * lam:.3g} mm)")
