@@ -81,8 +81,8 @@ CELL = 0.25
 
 def occupied_cells(Z: np.ndarray, side: float) -> int:
     """How many cubes of the grid with this side (mm) hold at least one point of Z."""
-    keys = np.floor((Z - Z.min(axis=0)) / side).astype(np.int64)
-    return int(len(np.unique(keys, axis=0)))
+    keys = np.ascontiguousarray(np.floor((Z - Z.min(axis=0)) / side).astype(np.int64))
+    return int(len(np.unique(keys.view(np.dtype((np.void, 8 * keys.shape[1]))).ravel())))
 
 
 def rank_estimate(Z: np.ndarray, inv_lam2: float) -> tuple[int, float, int]:
