@@ -12,7 +12,8 @@ alternately so that each sees the same load:
 * ``dense``     the reference: V_X formed densely (:func:`xlfuncs.pointcloud.V_X`, 3m x 3m) and
                 u(d_ij)^2 = n^T (V_ii + V_jj - V_ij - V_ji) n for every pair with numpy, row by row.
 
-``--source DIR`` runs the non-dense cases on another checkout's ``xlfuncs`` (the "before" rows).
+``--before=DIR:LABEL`` adds the in-memory case on another checkout's ``xlfuncs`` (the code before,
+``git archive COMMIT xlfuncs | tar -x -C DIR``), alternating with the others in the same run.
 The 2-core machine is shared with other jobs: every row gives the 1-minute load average; the
 speed-up is the ratio of the dense reference's best time to the case's best time in the same run.
 Results: bench/results/pairs.md.
@@ -109,36 +110,36 @@ def run(case: str, source: Path) -> dict:
 
 def main(argv: list[str]) -> int:
     repeats = int(os.environ.get("BENCH_REPEATS", "2"))
-    source, label = ROOT, "this checkout"
+    runs = [("streamed", ROOT, "this checkout"), ("arrays", ROOT, "this checkout")]
     for a in argv:
-        if a.startswith("--source="):
-            source, label = Path(a.split("=", 1)[1]).resolve(), a.split("=", 1)[1]
-    cases = ["streamed", "arrays"] if source == ROOT else ["arrays"]
-    res: dict[str, list[dict]] = {c: [] for c in cases + ["dense"]}
+        if a.startswith("--before="):       # a checkout of the code before, e.g. git archive COMMIT xlfuncs
+            src, _, label = a.split("=", 1)[1].partition(":")
+            runs.insert(0, ("arrays", Path(src).resolve(), label or src))
+    runs.append(("dense", ROOT, "reference"))
+    res: dict[tuple, list[dict]] = {(c, lab): [] for c, _s, lab in runs}
     for _ in range(repeats):
-        for c in cases:
-            res[c].append(run(c, source))
-            print(c, res[c][-1], flush=True)
-        res["dense"].append(run("dense", ROOT))
-        print("dense", res["dense"][-1], flush=True)
-    ref = res["dense"][0]["check"]
-    for c in cases:
-        for r in res[c]:
-            assert max(abs(a - b) / b for a, b in zip(r["check"], ref)) < 1e-12, (c, r["check"], ref)
-    best_dense = min(r["seconds"] for r in res["dense"])
-    out = ROOT / "bench" / "results" / "pairs.md"
-    lines = out.read_text(encoding="utf-8").splitlines() if out.exists() else [
+        for c, src, lab in runs:
+            res[(c, lab)].append(run(c, src))
+            print(lab, c, res[(c, lab)][-1], flush=True)
+    ref = res[("dense", "reference")][0]["check"]
+    for key, rs in res.items():
+        for r in rs:
+            assert max(abs(a - b) / b for a, b in zip(r["check"], ref)) < 1e-12, (key, r["check"], ref)
+    best_dense = min(r["seconds"] for r in res[("dense", "reference")])
+    lines = [
         "Measured by `python bench/bench_pairs.py` on the 2-core machine shared with other jobs (each row "
-        "a fresh process; the cases of one run alternate; peak = ru_maxrss; load = 1-minute load average "
-        "after the run, 2.0 = both cores busy).  m = 3,000: 4,498,500 distances, eight float64 outputs "
-        "each (288 MB if held).", "",
-        "| code | case | time / s best | median | peak MB best | dense reference best / s (same run) | speed-up vs dense | load |",
-        "|---|---|---|---|---|---|---|---|"]
-    for c in cases + ["dense"]:
-        ts = [r["seconds"] for r in res[c]]
-        lines.append(f"| {label} | {c} | {min(ts):.2f} | {statistics.median(ts):.2f} | "
-                     f"{min(r['peak_MB'] for r in res[c]):.0f} | {best_dense:.2f} | "
-                     f"{best_dense / min(ts):.1f}x | {max(r['load'] for r in res[c]):.1f} |")
+        "a fresh process; the cases of one run alternate, so each sees the same load; peak = ru_maxrss; "
+        "load = highest 1-minute load average after its runs, 2.0 = both cores busy).  m = 3,000: "
+        "4,498,500 distances, eight float64 outputs each (288 MB if held); every case's u equals the "
+        "dense reference's to 1e-12.", "",
+        "| code | case | time / s best | median | peak MB best | speed-up vs dense (best / best, same run) | load |",
+        "|---|---|---|---|---|---|---|"]
+    for (c, lab), rs in res.items():
+        ts = [r["seconds"] for r in rs]
+        lines.append(f"| {lab} | {c} | {min(ts):.2f} | {statistics.median(ts):.2f} | "
+                     f"{min(r['peak_MB'] for r in rs):.0f} | {best_dense / min(ts):.1f}x | "
+                     f"{max(r['load'] for r in rs):.1f} |")
+    out = ROOT / "bench" / "results" / "pairs.md"
     out.write_text("\n".join(lines) + "\n", encoding="utf-8")
     print("\n".join(lines))
     return 0

@@ -73,9 +73,13 @@ def diagnose(rec: LengthRecords | PointRecords, model: Model, alpha: float = 0.0
     of the structured length covariance run, :mod:`xlfuncs.distributed`, same numbers)."""
     alpha_name = check_alphas(alpha, alpha_name)
     prep = prepare(rec, model, structured)
-    if backend is not None and hasattr(prep.C, "backend"):
-        prep.C.backend = backend
-    return diagnose_prepared(prep, alpha, alpha_name)
+    if backend is None or not hasattr(prep.C, "backend"):
+        return diagnose_prepared(prep, alpha, alpha_name)
+    prep.C.backend = backend
+    try:
+        return diagnose_prepared(prep, alpha, alpha_name)
+    finally:
+        prep.C.backend = None          # the caller owns (and closes) the backend
 
 
 #: a cause is named when its adjusted p-value is below alpha x NAME_SHARE (docs/recordings.md
