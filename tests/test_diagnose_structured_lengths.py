@@ -132,3 +132,12 @@ def test_records_without_a_probing_of_their_own_are_refused_with_the_reason(monk
         dg.prepare(rec, MODEL, True)
     monkeypatch.setattr(locator_model, "STRUCTURED_MIN_OBS", 0)
     assert isinstance(dg.prepare(rec, MODEL).C, np.ndarray)
+
+
+def test_group_statistics_that_would_not_fit_are_refused_beforehand(monkeypatch):
+    from xlfuncs.memory import ResourceError
+
+    rec = sm.simulate(sm.iso10360(PAIR, repeats=2), MPE1, {}, seed=1)
+    monkeypatch.setattr(sl, "available_bytes", lambda: 50 * 2**20)
+    with pytest.raises(ResourceError, match=r"group statistics of 70 length records need about .* GiB are available"):
+        dg.diagnose(rec, MODEL, structured=True)

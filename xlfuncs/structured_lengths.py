@@ -47,6 +47,7 @@ from . import lowrank as lr
 from . import pointcloud as pc
 from .errors import ModelError
 from .execution import ThreadBackend
+from .memory import ResourceError, available_bytes
 from .structured import GramWhitener
 
 #: records per block of the passes over U
@@ -316,6 +317,13 @@ class LengthCovariance:
             _u, first, cell = np.unique(code, return_index=True, return_inverse=True)
             cell = cell.reshape(-1)
             members = [[None] + [keys[j] for j in labels[:, a] if j >= 0] for a in first]
+        need = (len(keys) + 4) * 8 * self.k * (self.k + c)     # a Gram per group, the total, a cell, a task
+        have = available_bytes()
+        if need > have:
+            raise ResourceError(
+                f"the group statistics of {n:,} length records need about {need / 2**30:,.1f} GiB "
+                f"({len(keys)} groups x {self.k:,}^2 numbers), {have / 2**30:,.1f} GiB are available: "
+                "diagnose fewer groupings (drop the group, time or temperature columns) or a section")
         grams = {None: [np.zeros((self.k, self.k)), np.zeros((self.k, c))]}
         for g in keys:
             grams[g] = [np.zeros((self.k, self.k)), np.zeros((self.k, c))]
