@@ -74,3 +74,22 @@ def test_the_environment_chooses_the_backend(monkeypatch, cluster):
         assert isinstance(backend, DaskBackend) and backend.address == cluster.scheduler_address
     finally:
         backend.close()
+
+
+def test_diagnose_of_length_records_on_a_dask_cluster_equals_the_local_path(cluster):
+    """The passes of the structured length covariance (xlfuncs.structured_lengths) as Dask tasks
+    on two worker processes: chi-square, candidates, estimates and u as on one process."""
+    from xlfuncs import diagnose as dg
+    from xlfuncs import simulate as sm
+    from test_diagnose_core import MPE1, PAIR
+
+    rec = sm.simulate(sm.iso10360(PAIR, repeats=2), MPE1, {"scale": 3.0}, seed=3)
+    model = dg.Model(MPE1, PAIR, True)
+    local = dg.diagnose(rec, model, structured=True)
+    with DaskBackend(cluster.scheduler_address) as backend:
+        remote = dg.diagnose(rec, model, structured=True, backend=backend)
+    assert remote.chosen == local.chosen == ["scale"]
+    for a, b in ((remote.chi2_before, local.chi2_before), (remote.chi2_after, local.chi2_after),
+                 (remote.beta, local.beta), (np.diag(remote.cov_beta), np.diag(local.cov_beta)),
+                 (remote.u_obs, local.u_obs), ([g["chi2"] for g in remote.groups], [g["chi2"] for g in local.groups])):
+        assert np.max(np.abs(np.asarray(a) - np.asarray(b))) <= 1e-12 * np.max(np.abs(np.asarray(b)))

@@ -277,7 +277,7 @@ def _distance_pairs(item, shared):
 
 
 def distance_components(cloud: pc.PointCloud, params: pc.Parameters, pairs=None, *,
-                        backend=None, progress=None, block: int = 262_144) -> dict[str, np.ndarray]:
+                        backend=None, progress=None, block: int = pc.PAIR_BLOCK) -> dict[str, np.ndarray]:
     """d_ij (mm), u(d_ij) and the six components (µm) of eqs. (29)-(30), as
     :func:`xlfuncs.pointcloud.distance_components` (same keys, same order, same numbers).
 

@@ -67,12 +67,19 @@ __all__ = ["diagnose", "diagnose_prepared", "effect_covariance", "check_alphas",
 
 
 def diagnose(rec: LengthRecords | PointRecords, model: Model, alpha: float = 0.01,
-             structured: bool | None = None, alpha_name: float | None = None) -> Diagnosis:
+             structured: bool | None = None, alpha_name: float | None = None, *, backend=None) -> Diagnosis:
     """The analysis of docs/recordings.md section 3 on validated recordings (``structured``: see
-    :func:`prepare`; ``alpha_name``: see :func:`diagnose_prepared`)."""
+    :func:`prepare`; ``alpha_name``: see :func:`diagnose_prepared`; ``backend``: where the passes
+    of the structured length covariance run, :mod:`xlfuncs.distributed`, same numbers)."""
     alpha_name = check_alphas(alpha, alpha_name)
     prep = prepare(rec, model, structured)
-    return diagnose_prepared(prep, alpha, alpha_name)
+    if backend is None or not hasattr(prep.C, "backend"):
+        return diagnose_prepared(prep, alpha, alpha_name)
+    prep.C.backend = backend
+    try:
+        return diagnose_prepared(prep, alpha, alpha_name)
+    finally:
+        prep.C.backend = None          # the caller owns (and closes) the backend
 
 
 #: a cause is named when its adjusted p-value is below alpha x NAME_SHARE (docs/recordings.md

@@ -64,10 +64,82 @@ def _kernel(A, B, inv_lam2):
     return np.exp(K, out=K)
 
 
-def pivots(Z: np.ndarray, inv_lam2: float, *, tol: float = PIVOT_TOL, max_rank: int = MAX_RANK,
+class RankError(ModelError):
+    """A kernel needs more pivots than :data:`MAX_RANK`: the low-rank path is refused, with what fits."""
+
+
+#: most work m r^2 of a low-rank factor (the projection of m points on r pivots; 5e11 is a few
+#: minutes on one core): m = 10^6 points allow r = 707 pivots, m = 125,000 the whole MAX_RANK
+WORK_LIMIT = 5e11
+#: the section proposed in a refusal aims at this share of the pivots allowed (the estimate is rough)
+SECTION_SHARE = 0.8
+#: side of the cells (in correlation lengths) whose count over the points estimates the pivots a
+#: kernel needs at PIVOT_TOL (measured at lambda = 30 mm: 3.7 pivots per lambda on a line, 15-17
+#: per lambda^2 on a plane, 75-120 per lambda^3 in a volume, i.e. about one per cell of lambda/4)
+CELL = 0.25
+
+
+def occupied_cells(Z: np.ndarray, side: float) -> int:
+    """How many cubes of the grid with this side (mm) hold at least one point of Z."""
+    keys = np.ascontiguousarray(np.floor((Z - Z.min(axis=0)) / side).astype(np.int64))
+    return int(len(np.unique(keys.view(np.dtype((np.void, 8 * keys.shape[1]))).ravel())))
+
+
+def rank_estimate(Z: np.ndarray, inv_lam2: float) -> tuple[int, float, int]:
+    """(estimated pivots, dimension of the points at the scale of lambda, pivots of the region
+    once densely filled): the cells of side CELL lambda that the points occupy; the dimension is
+    the smaller of the number of directions along which the points extend beyond lambda and log2
+    of the ratio of the cells of side lambda to those of side 2 lambda (a surface in space counts
+    2); the filled estimate scales the cells of side lambda by (1/CELL)^dimension."""
+    lam = 1.0 / np.sqrt(inv_lam2)
+    n1 = occupied_cells(Z, CELL * lam)
+    n2, n4 = occupied_cells(Z, lam), occupied_cells(Z, 2.0 * lam)
+    axes = int(np.count_nonzero(np.linalg.svd(Z - Z.mean(axis=0), compute_uv=False) / np.sqrt(len(Z))
+                                > lam / np.sqrt(12.0))) if len(Z) > 1 else 1
+    dim = float(min(3.0, max(1.0, min(axes, np.log2(max(n2, 1) / max(n4, 1))))))
+    return n1, dim, int(max(n1, n2 * (1.0 / CELL) ** dim))
+
+
+def check_rank(Z: np.ndarray, inv_lam2: float, name: str, max_rank: int | None = None,
+               found: int | None = None) -> None:
+    """Refuse (:class:`RankError`) a kernel whose rank would exceed ``max_rank``: by the cell
+    estimate before any pivoting (time O(m)), or when the pivots actually ran into the limit
+    (``found``); the message says what fits (a section, a correlation length, the exact path)."""
+    m = len(Z)
+    max_rank = MAX_RANK if max_rank is None else max_rank
+    limit = max(1, min(max_rank, int(np.sqrt(WORK_LIMIT / max(m, 1)))))
+    est, dim, filled = rank_estimate(Z, inv_lam2)
+    if found is None and est <= limit:
+        return
+    max_rank = limit if found is None else max_rank
+    lam = 1.0 / np.sqrt(inv_lam2)
+    ext = np.ptp(Z, axis=0)
+    need = max(filled, found or 0)                 # a section is measured as densely
+    share = (SECTION_SHARE * max_rank / need) ** (1.0 / dim)
+    sizes = " x ".join(f"{v * share:.0f}" for v in ext if v > lam)
+    how = (f"ran into the limit of {max_rank:,} pivots with residual left" if found is not None
+           else f"needs about {est:,} pivots (points in {est:,} cells of lambda/4 = {CELL * lam:.3g} mm)")
+    raise RankError(
+        f"{name}: the correlation length {lam:g} mm is short against the extent of the "
+        f"{len(Z):,} points ({' x '.join(f'{v:.0f}' for v in ext)} mm): the low-rank factor {how}, "
+        f"more than the {max_rank:,} it allows for {m:,} points (pivot tolerance {PIVOT_TOL:g}, work "
+        f"m r^2 <= {WORK_LIMIT:.0e}). What fits: a "
+        f"section of about {sizes or '-'} mm, or a correlation length of at least about "
+        f"{lam / share:.0f} mm, or the exact O(m^2) path (--exact, va_method = \"exact\"; about 10^5 points "
+        "in minutes)")
+
+
+def unit_kernel(A: np.ndarray, B: np.ndarray, inv_lam2: float) -> np.ndarray:
+    """The unit squared-exponential kernel exp(-|a - b|^2 inv_lam2), rows A, columns B."""
+    return _kernel(A, B, inv_lam2)
+
+
+def pivots(Z: np.ndarray, inv_lam2: float, *, tol: float = PIVOT_TOL, max_rank: int | None = None,
            pool: np.ndarray | None = None) -> np.ndarray:
     """Indices into ``Z`` of the pivots of a greedy pivoted Cholesky of the unit SE kernel on the
-    points ``pool`` (default: all of Z), stopped when the largest residual diagonal is <= tol."""
+    points ``pool`` (default: all of Z), stopped when the largest residual diagonal is <= tol;
+    :class:`RankError` when ``max_rank`` (default MAX_RANK) pivots leave more than tol."""
+    max_rank = MAX_RANK if max_rank is None else max_rank
     idx = np.arange(len(Z)) if pool is None else np.asarray(pool, dtype=int)
     Zp = Z[idx]
     s = len(idx)
@@ -86,6 +158,9 @@ def pivots(Z: np.ndarray, inv_lam2: float, *, tol: float = PIVOT_TOL, max_rank: 
         L[r] = row
         d -= row * row
         d[chosen] = 0.0
+    else:
+        if s > max_rank and np.max(d) > tol:
+            raise RankError(f"the kernel needs more than {max_rank} pivots")
     return idx[np.asarray(chosen, dtype=int)]
 
 
@@ -200,15 +275,22 @@ def initial_pool(m: int) -> np.ndarray:
 
 
 def controlled_factor(Z: np.ndarray, inv_lam2: float, tol: float = PIVOT_TOL,
-                      block: int = 4096) -> tuple[KernelFactor, float]:
+                      block: int = 4096, name: str = "kernel") -> tuple[KernelFactor, float]:
     """The Nyström factor of the unit SE kernel on Z and the trace of its residual over all
     points (with the rounding allowance), re-choosing the pivots with the worst points added
-    while any residual diagonal exceeds CHECK_FACTOR * tol."""
+    while any residual diagonal exceeds CHECK_FACTOR * tol.  A kernel whose rank would exceed
+    MAX_RANK is refused (:func:`check_rank`, named ``name``)."""
     eps = np.finfo(float).eps
     m = Z.shape[0]
     pool = initial_pool(m)
+    check_rank(Z, inv_lam2, name)
     for rnd in range(MAX_ROUNDS):
-        fac = KernelFactor.at(Z, pivots(Z, inv_lam2, tol=tol, pool=pool), inv_lam2)
+        try:
+            piv = pivots(Z, inv_lam2, tol=tol, pool=pool)
+        except RankError:
+            check_rank(Z, inv_lam2, name, found=MAX_RANK)
+            raise
+        fac = KernelFactor.at(Z, piv, inv_lam2)
         d = np.empty(m)
         for i0 in range(0, m, block):
             L = fac.rows(Z[i0:i0 + block])
@@ -240,11 +322,17 @@ def gp_terms_V_A(problems, nA: int, approx: Approximation, *, backend=None, prog
         facs.append(None)
     todo = list(range(len(terms)))
     results: dict[int, tuple] = {}
+    for Z, name, _s, inv_lam2, _W in terms:
+        check_rank(Z, inv_lam2, name)
     for rnd in range(MAX_ROUNDS):
         for t in todo:
-            Z, _n, _s, inv_lam2, _W = terms[t]
-            facs[t] = KernelFactor.at(Z, pivots(Z, inv_lam2, tol=approx.pivot_tol, pool=pools[t]),
-                                      inv_lam2)
+            Z, name, _s, inv_lam2, _W = terms[t]
+            try:
+                piv = pivots(Z, inv_lam2, tol=approx.pivot_tol, pool=pools[t])
+            except RankError:
+                check_rank(Z, inv_lam2, name, found=MAX_RANK)
+                raise
+            facs[t] = KernelFactor.at(Z, piv, inv_lam2)
         Ys, Ds = nystrom_project([(terms[t][0], terms[t][4], facs[t]) for t in todo],
                                  backend=backend, progress=progress)
         again = []

@@ -37,9 +37,10 @@ class ResourceError(ModelError):
 
 def diagnose_bytes(kind: str, n_records: int, dims: int = 3, structured: bool = False) -> int:
     """Estimated peak memory (bytes) of :func:`xlfuncs.diagnose.diagnose` on ``n_records``
-    (``structured``: point records on the structured operator, linear in n)."""
+    (``structured``: the structured operator of point or length records
+    (:mod:`xlfuncs.structured_lengths`), linear in n)."""
     n = int(n_records)
-    if structured and kind != "length":
+    if structured:
         return STRUCTURED_BASE_BYTES + STRUCTURED_BYTES_PER_RECORD * n
     if kind == "length":
         return 8 * LENGTH_MATRICES * n * n
@@ -85,7 +86,7 @@ def check_diagnose_fits(kind: str, n_records: int, dims: int = 3, available: int
     have = available_bytes() if available is None else available
     if need <= have:
         return
-    if structured and kind != "length":
+    if structured:
         fits = max((have - STRUCTURED_BASE_BYTES) // STRUCTURED_BYTES_PER_RECORD, 0)
     else:
         base = diagnose_bytes(kind, 0, dims)            # the estimate is base + per_n2 n^2

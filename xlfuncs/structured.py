@@ -78,7 +78,7 @@ class StructuredCovariance:
             if idx.size and sp[idx[0]] > 0:
                 terms.append((f"P{q}", cloud.N[idx], 1 / lam[idx[0]] ** 2, sp[idx[0]] ** 2, 1.0, idx))
         for name, Z, il2, s, w2, idx in terms:
-            fac, tr = lr.controlled_factor(Z, il2, self.pivot_tol)
+            fac, tr = lr.controlled_factor(Z, il2, self.pivot_tol, name=name)
             self.facs[name] = (fac, idx)
             self.ranks[name] = fac.rank
             self.eps_C += s * tr * w2
@@ -359,7 +359,9 @@ def _acc(acc, key, V, B, nz, VV=None, VB=None):
 class GramWhitener:
     """W with (W a)^T (W b) = a^T C^-1 b for a, b in the span of the columns B it was built on
     (:meth:`StructuredCovariance.whitener`): coordinates Lambda^-1/2 V^T S P^T M, with
-    S Gamma S = V Lambda V^T (S: column scaling), P = C^-1 B."""
+    S Gamma S = V Lambda V^T (S: column scaling), P = C^-1 B.  ``d``: the diagonal part D of
+    C = D + U U^T, a number (point records) or one value per observation (length records,
+    :mod:`xlfuncs.structured_lengths`)."""
 
     mode = "structured"
     L = None
@@ -385,6 +387,7 @@ class GramWhitener:
         A = B A_coef (generalized Woodbury; the group is a strict subset of the records)."""
         UtU, UtB, idx = self.groups[key]
         Bg = self.B[idx]
+        dg = self.d if np.ndim(self.d) == 0 else self.d[idx]      # D: scalar or diagonal
         e = Bg @ e_coef
         k = UtU.shape[0]
         Ag = Bg @ A_coef
@@ -397,7 +400,8 @@ class GramWhitener:
         if p0:
             core[:k, k:] = Ut_A
             core[k:, :k] = Ut_A.T
-            core[k:, k:] = Ag.T @ Ag / self.d - np.linalg.inv(cov0)
-        rhs = np.concatenate([Ut_e, Ag.T @ e / self.d]) if p0 else Ut_e
-        sol = np.linalg.solve(core, rhs)
-        return float(e @ e / self.d - rhs @ sol)
+            core[k:, k:] = Ag.T @ (Ag / np.reshape(dg, (-1, 1))) - np.linalg.inv(cov0)
+        rhs = np.concatenate([Ut_e, Ag.T @ (e / dg)]) if p0 else Ut_e
+        # without alignment columns the core I + U_g^T D_g^-1 U_g is positive definite: Cholesky
+        sol = cho_solve(cho_factor(core, lower=True), rhs) if not p0 else np.linalg.solve(core, rhs)
+        return float(e @ (e / dg) - rhs @ sol)

@@ -23,6 +23,7 @@ from xlfuncs import diagnose as dg
 from xlfuncs import pointcloud as pc
 from xlfuncs import simulate as sm
 from xlfuncs.errors import ModelError
+from xlfuncs.distributed import get_backend
 from xlfuncs.memory import ResourceError, check_diagnose_fits
 from xlfuncs.recordings import RecordingsError, parse_recordings, write_recordings
 
@@ -161,7 +162,13 @@ def run_diagnose(rec_path: Path, model: dg.Model, out_dir: Path, *, alpha: float
     except ResourceError as e:
         raise InputError(str(e), file=rec_path) from None
     try:
-        diag = dg.diagnose(rec, model, alpha, structured=structured, alpha_name=alpha_name)
+        backend = get_backend() if structured and rec.kind == "length" else None
+        try:
+            diag = dg.diagnose(rec, model, alpha, structured=False if exact else None, alpha_name=alpha_name,
+                               backend=backend)
+        finally:
+            if backend is not None:
+                backend.close()
     except RecordingsError as e:
         raise InputError(e.message, file=rec_path, where=e.where) from None
     except ModelError as e:

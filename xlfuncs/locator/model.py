@@ -13,6 +13,7 @@ import numpy as np
 
 from .. import effects as fx
 from .. import pointcloud as pc
+from .. import structured_lengths as sl
 from ..errors import ModelError
 from ..recordings import LengthRecords, PointRecords, RecordingsError
 
@@ -115,36 +116,36 @@ class Prepared:
 
 
 def _unique_probings(rec: LengthRecords, k1: np.ndarray, k2: np.ndarray):
-    """Ends with identical coordinates, normal and probe are one probing (docs/recordings.md section 6)."""
+    """Ends with identical coordinates, normal and probe are one probing (docs/recordings.md section 6).
+    Probings are numbered in the order of first use (first ends of all records, then second ends)."""
+    n = rec.n
     N1 = rec.N1 if rec.N1 is not None else np.zeros_like(rec.X1_mm)
     N2 = rec.N2 if rec.N2 is not None else np.zeros_like(rec.X2_mm)
-    keys: dict[tuple, int] = {}
-    X, N, K = [], [], []
-    idx = np.empty((2, rec.n), dtype=int)
-    for e, (Xe, Ne, ke) in enumerate(((rec.X1_mm, N1, k1), (rec.X2_mm, N2, k2))):
-        for a in range(rec.n):
-            key = (*Xe[a].tolist(), *Ne[a].tolist(), int(ke[a]))
-            q = keys.get(key)
-            if q is None:
-                q = keys[key] = len(X)
-                X.append(Xe[a])
-                N.append(Ne[a])
-                K.append(int(ke[a]))
-            idx[e, a] = q
-    pairs: dict[tuple[int, int], int] = {}
-    for a in range(rec.n):
-        key = tuple(sorted((int(idx[0, a]), int(idx[1, a]))))
-        if key in pairs:
-            b = pairs[key]
-            if abs(rec.measured_mm[a] - rec.measured_mm[b]) > 1e-9 or abs(rec.reference_mm[a] - rec.reference_mm[b]) > 1e-9:
-                raise RecordingsError(
-                    f"records {rec.ids[b]!r} (line {rec.lines[b]}) and {rec.ids[a]!r} have the same two "
-                    "probings (identical coordinates, normals and probes: one probing each, spec "
-                    "section 6) but different lengths; give the indicated coordinates of every repeat",
-                    rec.lines[a], "x1")
-        else:
-            pairs[key] = a
-    return np.array(X), np.array(N), np.array(K, dtype=int), idx[0], idx[1]
+    rows = np.vstack([np.column_stack([rec.X1_mm, N1, k1]), np.column_stack([rec.X2_mm, N2, k2])])
+    rows = np.ascontiguousarray(rows + 0.0)             # -0.0 and 0.0 are the same coordinate
+    keys = rows.view(np.dtype((np.void, rows.dtype.itemsize * rows.shape[1]))).ravel()
+    _u, first, inv = np.unique(keys, return_index=True, return_inverse=True)   # equal bytes = equal row
+    inv = inv.reshape(-1)
+    order = np.argsort(first, kind="stable")            # unique rows by first use
+    q_of = np.empty(len(first), dtype=int)
+    q_of[order] = np.arange(len(first))
+    idx = q_of[inv].reshape(2, n)
+    src = first[order]
+    X, N, K = rows[src, :3], rows[src, 3:6], rows[src, 6].astype(int)
+    pair = np.sort(idx, axis=0).astype(np.int64)
+    _p, pfirst, pinv = np.unique(pair[0] * len(first) + pair[1], return_index=True, return_inverse=True)
+    b_of = pfirst[pinv.reshape(-1)]
+    bad = np.flatnonzero((np.abs(rec.measured_mm - rec.measured_mm[b_of]) > 1e-9)
+                         | (np.abs(rec.reference_mm - rec.reference_mm[b_of]) > 1e-9))
+    if bad.size:
+        a = int(bad[0])
+        b = int(b_of[a])
+        raise RecordingsError(
+            f"records {rec.ids[b]!r} (line {rec.lines[b]}) and {rec.ids[a]!r} have the same two "
+            "probings (identical coordinates, normals and probes: one probing each, spec "
+            "section 6) but different lengths; give the indicated coordinates of every repeat",
+            rec.lines[a], "x1")
+    return X, N, K, idx[0], idx[1]
 
 
 def kabsch(X_nom: np.ndarray, X: np.ndarray, planar: bool) -> tuple[np.ndarray, np.ndarray]:
@@ -171,19 +172,19 @@ STRUCTURED_MIN_OBS = 6000
 
 
 def uses_structured(rec: LengthRecords | PointRecords, model: Model, structured: bool | None = None) -> bool:
-    """Whether :func:`prepare` takes the structured covariance for these records."""
-    if isinstance(rec, LengthRecords):
-        return False
+    """Whether :func:`prepare` takes the structured covariance for these records (length
+    records: unless their probings do not allow it, see
+    :func:`xlfuncs.structured_lengths.structure_check`, then dense)."""
     if structured is not None:
         return bool(structured)
-    dims = 2 if rec.planar else 3
+    dims = 1 if isinstance(rec, LengthRecords) else 2 if rec.planar else 3
     return rec.n * dims > STRUCTURED_MIN_OBS and model.params.sigma_R_um > 0
 
 
 def prepare(rec: LengthRecords | PointRecords, model: Model, structured: bool | None = None) -> Prepared:
-    """The linear model of the records.  ``structured``: for point records, the covariance as the
-    operator of :mod:`xlfuncs.structured` (True), dense (False), or dense up to
-    ``STRUCTURED_MIN_OBS`` observations (None)."""
+    """The linear model of the records.  ``structured``: the covariance as the operator of
+    :mod:`xlfuncs.structured` (point records) or :mod:`xlfuncs.structured_lengths` (length
+    records) (True), dense (False), or dense up to ``STRUCTURED_MIN_OBS`` observations (None)."""
     ids_per_end, probe_ids, probes, offsets_given = resolve_probes(rec, model)
     index = {p: k for k, p in enumerate(probe_ids)}
     offsets = np.array([p.offset_mm for p in probes], dtype=float).reshape(-1, 3)
@@ -199,7 +200,16 @@ def prepare(rec: LengthRecords | PointRecords, model: Model, structured: bool | 
         design = fx.Design("length", probe_ids, offsets_given, T=T, t=t, na=na,
                            U1=rec.X1_mm - P1, U2=rec.X2_mm - P2, N1=rec.N1, N2=rec.N2, k1=k1, k2=k2,
                            P1=P1, P2=P2, ref=rec.reference_mm, extent_mm=float(np.max(rec.reference_mm)))
-        C = length_covariance(cloud, model.params, I, J)
+        if uses_structured(rec, model, structured):
+            why = sl.structure_check(I, J, cloud.m)
+            if why is None:
+                C = sl.LengthCovariance(cloud, model.params, I, J)
+            elif structured:
+                raise ModelError(why + "; diagnose with the dense covariance (--exact)")
+            else:
+                C = length_covariance(cloud, model.params, I, J)
+        else:
+            C = length_covariance(cloud, model.params, I, J)
         n = rec.n
         return Prepared(rec, design, cloud, rec.residual_um.copy(), C, np.zeros((n, 0)), [],
                         np.arange(n), -np.ones(n, dtype=int), ends=(I, J))
@@ -276,10 +286,7 @@ def length_covariance(cloud: pc.PointCloud, params: pc.Parameters, I: np.ndarray
     s = pa["sigma_PQ_um"]
     out["PQ"] = four(lambda a, b: (kp[a][:, None] == kp[b][None, :]) * np.outer(s[a], s[b])) * NN
     # S (eqs. 11-14): rank 7 at the ram positions
-    du = U[J] - U[I]
-    nx, ny, nz = na.T
-    ux, uy, uz = du.T
-    g7 = np.column_stack([nx * ux + ny * uy + nz * uz, nx * ux, ny * uy, nz * uz, nx * uy, nx * uz, ny * uz])
+    g7 = sl.scale_rows(na, U[J] - U[I])
     out["S"] = (g7 * pc.V_S_diag_um_per_mm2(params)) @ g7.T
     D2 = None
     if params.sigma_ET_um > 0 or params.sigma_ER_urad > 0:
@@ -345,7 +352,7 @@ def group_labels(prep: Prepared) -> dict[str, list[str]]:
             o = np.einsum("ij,ij->i", D.na, D.N1) * np.einsum("ij,ij->i", D.na, D.N2)
             out["probing"] = ["bidirectional" if v < -0.25 else "unidirectional" if v > 0.25 else "other"
                               for v in o]
-        out["direction"] = [direction_label(v) for v in D.na]
+        out["direction"] = direction_labels(D.na)
     for key, v, unit, scale in (("temperature", D.T, "°C", 1.0), ("time", D.t, "h", 1 / 3600.0)):
         if v is not None and np.ptp(v) > 1e-9:
             out[key] = band_labels(v * scale, unit)
@@ -359,6 +366,21 @@ def direction_label(v: np.ndarray) -> str:
         return "other"
     s0 = comps[0][1]
     return "".join(("+" if s * s0 > 0 else "-") + fx.AXES[a] for a, s in comps)
+
+
+def direction_labels(V: np.ndarray) -> list[str]:
+    """:func:`direction_label` of every row of V (vectorized: one label per sign pattern)."""
+    big = np.abs(V) > 0.2
+    sgn = np.sign(V)
+    first = np.argmax(big, axis=1)
+    s0 = sgn[np.arange(len(V)), first]
+    code = np.where(big, np.where(sgn * s0[:, None] > 0, 1, 2), 0) @ np.array([9, 3, 1])
+    names = {}
+    for c in np.unique(code):
+        digits = (c // 9, (c // 3) % 3, c % 3)
+        names[int(c)] = ("".join(("+" if d == 1 else "-") + fx.AXES[a] for a, d in enumerate(digits) if d)
+                         or "other")
+    return [names[int(c)] for c in code]
 
 
 def band_labels(v: np.ndarray, unit: str) -> list[str]:
