@@ -406,7 +406,7 @@ class Calibration:
 
     def to_json(self) -> dict:
         return {
-            "loglik": self.loglik, "loglik_start": self.loglik_start, "chi2": self.chi2, "dof": self.dof,
+            "loglik": self.loglik, "loglik_start": self.loglik_start, "reml_chi2": self.chi2, "reml_dof": self.dof,
             "iterations": self.iterations,
             "estimated": list(self.free),
             "hyper_parameters": [
@@ -668,3 +668,32 @@ def mpe_consistency(params: pc.Parameters, A_um: float, B_mm: float, K: float, P
             "C_max": chk.C_max, "u_C_max": u_c, "d_at_max_mm": chk.d_at_max_mm,
             "margin": 1.0 - chk.C_max, "conforms": chk.conforms,
             "d_mm": d.tolist(), "C": c.tolist()}
+
+
+def gls_fit(s: RecordSet, params: pc.Parameters, y: np.ndarray | None = None,
+            X: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, float, int]:
+    """GLS of ``y`` (default: the records' residual) on ``X`` (default: the set's fixed effects)
+    with the covariance of ``params``: (beta, cov(beta), chi2, dof).  The fixed-effect estimates
+    at the fitted hyper-parameters and the chi-square of the records against a model."""
+    values = {n: float(getattr(params, n)) for n in NAMES}
+    C, _ = s.op.evaluate(values, [])
+    y = s.y if y is None else y
+    X = s.X if X is None else X
+    Li = np.linalg.inv(np.linalg.cholesky(C))
+    yw, Xw = Li @ y, Li @ X
+    if X.shape[1]:
+        Qw, R = np.linalg.qr(Xw)
+        keep = np.abs(np.diag(R)) > 1e-10 * max(np.max(np.abs(np.diag(R))), 1e-300)
+        beta = np.zeros(X.shape[1])
+        cov = np.zeros((X.shape[1], X.shape[1]))
+        Xk = Xw[:, keep]
+        G = Xk.T @ Xk
+        covk = np.linalg.inv(G)
+        bk = covk @ (Xk.T @ yw)
+        beta[keep] = bk
+        cov[np.ix_(keep, keep)] = covk
+        e = yw - Xk @ bk
+        p = int(keep.sum())
+    else:
+        beta, cov, e, p = np.zeros(0), np.zeros((0, 0)), yw, 0
+    return beta, cov, float(e @ e), len(y) - p
