@@ -67,6 +67,16 @@ class Change:
     how: str
 
 
+def absorbed(names) -> set[str]:
+    """Hyper-parameters whose factor the fixed effects ``names`` take over: a factor all of whose
+    parameters are fixed effects (scale -> sigma_S_ppm; scale_x, _y, _z -> sigma_Sa_ppm; the three
+    squarenesses -> sigma_Q_ppm; probe_qualification -> sigma_PQ_um; probe_radius -> sigma_P0_um).
+    The effects' estimates are then the machine's draw of that factor, so they are estimated with
+    the factor left out of the covariance (else u(b) would count the factor's spread again)."""
+    got = set(names)
+    return {EFFECT_FACTOR[n][0] for n in got if n in EFFECT_FACTOR and set(EFFECT_FACTOR[n][1]) <= got}
+
+
 def feed_back(params: pc.Parameters, findings: list[Finding], mode: str) -> tuple[pc.Parameters, list[Change], list[str]]:
     """The task's parameters with the findings fed back (module docstring): (parameters, the
     changes, notes on what could not be represented)."""

@@ -178,7 +178,11 @@ def run_calibrate(paths: list[Path], model: dg.Model, out_dir: Path, *, task_pat
     # -- the effects at the fitted model, fed back ---------------------------------------------
     findings, effect_rows = [], []
     for f, s in zip(per_file, sets):
-        beta, cov, _, _ = cb.gls_fit(s, cal.params)
+        # a factor the effects take over is left out of C for their estimates (compensation.absorbed)
+        gone = cp.absorbed(f["chosen"])
+        p_eff = cal.params if not gone else cal.params.__class__(
+            **{k: (0.0 if k in gone else getattr(cal.params, k)) for k in pc.Parameters.__dataclass_fields__})
+        beta, cov, _, _ = cb.gls_fit(s, p_eff)
         f["beta"], f["cov"] = beta, cov
         for name in f["chosen"]:
             idx = [j for j, (e, _) in enumerate(f["labels"]) if e == name]
@@ -262,6 +266,14 @@ def run_calibrate(paths: list[Path], model: dg.Model, out_dir: Path, *, task_pat
         made = [tmp / "calibration.json"]
         (tmp / "fitted.toml").write_text(fitted_toml(doc, final, result), encoding="utf-8")
         made.append(tmp / "fitted.toml")
+        pts = (doc or {}).get("points")
+        if task_path is not None and isinstance(pts, dict) and isinstance(pts.get("file"), str):
+            src = Path(task_path).parent / pts["file"]
+            if not Path(pts["file"]).is_absolute() and src.is_file() and "/" not in pts["file"] \
+                    and "\\" not in pts["file"]:
+                # the fitted task refers to its points file by the same relative name: a copy beside it
+                (tmp / src.name).write_bytes(src.read_bytes())
+                made.append(tmp / src.name)
         for path, rec in compensated:
             target = tmp / f"compensated_{Path(path).stem}.csv"
             write_recordings(rec, target, comments=[f"cmmwb {__version__} calibrate: {Path(path).name} with the "
