@@ -74,7 +74,11 @@ def main(argv=None) -> int:
              "from the D-files of csayres/fitPlugPlateMeas `tests/testData` (not shipped: the repository states "
              "no licence). Each plate: hole centres measured against nominal (2-D point records, one probe); the "
              "effects the locator names are fixed effects; starting values a shop CMM (sigma_R 5 µm, S/Sa/Q "
-             "3 ppm, ET 3 µm at 200 mm; no probe factors: the records carry no probe data).", ""]
+             "3 ppm, ET 3 µm at 200 mm). Off (zero in the start, not estimated): sigma_PQ, sigma_ER/lambda_ER, "
+             "sigma_P0, sigma_P/lambda_P: the D-files carry no probe offsets, probe ids or normals, so no probe "
+             "factor is identifiable from them. What the plates measure is the hole position scatter: the "
+             "drilling machine's and the plate's errors together with the CMM's, so sigma_R here is an upper "
+             "bound of the CMM's repeatability.", ""]
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
         (tmp / "task.toml").write_text(TASK)

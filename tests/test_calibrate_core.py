@@ -118,3 +118,15 @@ def test_the_demo_data_reproduce_the_simulations_hyper_parameters_within_u(plant
     for name in cal.free:
         e = cal.estimates[name]
         assert abs(e.value - getattr(MPE1, name)) <= e.u, (name, e.value, e.u)
+
+
+def test_a_length_scale_beyond_the_travel_is_reported_as_such():
+    from dataclasses import replace
+
+    far = replace(MPE1, lambda_ET_mm=5000.0)
+    rec = sm.simulate(sm.layout("ballplate", PAIR), far, {}, seed=2)
+    prep = dg.prepare(rec, dg.Model(far, PAIR, True), False)
+    cal = cb.calibrate([cb.record_set(prep)], far)
+    for name in ("sigma_ET_um", "lambda_ET_mm"):
+        e = cal.estimates[name]
+        assert e.status == "not identifiable" and "beyond the travel" in e.reason, (name, e.reason)

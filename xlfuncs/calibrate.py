@@ -422,7 +422,21 @@ def _corr(cov: np.ndarray) -> np.ndarray:
     return cov / np.outer(s, s)
 
 
-def _why_insensitive(name: str, sets: list[RecordSet]) -> str:
+def _beyond_travel(name: str, sets: list[RecordSet], values: dict[str, float]) -> str | None:
+    """The sentence for a GP factor whose length scale exceeds the travel the records span."""
+    lam = {"sigma_ET_um": "lambda_ET_mm", "lambda_ET_mm": "lambda_ET_mm", "sigma_ER_urad": "lambda_ER_mm",
+           "lambda_ER_mm": "lambda_ER_mm"}.get(name)
+    if lam is None:
+        return None
+    travel = max(float(np.max(np.ptp(s.op.cloud.ram_mm, axis=0))) for s in sets)
+    if values[lam] > travel:
+        return (f"{lam} = {values[lam]:.4g} mm reaches beyond the travel seen ({travel:.4g} mm): the records see "
+                "only the start of the correlation's decay (within the travel the factor moves the records "
+                "almost rigidly, which the lengths cancel or the alignment absorbs)")
+    return None
+
+
+def _why_insensitive(name: str, sets: list[RecordSet], values: dict[str, float] | None = None) -> str:
     probes = {p.offset_mm for s in sets for p in s.op.cloud.probes}
     ids = {p.id for s in sets for p in s.op.cloud.probes}
     kinds = {s.prep.design.kind for s in sets}
@@ -433,17 +447,16 @@ def _why_insensitive(name: str, sets: list[RecordSet]) -> str:
         return "every probe offset is zero: a rotation of the ram moves no stylus tip"
     if name in ("sigma_P0_um", "sigma_P_um", "lambda_P"):
         return "no normals in the records, or every point probed along one direction per probe"
-    return "the records carry no information on it after the fixed effects"
+    far = _beyond_travel(name, sets, values) if values else None
+    return far or "the records carry no information on it after the fixed effects"
 
 
 def _why_weak(name: str, sets: list[RecordSet], corr_row: np.ndarray | None, free: list[str],
               values: dict[str, float]) -> str:
     parts = []
-    if name.startswith("lambda"):
-        travel = max(float(np.max(np.ptp(s.op.cloud.ram_mm, axis=0))) for s in sets)
-        if values[name] > travel and name != "lambda_P":
-            parts.append(f"{name} = {values[name]:.4g} mm reaches beyond the travel seen ({travel:.4g} mm): "
-                         "the records see only the start of the correlation's decay")
+    far = _beyond_travel(name, sets, values)
+    if far:
+        parts.append(far)
     if name in ("sigma_ER_urad", "lambda_ER_mm"):
         offs = {p.offset_mm for s in sets for p in s.op.cloud.probes}
         if len(offs) == 1:
@@ -498,7 +511,9 @@ def calibrate(sets: list[RecordSet], start: pc.Parameters, *, fixed: tuple[str, 
         free.remove(name)
         lm = next((lm for lm, s_ in PARTNER.items() if s_ == name), None)
         if lm is not None and lm in free and status == "not identifiable":
-            hold(lm, "not identifiable", f"{name} is not identifiable: its length scale neither")
+            far = _beyond_travel(lm, sets, sv)
+            hold(lm, "not identifiable", f"{name} is not identifiable: its length scale neither"
+                 + (f" ({far})" if far else ""))
 
     # -- 2. identifiability from the expected information at the start (the design) ---------
     t0 = reml_terms(sets, sv, free)
@@ -508,7 +523,7 @@ def calibrate(sets: list[RecordSet], start: pc.Parameters, *, fixed: tuple[str, 
     full = list(free)
     for name in list(free):
         if F0[name] < NO_SENSITIVITY * ref and name in free:
-            hold(name, "not identifiable", _why_insensitive(name, sets))
+            hold(name, "not identifiable", _why_insensitive(name, sets, sv))
     while free:
         idx = [full.index(n) for n in free]
         F = t0.fisher[np.ix_(idx, idx)]
