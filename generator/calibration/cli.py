@@ -302,6 +302,11 @@ def summary(result: dict) -> str:
                      + ".")
     c = result["chi2"]
     parts.append(f"chi2 {c['before']:.1f}/{c['dof_before']} (task) -> {c['after']:.1f}/{c['dof_after']} (fitted).")
+    ud = result["u_d"]
+    mid = len(ud["d_mm"]) // 2
+    parts.append(f"u(d) before -> after ({result['feedback']}): "
+                 + ", ".join(f"{ud['before_um'][k]:.3f} -> {ud['after_um'][k]:.3f} µm at {ud['d_mm'][k]:.0f} mm"
+                             for k in (0, mid, len(ud["d_mm"]) - 1)) + ".")
     m = result["mpe_check"]
     if m:
         f = m["fitted"]
