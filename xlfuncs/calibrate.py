@@ -85,6 +85,10 @@ U_LOG_MAX = 0.5
 ZERO_SHARE = 1e-3
 #: a parameter with an expected information below this (per unit log) has no sensitivity
 NO_SENSITIVITY = 1e-6
+#: drop of the REML log-likelihood that bounds a standard deviation estimated at zero: the upper
+#: one-sided 95 % limit for a parameter on the boundary (Self & Liang 1987: the likelihood-ratio
+#: statistic is 1/2 chi2_0 + 1/2 chi2_1, its 95 % point chi2_1(0.90) = 2.706, half of it)
+UPPER_DROP = 1.353
 #: the dense path: at most this many observations (memory n^2 per derivative)
 DENSE_MAX_OBS = 4000
 
@@ -388,6 +392,7 @@ class Estimate:
     status: str              # "estimated", "zero", "not identifiable", "off"
     reason: str = ""
     advice: str = ""
+    upper: float | None = None   # "zero": upper one-sided 95 % limit from the REML profile
 
 
 @dataclass
@@ -411,7 +416,8 @@ class Calibration:
             "estimated": list(self.free),
             "hyper_parameters": [
                 {"name": e.name, "unit": e.unit, "start": e.start, "estimate": e.value, "u": e.u,
-                 "u_log": e.u_log, "status": e.status, "reason": e.reason, "advice": e.advice}
+                 "u_log": e.u_log, "status": e.status, "reason": e.reason, "advice": e.advice,
+                 "upper_95": e.upper}
                 for e in self.estimates.values()],
             "correlation": _corr(self.cov_log).tolist() if len(self.free) else [],
         }
@@ -603,8 +609,45 @@ def calibrate(sets: list[RecordSet], start: pc.Parameters, *, fixed: tuple[str, 
             fitted[n] = e.value = e.start
     params = pc.Parameters(**fitted)
     tf = reml_terms(sets, fitted, [], fisher=False)
+    for n, e in est.items():
+        if e.status == "zero":
+            e.upper = upper_limit(sets, fitted, list(free), n, e.start, tf.loglik,
+                                  {lm: est[lm].start for lm, s_ in PARTNER.items() if s_ == n})
+            e.reason += f"; upper 95 % limit {e.upper:.3g} {e.unit} (REML profile)"
     return Calibration(est, params, start, list(free), cov if free else np.zeros((0, 0)), tf.loglik,
                        loglik_start, tf.chi2, tf.dof, iterations, sets)
+
+
+def upper_limit(sets: list[RecordSet], values: dict[str, float], free: list[str], name: str, start: float,
+                loglik_max: float, lam: dict[str, float], drop: float = UPPER_DROP, steps: int = 14) -> float:
+    """Upper one-sided 95 % limit of a standard deviation whose REML estimate is zero: where its
+    profile log-likelihood (the estimated parameters re-optimized, its length scale at ``lam``) has
+    fallen by ``drop`` from the maximum at zero; bisection in log between ZERO_SHARE x start and
+    1e3 x start (the upper end when the profile stays above)."""
+    base = dict(values)
+    base.update(lam)
+
+    def prof(x: float) -> float:
+        v = dict(base)
+        v[name] = math.exp(x)
+        if not free:
+            return reml_terms(sets, v, [], fisher=False).loglik
+        box = bounds(sets, v, free)
+        box.lo = np.minimum(box.lo, np.log([v[n] for n in free]) - 3)
+        _, t, _ = maximize(sets, v, free, box, max_iter=15, tol=1e-4)
+        return t.loglik
+
+    lo, hi = math.log(start * ZERO_SHARE), math.log(start * 1e3)
+    target = loglik_max - drop
+    if prof(hi) >= target:
+        return math.exp(hi)
+    for _ in range(steps):
+        mid = 0.5 * (lo + hi)
+        if prof(mid) >= target:
+            lo = mid
+        else:
+            hi = mid
+    return math.exp(hi)
 
 
 # ---------------------------------------------------------------------------------------------
