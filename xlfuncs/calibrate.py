@@ -190,8 +190,43 @@ class DenseRecordCovariance:
         return C, [d.get(k, np.zeros_like(C)) for k in free]
 
 
+    def reml(self, y: np.ndarray, Q: np.ndarray, values: dict[str, float], free: list[str],
+             fisher: bool = True) -> "RemlTerms":
+        """The REML terms of this record set (module docstring): one Cholesky factorization of C,
+        P formed once, tr(P dC_k) and r^T P dC_k P r for the gradient, 1/2 tr(P dC_k P dC_l) for the
+        expected information."""
+        C, dCs = self.evaluate(values, free)
+        L = np.linalg.cholesky(C)
+        Li = np.linalg.inv(L)
+        Ci = Li.T @ Li
+        CiQ = Ci @ Q
+        if Q.shape[1]:
+            M = Q.T @ CiQ
+            logdetM = 2.0 * float(np.sum(np.log(np.diag(np.linalg.cholesky(M)))))
+            P = Ci - CiQ @ np.linalg.solve(M, CiQ.T)
+        else:
+            logdetM, P = 0.0, Ci
+        P = 0.5 * (P + P.T)
+        Py = P @ y
+        n, p = len(y), Q.shape[1]
+        q = float(y @ Py)
+        ll = -0.5 * (2.0 * float(np.sum(np.log(np.diag(L)))) + logdetM + q + (n - p) * math.log(2 * math.pi))
+        k = len(free)
+        g, F = np.zeros(k), np.zeros((k, k)) if fisher else None
+        PdC = [P @ dC for dC in dCs]
+        for a in range(k):
+            g[a] = -0.5 * float(np.trace(PdC[a])) + 0.5 * float(Py @ dCs[a] @ Py)
+            if fisher:
+                for b in range(a + 1):
+                    F[a, b] = F[b, a] = 0.5 * float(np.sum(PdC[a] * PdC[b].T))
+        return RemlTerms(ll, g, F, q, n - p)
+
+
 def record_covariance(prep: Prepared) -> DenseRecordCovariance:
-    """The operator C(theta) of one record set (dense; a structured operator plugs in here)."""
+    """The operator C(theta) of one record set (dense).  A structured operator plugs in here: it
+    gives ``cloud`` (the probings), ``n`` (observations), ``reml(y, Q, values, free, fisher) ->
+    RemlTerms`` (the fit) and ``evaluate(values, []) -> (C, [])`` (GLS of the effects and the
+    standardized residuals; dense there)."""
     return DenseRecordCovariance(prep)
 
 
@@ -246,44 +281,23 @@ class RemlTerms:
 
 def reml_terms(sets: list[RecordSet], values: dict[str, float], free: list[str], fisher: bool = True) -> RemlTerms:
     """REML log-likelihood, its gradient in phi = log(value) of ``free`` and the expected
-    information, summed over independent record sets."""
+    information, summed over independent record sets (each set's operator computes its own:
+    :meth:`DenseRecordCovariance.reml`)."""
     k = len(free)
-    ll, g, F, chi2, dof = 0.0, np.zeros(k), np.zeros((k, k)), 0.0, 0
+    total = RemlTerms(0.0, np.zeros(k), np.zeros((k, k)) if fisher else None, 0.0, 0)
     for s in sets:
-        C, dCs = s.op.evaluate(values, free)
         try:
-            L = np.linalg.cholesky(C)
+            t = s.op.reml(s.y, s.Q, values, free, fisher)
         except np.linalg.LinAlgError:
             raise ModelError(f"{s.name}: the record covariance is not positive definite at "
                              + ", ".join(f"{n} = {values[n]:.4g}" for n in free)) from None
-        Li = np.linalg.inv(L)
-        Ci = Li.T @ Li
-        Q = s.Q
-        CiQ = Ci @ Q
-        M = Q.T @ CiQ
-        if Q.shape[1]:
-            Lm = np.linalg.cholesky(M)
-            logdetM = 2.0 * float(np.sum(np.log(np.diag(Lm))))
-            P = Ci - CiQ @ np.linalg.solve(M, CiQ.T)
-        else:
-            logdetM, P = 0.0, Ci
-        P = 0.5 * (P + P.T)
-        y = s.y
-        Py = P @ y
-        n, p = len(y), Q.shape[1]
-        q = float(y @ Py)
-        ll += -0.5 * (2.0 * float(np.sum(np.log(np.diag(L)))) + logdetM + q + (n - p) * math.log(2 * math.pi))
-        chi2 += q
-        dof += n - p
-        PdC = [P @ dC for dC in dCs]
-        for a in range(k):
-            g[a] += -0.5 * float(np.trace(PdC[a])) + 0.5 * float(Py @ dCs[a] @ Py)
-            if fisher:
-                for b in range(a + 1):
-                    F[a, b] += 0.5 * float(np.sum(PdC[a] * PdC[b].T))
-    if fisher:
-        F = F + np.tril(F, -1).T
-    return RemlTerms(ll, g, F if fisher else None, chi2, dof)
+        total.loglik += t.loglik
+        total.grad += t.grad
+        if fisher:
+            total.fisher += t.fisher
+        total.chi2 += t.chi2
+        total.dof += t.dof
+    return total
 
 
 def _values(start: dict[str, float], free: list[str], phi: np.ndarray) -> dict[str, float]:
