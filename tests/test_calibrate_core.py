@@ -130,3 +130,21 @@ def test_a_length_scale_beyond_the_travel_is_reported_as_such():
     for name in ("sigma_ET_um", "lambda_ET_mm"):
         e = cal.estimates[name]
         assert e.status == "not identifiable" and "beyond the travel" in e.reason, (name, e.reason)
+
+
+def test_feeding_back_a_scale_error_compensated_or_as_a_factor():
+    from xlfuncs import compensation as cp
+
+    found = [cp.Finding("scale", [8.0], [0.5], "um/m"), cp.Finding("EBX", [150.0], [20.0], "urad/m")]
+    comp, changes, notes = cp.feed_back(MPE1, found, "compensate")
+    assert comp.sigma_S_ppm == 0.5 and comp.sigma_Sa_ppm == MPE1.sigma_Sa_ppm
+    assert [c.parameter for c in changes] == ["sigma_S_ppm"]
+    assert any(n.startswith("EBX compensated") for n in notes)        # outside the six factors
+    fac, _, _ = cp.feed_back(MPE1, found[:1], "factor")
+    assert math.isclose(fac.sigma_S_ppm, math.sqrt(0.7**2 + 8.0**2 + 0.5**2), rel_tol=1e-12)
+    with pytest.raises(Exception, match="cannot be added as a factor"):
+        cp.feed_back(MPE1, found, "factor")
+    # one of three per-axis scales corrected: the factor keeps its spread (y and z still carry it)
+    part, changes, _ = cp.feed_back(MPE1, [cp.Finding("scale_x", [3.0], [0.2], "um/m")], "compensate")
+    assert part.sigma_Sa_ppm == MPE1.sigma_Sa_ppm and "keeps its spread" in changes[0].how
+    assert cp.absorbed(["scale_x", "scale_y"]) == set() and cp.absorbed(["scale"]) == {"sigma_S_ppm"}

@@ -67,7 +67,8 @@ def results_table(kind: str, results: dict) -> list[dict[str, Any]]:
         fe = results["feature"]
         return [{"parameter": n, "value": fe["parameters"][n], "u": fe["u"][n]} for n in fe["parameter_names"]]
     if kind in ("diagnose", "calibrate"):
-        # the diagnosis (calibration) book's Results rows, built by generator.diagnosis.book from the same numbers
+        # the diagnosis (calibration) book's Results rows, built by generator.diagnosis.book
+        # (generator.calibration.book) from the same numbers
         # as diagnosis.json (the core's GLS estimates)
         return list(results["rows"])
     raise ValueError(f"unknown kind {kind!r}")
