@@ -41,7 +41,7 @@ DEFAULT_L_MAX_MM = 1000.0
 def register(sub) -> None:
     from ..commands import add_command
 
-    s = add_command(sub, "calibrate", "estimate the six factors' hyper-parameters from verification recordings",
+    s = add_command(sub, "calibrate", "the six factors' hyper-parameters from recordings (REML)",
                     "Restricted maximum likelihood of the Forbes 2025 hyper-parameters (sigma_R_um, sigma_S_ppm, "
                     "..., lambda_P) from the machine's own recordings (ISO 10360-2 lengths, step gauges, ball "
                     "plates: docs/recordings.md), with the effects the locator names as fixed effects; the "
