@@ -69,6 +69,9 @@ def register(sub) -> None:
     s.add_argument("--mpe", default=None, metavar="A,B[,K]",
                    help="MPE statement E = A + L/B (A in µm, B in mm) and coverage factor K (default 2) for the "
                         "check; default: the task's [mpe]")
+    s.add_argument("--start", default="task", choices=("task", "mpe1"),
+                   help="starting values: the task's [parameters] (a zero there leaves the factor out), or "
+                        "Forbes 2025 Table 3 MPE1 for every factor (default: task)")
     s.add_argument("--alpha", type=float, default=0.01, help="significance level of the locator (default: 0.01)")
     s.add_argument("--no-workbook", action="store_true", help="skip the workbook (default: write it)")
     s.add_argument("--force", action="store_true",
@@ -295,7 +298,7 @@ def summary(result: dict) -> str:
     if zero:
         parts.append("At zero (not seen in these records): " + ", ".join(h["name"] for h in zero) + ".")
     if non:
-        parts.append("Not identifiable from these records (held at the task's values): "
+        parts.append("Not identifiable from these records (held at their starting values): "
                      + ", ".join(h["name"] for h in non) + ".")
     if result["effects"]:
         parts.append(f"Effects ({result['feedback']}): " + ", ".join(sorted({e['name'] for e in result['effects']}))
@@ -345,6 +348,13 @@ def fitted_toml(doc: dict | None, params: pc.Parameters, result: dict) -> str:
 
 def cmd_calibrate(args) -> int:
     model, label = load_model(args.task, args.sigma_um)
+    if args.start == "mpe1":
+        from dataclasses import replace
+
+        from ..diagnosis.cli import MPE1
+
+        model = replace(model, params=pc.Parameters(**MPE1))
+        label += " (starting values: Forbes 2025 Table 3 MPE1)"
     task_path = Path(args.task) if args.task else None
     doc = None
     if task_path is not None:
