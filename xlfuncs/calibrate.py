@@ -29,13 +29,16 @@ dC/d(log sigma) = 2 sigma^2 B and dC/d(log lambda) the kernel's derivative
 F_kl = 1/2 tr(P dC_k P dC_l) for Fisher scoring.  The covariance of the estimates is the inverse
 of the observed information (the Hessian of -l, central differences of the closed-form gradient).
 
-Identifiability (per hyper-parameter): a parameter whose covariance has no sensitivity in these
+Identifiability (per hyper-parameter) is judged on the design first: from the expected
+information at the starting values, a parameter whose covariance has no sensitivity in these
 records after the fixed effects (F_kk = 0: sigma_PQ with one probe, sigma_ER with zero probe
-offsets, ...) or whose observed-information standard uncertainty in log exceeds
-:data:`U_LOG_MAX` (the records determine it to no better than a factor of e^0.5 ~ 1.65:
-sigma_ER with one probe offset, a lambda beyond the travel, a scale factor of which one machine
-shows one draw) is held at its starting value and reported with the measurement that would
-identify it; the others are refitted without it.
+offsets, ...) or whose u(log) with the others free exceeds :data:`U_LOG_MAX` (the records
+determine it to no better than a factor of e^0.5 ~ 1.65: sigma_ER with one probe offset, a lambda
+beyond the travel, a scale factor of which one machine shows one draw) is held at its starting
+value and reported with the measurement that would identify it; after the fit, one whose u(log)
+from the observed information exceeds twice that is held too.  A standard deviation whose
+likelihood is largest at zero is reported ``zero`` with the upper one-sided 95 % limit of its
+REML profile (:func:`upper_limit`).
 
 The dense operator (:class:`DenseRecordCovariance`) keeps C and its derivatives as n x n
 matrices; :func:`record_covariance` is where a structured operator plugs in (it must give
