@@ -42,7 +42,7 @@ REML profile (:func:`upper_limit`).
 
 The dense operator (:class:`DenseRecordCovariance`) keeps C and its derivatives as n x n
 matrices; :func:`record_covariance` is where a structured operator plugs in (it must give
-``evaluate(values, free) -> (C, [dC_k])`` or the REML terms directly).
+``reml(y, Q, values, free, fisher)``, the REML terms of its records, and ``evaluate(values, [])``).
 
 numpy only.
 """
