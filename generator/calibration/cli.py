@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import json
 import math
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -183,8 +184,7 @@ def run_calibrate(paths: list[Path], model: dg.Model, out_dir: Path, *, task_pat
     for f, s in zip(per_file, sets):
         # a factor the effects take over is left out of C for their estimates (compensation.absorbed)
         gone = cp.absorbed(f["chosen"])
-        p_eff = cal.params if not gone else cal.params.__class__(
-            **{k: (0.0 if k in gone else getattr(cal.params, k)) for k in pc.Parameters.__dataclass_fields__})
+        p_eff = replace(cal.params, **{k: 0.0 for k in gone})
         beta, cov, _, _ = cb.gls_fit(s, p_eff)
         f["beta"], f["cov"] = beta, cov
         for name in f["chosen"]:
@@ -349,8 +349,6 @@ def fitted_toml(doc: dict | None, params: pc.Parameters, result: dict) -> str:
 def cmd_calibrate(args) -> int:
     model, label = load_model(args.task, args.sigma_um)
     if args.start == "mpe1":
-        from dataclasses import replace
-
         from ..diagnosis.cli import MPE1
 
         model = replace(model, params=pc.Parameters(**MPE1))
