@@ -45,6 +45,7 @@ LAYOUTS = (
     ("iso1", "ISO 10360-2 lengths, one probe offset", "iso10360", ONE, {}),
     ("step", "step gauges (x, y, xy), two probes, 2 repeats", "stepgauge", PAIR, {"repeats": 2}),
     ("ball", "ball plate 5x5, 4 passes, two probes", "ballplate", PAIR, {"passes": 4}),
+    ("spheres", "four spheres, 13 points each with normals, two probes", "spheres", PAIR, {}),
 )
 
 
