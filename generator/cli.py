@@ -32,7 +32,8 @@ from .workbook.atomic import write_text
 EXAMPLES_DIR = Path(__file__).parent / "examples"
 #: modules that add their subcommands (``register(sub)``), when present in this installation
 EXTRA_COMMANDS = ("generator.read_cli", "generator.diagnosis.cli", "generator.addin_cli",
-                  "generator.import_cli")
+                  "generator.import_cli",
+                  "generator.calibration.cli")
 
 
 # -- commands ----------------------------------------------------------------------------------

@@ -38,6 +38,7 @@ NUMERIC_MODULES = {
     "test_characteristics", "test_reference_fits", "test_characteristics_workbook",
     "test_qif_characteristics",
     "test_diagnose_structured_lengths", "test_rank_refusal", "test_all_pairs_stream",
+    "test_calibrate_core", "test_calibrate_loop",
 }
 
 

@@ -216,10 +216,23 @@ def sq_dists(A: np.ndarray, B: np.ndarray) -> np.ndarray:
     return np.einsum("ijk,ijk->ij", D, D)
 
 
-def V_X_components(cloud: PointCloud, params: Parameters) -> dict[str, np.ndarray]:
+def gauss_kernel(D2: np.ndarray, lam2, d_log_lambda: bool = False) -> np.ndarray:
+    """The squared-exponential correlation exp(-D^2/lambda^2) of eqs. (21), (25), (27)
+    (``lam2`` = lambda^2, a number or an array), or with ``d_log_lambda`` its derivative in
+    log lambda, (2 D^2/lambda^2) exp(-D^2/lambda^2)."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        q = D2 / lam2
+        k = np.exp(-q)
+        return 2.0 * q * k if d_log_lambda else k
+
+
+def V_X_components(cloud: PointCloud, params: Parameters, *, d_log_lambda: bool = False) -> dict[str, np.ndarray]:
     """The six 3m x 3m contributions of Forbes 2025 eq. (28), in µm², keyed by ``FACTORS``.
 
     Coordinates are interleaved ``x1, y1, z1, x2, ...`` (the paper's x_{1:m}).
+    ``d_log_lambda``: the GP factors ET, ER and P with their kernels replaced by the derivative
+    in log lambda (:func:`gauss_kernel`; the radius part of P dropped), the closed-form dV/d(log
+    lambda) of the hyper-parameter fit (:mod:`xlfuncs.calibrate`).
     """
     m = cloud.m
     n3 = 3 * m
@@ -244,14 +257,14 @@ def V_X_components(cloud: PointCloud, params: Parameters) -> dict[str, np.ndarra
 
     # ET, eq. (21): independent axes, kernel on ram positions
     if params.sigma_ET_um > 0:
-        out["ET"] = np.kron(params.sigma_ET_um**2 * np.exp(-D2 / params.lambda_ET_mm**2), I3)
+        out["ET"] = np.kron(params.sigma_ET_um**2 * gauss_kernel(D2, params.lambda_ET_mm**2, d_log_lambda), I3)
     else:
         out["ET"] = np.zeros((n3, n3))
 
     # ER, eq. (25): sigma_ER^2 exp(-d_ij^2/lambda^2) G_k(i) G_k(j)^T
     if params.sigma_ER_urad > 0:
         GR = np.vstack([skew_G(p) for p in cloud.offsets_mm])  # 3m x 3, mm/rad
-        rho = np.exp(-D2 / params.lambda_ER_mm**2)
+        rho = gauss_kernel(D2, params.lambda_ER_mm**2, d_log_lambda)
         out["ER"] = (params.sigma_ER_urad * MILLI) ** 2 * np.kron(rho, np.ones((3, 3))) * (GR @ GR.T)
     else:
         out["ER"] = np.zeros((n3, n3))
@@ -262,8 +275,9 @@ def V_X_components(cloud: PointCloud, params: Parameters) -> dict[str, np.ndarra
     lam = pa["lambda_P"]
     sP = pa["sigma_P_um"]
     with np.errstate(divide="ignore", invalid="ignore"):
-        kern = np.where(np.outer(sP, sP) > 0, np.exp(-DN2 / np.outer(lam, lam)), 0.0)
-    V_DP = same_probe * (np.outer(pa["sigma_P0_um"], pa["sigma_P0_um"]) + np.outer(sP, sP) * kern)
+        kern = np.where(np.outer(sP, sP) > 0, gauss_kernel(DN2, np.outer(lam, lam), d_log_lambda), 0.0)
+    radius = 0.0 if d_log_lambda else np.outer(pa["sigma_P0_um"], pa["sigma_P0_um"])
+    V_DP = same_probe * (radius + np.outer(sP, sP) * kern)
     NN = np.einsum("ia,jb->iajb", N, N).reshape(n3, n3) if m else np.zeros((0, 0))
     out["P"] = np.kron(V_DP, np.ones((3, 3))) * NN
     return out

@@ -69,8 +69,9 @@ def results_table(kind: str, results: dict) -> list[dict[str, Any]]:
     if kind == "characteristic":
         return [{"name": c["name"], "type": c["type"], "value": c["value"], "unit": c["unit"],
                  "u": c["u"], "u_unit": c["u_unit"]} for c in results["characteristics"]]
-    if kind == "diagnose":
-        # the diagnosis book's Results rows, built by generator.diagnosis.book from the same numbers
+    if kind in ("diagnose", "calibrate"):
+        # the diagnosis (calibration) book's Results rows, built by generator.diagnosis.book
+        # (generator.calibration.book) from the same numbers
         # as diagnosis.json (the core's GLS estimates)
         return list(results["rows"])
     raise ValueError(f"unknown kind {kind!r}")

@@ -249,14 +249,20 @@ def _sqdist(A: np.ndarray, B: np.ndarray) -> np.ndarray:
 
 
 def length_covariance(cloud: pc.PointCloud, params: pc.Parameters, I: np.ndarray, J: np.ndarray,
-                      *, components: bool = False):
+                      *, components: bool = False, d_log_lambda: bool = False):
     """Covariance (µm²) of the lengths d_a = ||x_J[a] - x_I[a]|| of the unique points of
     ``cloud``: Cov(d_a, d_b) = g_a^T V_X g_b with g_a = -n_a at I[a] and +n_a at J[a].
 
     Each factor of eq. (28) is a point kernel K(p, q) times a direction term, so
     Cov(d_a, d_b) = sum over the ends s of a and t of b of sign_s sign_t K(s_a, t_b) w_{a,s}.w_{b,t}
     with w = n_a (R, PQ, ET), w = n_a x p (ER, eq. 24) or w = n_a . n_point (P, eq. 26);
-    scale/squareness is rank 7 (eq. 11).  Memory and time O(n^2 + m^2), m unique points."""
+    scale/squareness is rank 7 (eq. 11).  Memory and time O(n^2 + m^2), m unique points.
+
+    ``d_log_lambda`` (with ``components``): the GP factors ET, ER and P with every kernel
+    exp(-D^2/lambda^2) replaced by its derivative in log lambda, (2 D^2/lambda^2) exp(-D^2/lambda^2)
+    (:func:`xlfuncs.pointcloud.gauss_kernel`), the radius part of P dropped: the closed-form
+    dC/d(log lambda) of the hyper-parameter fit (:mod:`xlfuncs.calibrate`)."""
+    kernel = lambda D2_, lam2_: pc.gauss_kernel(D2_, lam2_, d_log_lambda)  # noqa: E731
     X, U, N = cloud.X_mm, cloud.ram_mm, cloud.N
     kp = cloud.probe_index
     d = X[J] - X[I]
@@ -293,14 +299,14 @@ def length_covariance(cloud: pc.PointCloud, params: pc.Parameters, I: np.ndarray
         D2 = _sqdist(U, U)
     # ET (eq. 21): independent axes
     if params.sigma_ET_um > 0:
-        out["ET"] = params.sigma_ET_um**2 * four(gather(np.exp(-D2 / params.lambda_ET_mm**2))) * NN
+        out["ET"] = params.sigma_ET_um**2 * four(gather(kernel(D2, params.lambda_ET_mm**2))) * NN
     else:
         out["ET"] = np.zeros_like(NN)
     # ER (eq. 25): w = G_k^T n (= p x n; the common sign cancels)
     if params.sigma_ER_urad > 0:
         P = cloud.offsets_mm
         out["ER"] = (params.sigma_ER_urad * pc.MILLI) ** 2 * four(
-            gather(np.exp(-D2 / params.lambda_ER_mm**2)), np.cross(na, P[I]), np.cross(na, P[J]))
+            gather(kernel(D2, params.lambda_ER_mm**2)), np.cross(na, P[I]), np.cross(na, P[J]))
     else:
         out["ER"] = np.zeros_like(NN)
     # P (eqs. 26-27): o = n_a . n_point, same probe only
@@ -309,8 +315,8 @@ def length_covariance(cloud: pc.PointCloud, params: pc.Parameters, I: np.ndarray
         same = kp[:, None] == kp[None, :]
         DN2 = _sqdist(N, N)
         with np.errstate(divide="ignore", invalid="ignore"):
-            kern = np.where(np.outer(sp, sp) > 0, np.exp(-DN2 / np.outer(lam, lam)), 0.0)
-        KP = same * (np.outer(s0, s0) + np.outer(sp, sp) * kern)
+            kern = np.where(np.outer(sp, sp) > 0, kernel(DN2, np.outer(lam, lam)), 0.0)
+        KP = same * ((0.0 if d_log_lambda else np.outer(s0, s0)) + np.outer(sp, sp) * kern)
         out["P"] = four(gather(KP), np.einsum("ij,ij->i", na, N[I])[:, None],
                         np.einsum("ij,ij->i", na, N[J])[:, None])
     else:

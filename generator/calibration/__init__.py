@@ -1,0 +1,1 @@
+"""``cmmwb calibrate``: hyper-parameters of the six factors estimated from the machine's recordings."""
