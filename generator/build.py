@@ -22,12 +22,14 @@ from openpyxl.utils.exceptions import IllegalCharacterError
 
 from xlfuncs.errors import ModelError
 
+from . import decision as decisions
+from . import report
 from .errors import InputError
 from .jobs import job
 from .taskfile import read_toml, task_kind_and_name
 from .workbook import cache as cached_values
 from .workbook.atomic import write_text
-from .workbook.book import describing
+from .workbook.book import adding_sheets, describing
 
 
 def non_finite(obj, where: str = "results"):
@@ -225,6 +227,26 @@ def load_task(task_path: Path):
     return kind, mod, doc, task
 
 
+def sheet_writers(kind: str, spec, results: dict, cache: dict) -> list:
+    """The sheets every book of the task gets besides its kind's: ``Decision`` (when the task has a
+    ``[decision]`` table) and ``Summary``; the values they cache go into ``cache``."""
+    rows: dict[str, int] = {}
+
+    def decision_sheet(book):
+        got = decisions.write_sheet(book, kind, spec, results, results["decisions"])
+        rows.update({t.label: decisions.FIRST_ROW + i for i, t in enumerate(spec.tolerances)})
+        for sheet, vals in got.items():
+            cache.setdefault(sheet, {}).update(vals)
+
+    def summary_sheet(book):
+        got = report.write_sheet(book, kind, results, decision_rows=rows,
+                                 k_feature=spec.k if spec is not None and spec.k is not None else 2.0)
+        for sheet, vals in got.items():
+            cache.setdefault(sheet, {}).update(vals)
+
+    return ([decision_sheet] if spec is not None else []) + [summary_sheet]
+
+
 def build_task(task_path: Path, out_dir: Path, *, plots: bool = True, force: bool = False,
                cache: str = "results", exact: bool = False) -> tuple[dict, list[Path]]:
     """Build one task into ``out_dir``: workbook, JSON and plots, all or nothing.
@@ -235,6 +257,8 @@ def build_task(task_path: Path, out_dir: Path, *, plots: bool = True, force: boo
     a feature task's V_A; the other kinds are always exact)."""
     task_path = Path(task_path)
     kind, mod, doc, task = load_task(task_path)
+    spec = decisions.read_spec(task_path, doc, kind)
+    rep = report.read_report(task_path, doc)
     if exact and hasattr(mod, "force_exact"):
         mod.force_exact(task)
     try:
@@ -243,6 +267,12 @@ def build_task(task_path: Path, out_dir: Path, *, plots: bool = True, force: boo
             results = mod.compute(task)
     except ModelError as e:
         raise InputError(str(e), file=task_path) from None
+    if spec is not None:
+        results["decision_rule"] = decisions.rule_json(spec)
+        results["decisions"] = decisions.decide_all(task_path, kind, spec, results)
+    results["provenance"] = report.provenance(task_path, doc)
+    if rep is not None:
+        results["report"] = rep
 
     bad = non_finite(results)
     if bad is not None:
@@ -252,13 +282,15 @@ def build_task(task_path: Path, out_dir: Path, *, plots: bool = True, force: boo
     with staging as tmp:
         name = results["name"]
         book = tmp / f"{name}.xlsx"
+        extra_cache: dict = {}
         try:
-            with describing({"kind": kind, "name": name, "doc": doc, "task_file": task_path.name}):
+            with describing({"kind": kind, "name": name, "doc": doc, "task_file": task_path.name}), \
+                    adding_sheets(kind, *sheet_writers(kind, spec, results, extra_cache)):
                 mod.write_book(task, results, book)
         except IllegalCharacterError:
             raise InputError("a text (a point, probe or characteristic name, or a note) contains a control "
                              "character that a workbook cannot store", file=task_path) from None
-        cached_values.store(book, kind, results, cache)
+        cached_values.store(book, kind, results, cache, extra=extra_cache)
         (tmp / f"{name}.json").write_text(json.dumps(results, indent=1, ensure_ascii=False) + "\n",
                                           encoding="utf-8")
         made = [tmp / f"{name}.xlsx", tmp / f"{name}.json"]

@@ -33,7 +33,7 @@ from xlfuncs.limits import MAX_COORDINATE_MM, coordinate_problem
 
 from .. import __version__
 from ..errors import InputError
-from ..taskfile import (check_keys, number, read_parameters, read_point_cloud, read_probes, text_list,
+from ..taskfile import (COMMON_TABLES, check_keys, number, read_parameters, read_point_cloud, read_probes, text_list,
                        string, table, task_kind_and_name, vector3)
 from .task import KIND, Planning, Task
 
@@ -142,7 +142,7 @@ def load(path: Path, doc: dict) -> Task:
     path = Path(path)
     kind, name = task_kind_and_name(path, doc)
     check_keys(path, doc, "task file", {"task", "feature", "points", "sampling", "planning",
-                                        "parameters", "probes"})
+                                        "parameters", "probes"} | COMMON_TABLES)
     t = table(path, doc, "task")
     check_keys(path, t, "task", {"kind", "name", "notes"})
     notes = text_list(path, t, "task", "notes")
