@@ -16,6 +16,7 @@ values, r, max_pfa, k) with formulas all three engines accept (``_xlfn.NORM.S.DI
 from __future__ import annotations
 
 import math
+import textwrap
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -39,7 +40,7 @@ RULE_KEYS = {"rule", "r", "max_pfa", "k", "tolerances"}
 IDENT_KEYS = {"budget": ("characteristic",), "pointcloud": ("from", "to"), "feature": ("parameter",)}
 LIMIT_KEYS = {"nominal_mm", "tol_mm", "lsl_mm", "usl_mm", "measured_mm"}
 FMT_P = "0.000000"
-HEADER_ROW = 6
+HEADER_ROW = 7
 FIRST_ROW = HEADER_ROW + 1     #: the first characteristic's row
 #: columns of the decision table (first row of the table: headers with units)
 COLUMNS = ["#", "characteristic", "value_mm", "u_um", "U_um", "lsl_mm", "usl_mm", "w_um",
@@ -231,9 +232,14 @@ def decide_all(path: Path, kind: str, spec: DecisionSpec, results: dict) -> list
             raise InputError(str(e), file=path, where=_where(t.n)) from None
         entry = {"characteristic": t.label, **{k_: v for k_, v in t.ident.items()},
                  "value_source": "measured_mm" if t.measured_mm is not None else "task", **d.as_dict(),
-                 "statement": statement(t.label if kind != "pointcloud" else "d", value, "mm", d.U_um, "µm", row.k)}
+                 "statement": statement(symbol(kind, t.label), value, "mm", d.U_um, "µm", row.k)}
         out.append(entry)
     return out
+
+
+def symbol(kind: str, label: str) -> str:
+    """The quantity's symbol in a result statement: the characteristic's name, or d(FROM→TO)."""
+    return f"d({label})" if kind == "pointcloud" else label
 
 
 def rule_json(spec: DecisionSpec) -> dict:
@@ -265,11 +271,13 @@ def write_sheet(book: Book, kind: str, spec: DecisionSpec, results: dict, decisi
     cache: dict[str, Any] = {}
     rule = spec.rule
     book.text(ws, 1, 1, "Conformity decisions", font=TITLE_FONT)
-    book.text(ws, 2, 1, f"Decision rule: {rule.text}.")
-    book.text(ws, 3, 1, "p_c = probability of conformance, normal PDF (JCGM 106:2012, 7.3-7.4); A = acceptance "
-                        "limits, R = limits beyond which the value does not conform; w = guard band (µm).")
+    intro = textwrap.wrap(f"Decision rule: {rule.text}. p_c = probability of conformance, normal PDF "
+                          "(JCGM 106:2012, 7.3-7.4); A = acceptance limits, R = limits beyond which the value "
+                          "does not conform; w = guard band (µm).", 150)
+    for j, line in enumerate(intro[:HEADER_ROW - 3]):
+        book.text(ws, 2 + j, 1, line)
     # rule parameters (named inputs)
-    r0 = 4
+    r0 = HEADER_ROW - 1
     book.text(ws, r0, 1, "rule", font=HEADER_FONT)
     book.text(ws, r0, 2, rule.kind)
     params = []
@@ -402,17 +410,21 @@ def write_sheet(book: Book, kind: str, spec: DecisionSpec, results: dict, decisi
     def ref_of(name):
         return Reference(ws, min_col=c[name], min_row=h + 1, max_row=last)
 
-    series = [ChartSeries("measured value", xs, ref_of("dev_um")),
-              ChartSeries("value + U", xs, ref_of("dev_plus_U_um"), colour="7F7F7F"),
-              ChartSeries("value − U", xs, ref_of("dev_minus_U_um"), colour="7F7F7F"),
-              ChartSeries("lower specification limit", xs, ref_of("lsl_dev_um"), colour="D62728"),
-              ChartSeries("upper specification limit", xs, ref_of("usl_dev_um"), colour="D62728"),
-              ChartSeries("lower acceptance limit", xs, ref_of("A_L_dev_um"), colour="2CA02C"),
-              ChartSeries("upper acceptance limit", xs, ref_of("A_U_dev_um"), colour="2CA02C")]
-    book.scatter(ws, f"B{last + 3}", "Measured value ± U against the specification and acceptance limits",
-                 "characteristic # (rows of the table)", "deviation from the tolerance midpoint (µm)", series,
-                 width=22, height=10)
-    book.print_setup(ws, landscape=True, title_rows=h)
+    series = [ChartSeries("measured value", xs, ref_of("dev_um"), colour="000000"),
+              ChartSeries("value + U", xs, ref_of("dev_plus_U_um"), colour="1F77B4"),
+              ChartSeries("value − U", xs, ref_of("dev_minus_U_um"), colour="1F77B4"),
+              ChartSeries("lower specification limit", xs, ref_of("lsl_dev_um"), markers=False, colour="D62728",
+                          dash="solid", bold=True),
+              ChartSeries("upper specification limit", xs, ref_of("usl_dev_um"), markers=False, colour="D62728", dash="solid", bold=True),
+              ChartSeries("lower acceptance limit", xs, ref_of("A_L_dev_um"), markers=False, colour="2CA02C",
+                          dash="dash"),
+              ChartSeries("upper acceptance limit", xs, ref_of("A_U_dev_um"), markers=False, colour="2CA02C", dash="dash")]
+    book.scatter(ws, f"B{last + 3}", "Measured value ± U against the specification (red) and acceptance (green) "
+                 "limits", "characteristic # (rows of the table)", "deviation from the tolerance midpoint (µm)",
+                 series, width=24, height=11, x_min=0)
+    for name, width in (("characteristic", 18), ("outcome", 18), ("zone", 22)):
+        ws.column_dimensions[col(c[name])].width = width
+    book.print_setup(ws, landscape=True, title_rows=h, area=f"A1:{col(c['zone'])}{last + 26}")
     return {SHEET: cache}
 
 

@@ -16,6 +16,8 @@ from __future__ import annotations
 
 import datetime as _dt
 import hashlib
+import math
+import textwrap
 import os
 from pathlib import Path
 from typing import Any
@@ -23,6 +25,7 @@ from typing import Any
 from xlfuncs.statement import coverage_text, statement
 
 from . import __version__
+from .decision import symbol
 from .errors import InputError
 from .taskfile import check_keys
 from .workbook.book import HEADER_FONT, TITLE_FONT, Book
@@ -32,6 +35,7 @@ SHEET = "Summary"
 REPORT_KEYS = ("lab", "operator", "cmm", "artefact", "job_id", "notes")
 #: at most this many characteristics on the one-page Summary (the rest: see Results)
 MAX_ROWS = 24
+TEXT_WIDTH = 92               #: characters per line of the text beside a label (columns B-D)
 
 
 def sha256(path: Path) -> str:
@@ -64,7 +68,7 @@ def build_time_utc() -> str:
     return t.replace(microsecond=0).isoformat().replace("+00:00", "Z")
 
 
-def provenance(task_path: Path, doc: dict) -> dict:
+def provenance(task_path: Path, doc: dict, built_utc: str | None = None) -> dict:
     """``{"task_file": {"name", "sha256"}, "input_files": [{"name", "sha256"}], "built_utc",
     "cmmwb_version"}``."""
     task_path = Path(task_path)
@@ -76,7 +80,7 @@ def provenance(task_path: Path, doc: dict) -> dict:
         if p.is_file():
             inputs.append({"name": name, "sha256": sha256(p)})
     return {"task_file": {"name": task_path.name, "sha256": sha256(task_path)}, "input_files": inputs,
-            "built_utc": build_time_utc(), "cmmwb_version": __version__}
+            "built_utc": built_utc or build_time_utc(), "cmmwb_version": __version__}
 
 
 def read_report(path: Path, doc: dict) -> dict | None:
@@ -130,7 +134,8 @@ def summary_items(kind: str, results: dict, k_feature: float = 2.0) -> list[dict
             items.append(dict(label=n, value=fe["parameters"][n], unit=unit, U=k_feature * fe["u"][n] * scale,
                               U_unit="µm" if unit == "mm" else "rad", ratio=scale, k=k_feature, row=i + 2,
                               value_col="value", U_col=None, u_col="u"))
-    return items
+    # a quantity with U = 0 (a parameter the fit holds fixed) has no statement to round
+    return [it for it in items if it["U"] > 0 and math.isfinite(it["U"])]
 
 
 # -- the Summary sheet ------------------------------------------------------------------------------
@@ -165,12 +170,14 @@ def write_sheet(book: Book, kind: str, results: dict, *, decision_rows: dict[str
         lines.append(("decision rule", rule["text"]))
     for label, text in lines:
         book.text(ws, r, 1, label, font=HEADER_FONT)
-        book.text(ws, r, 2, text)
+        for part in textwrap.wrap(str(text), TEXT_WIDTH) or [""]:
+            book.text(ws, r, 2, part)
+            r += 1
+    r += 1
+    for part in textwrap.wrap("Results: U rounded to two significant digits and the value to the same decimal "
+                              "place (GUM 7.2.6); full precision in the Results sheet.", TEXT_WIDTH + 18):
+        book.text(ws, r, 1, part)
         r += 1
-    r += 1
-    book.text(ws, r, 1, "Results: U rounded to two significant digits and the value to the same decimal place "
-                        "(GUM 7.2.6); full precision in the Results sheet.")
-    r += 1
     head = r
     book.header(ws, head, 1, ["characteristic", "result statement", "decision", "p_c"])
     items = summary_items(kind, results, k_feature)
@@ -206,12 +213,11 @@ def write_sheet(book: Book, kind: str, results: dict, *, decision_rows: dict[str
         # (9.96 -> 10); the value to the same decimal place (GUM 7.2.6)
         Ur = f"ROUND({U},1-INT(LOG10({U})))"
         dU = f"(1-INT(LOG10({Ur})))"
-        text = (f'="{it["label"] if kind != "pointcloud" else "d"} = "&FIXED({y},{dU}+{shift},TRUE)&" {it["unit"]}, U = "'
+        text = (f'="{symbol(kind, it["label"])} = "&FIXED({y},{dU}+{shift},TRUE)&" {it["unit"]}, U = "'
                 f'&FIXED({Ur},{dU},TRUE)&" {it["U_unit"]} ({coverage_text(it["k"])})"')
         book.formula(ws, rr, 2, text, fmt=None, note="rounded statement of the Results (or Decision) cells; "
                                                      "GUM 7.2.6")
-        symbol = it["label"] if kind != "pointcloud" else "d"
-        cache[cell(rr, 2, absolute=False)] = statement(symbol, value, it["unit"], Uv, it["U_unit"], it["k"],
+        cache[cell(rr, 2, absolute=False)] = statement(symbol(kind, it["label"]), value, it["unit"], Uv, it["U_unit"], it["k"],
                                                       unit_ratio=it["ratio"])
         if drow is not None and dec is not None:
             book.formula(ws, rr, 3, f"={cell(drow, 14, 'Decision')}", fmt=None)
@@ -228,16 +234,24 @@ def write_sheet(book: Book, kind: str, results: dict, *, decision_rows: dict[str
     ws.column_dimensions["B"].width = 70
     ws.column_dimensions["C"].width = 18
     ws.column_dimensions["D"].width = 9
-    book.print_setup(ws, landscape=False, title_rows=None, fit_widths=False, one_page=True)
+    book.print_setup(ws, landscape=False, title_rows=None, fit_widths=False, one_page=True, area=f"A1:D{r}")
     return {SHEET: cache}
 
 
-def summary_lines(kind: str, results: dict) -> list[str]:
-    """Rounded statements and decisions for the console (``build``/``demo``)."""
+def summary_lines(results: dict, most: int = 4) -> list[str]:
+    """Rounded result statements (GUM 7.2.6) and decisions for the console (``build``/``demo``):
+    every decision, or else the first ``most`` characteristics."""
     out = []
-    for d in results.get("decisions", []):
-        out.append(f"{d['statement']}: {d['outcome']} ({d['zone']}, p_c = {d['p_c']:.4f})")
-    if "decision_rule" in results:
-        out.append(f"decision rule: {results['decision_rule']['rule']}")
+    rule = results.get("decision_rule")
+    if rule:
+        out.append(f"decisions ({rule['rule']}):")
+        for d in results.get("decisions", []):
+            out.append(f"  {d['statement']}: {d['outcome']} ({d['zone']}, "
+                       f"p_c = {d['p_c']:.4f})")
+        return out
+    items = summary_items(results["kind"], results)
+    for it in items[:most]:
+        out.append(statement(symbol(results["kind"], it["label"]), it["value"], it["unit"], it["U"], it["U_unit"], it["k"], unit_ratio=it["ratio"]))
+    if len(items) > most:
+        out.append(f"... {len(items) - most} more in the Results sheet and the JSON")
     return out
-

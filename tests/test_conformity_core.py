@@ -189,6 +189,11 @@ def test_bad_tolerances_and_rules_say_which_key():
         DecisionRule("specific_risk", max_pfa=0.7)
 
 
-def test_a_guard_band_wider_than_half_the_tolerance_is_refused():
-    with pytest.raises(ModelError, match="too large"):
-        acceptance_limits(Tolerance(0.0, 0.004), 2.5)
+def test_a_guard_band_of_half_the_tolerance_or_more_accepts_nothing():
+    """JCGM 106:2012, 8.3.2: U too large for the tolerance leaves an empty acceptance interval."""
+    lo, hi = acceptance_limits(Tolerance(0.0, 0.004), 2.5)
+    assert lo > hi
+    d = decide(0.002, 1.25, Tolerance(0.0, 0.004), DecisionRule("guarded_acceptance"), k=2)
+    assert d.outcome == DOES_NOT_CONFORM and d.as_dict()["acceptance_interval_empty"]
+    iso = decide(0.002, 1.25, Tolerance(0.0, 0.004), DecisionRule("iso14253"), k=2)
+    assert iso.outcome == UNDECIDED

@@ -182,6 +182,7 @@ class Decision:
                 "lsl_mm": self.tolerance.lsl_mm, "usl_mm": self.tolerance.usl_mm,
                 "rule": self.rule.kind, "r": self.rule.r, "max_pfa": self.rule.max_pfa,
                 "w_um": self.w_um, "acceptance_limits_mm": list(self.acceptance_mm),
+                "acceptance_interval_empty": empty(self.acceptance_mm),
                 "p_c": self.p_c, "outcome": self.outcome, "zone": self.zone}
 
 
@@ -218,15 +219,22 @@ def guard_band_um(rule: DecisionRule, U_um: float, k: float) -> float:
 
 
 def acceptance_limits(tolerance: Tolerance, w_um: float) -> tuple[float | None, float | None]:
-    """[A_L, A_U] = [T_L + w, T_U - w] (JCGM 106:2012, 8.3.1, eq. (23)); a missing limit stays None."""
+    """[A_L, A_U] = [T_L + w, T_U - w] (JCGM 106:2012, 8.3.1); a missing limit stays None.
+
+    A guard band of half the tolerance or more gives A_L >= A_U: an empty acceptance interval, in
+    which no measured value lies (the uncertainty is too large for the tolerance, JCGM 106:2012,
+    8.3.2); every value is then rejected (``does not conform``) or, by the ISO 14253-1 rule, at best
+    undecided."""
     w = w_um / UM_PER_MM
     lo = None if tolerance.lsl_mm is None else tolerance.lsl_mm + w
     hi = None if tolerance.usl_mm is None else tolerance.usl_mm - w
-    if lo is not None and hi is not None and not lo < hi:
-        raise ModelError(f"the guard band w = {w_um:.6g} µm leaves no acceptance interval inside "
-                         f"[{tolerance.lsl_mm}, {tolerance.usl_mm}] mm: the uncertainty is too large "
-                         "for this tolerance (JCGM 106:2012, 8.3.2)")
     return lo, hi
+
+
+def empty(limits: tuple[float | None, float | None]) -> bool:
+    """True when an acceptance interval [A_L, A_U] holds no value (A_L > A_U)."""
+    lo, hi = limits
+    return lo is not None and hi is not None and lo > hi
 
 
 def _inside(y: float, lo: float | None, hi: float | None) -> bool:
