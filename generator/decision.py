@@ -436,3 +436,52 @@ def _inside(y: str, lo: str | None, hi: str | None) -> str:
 def _outside(y: str, lo: str | None, hi: str | None) -> str:
     parts = ([f"{y}<{lo}"] if lo else []) + ([f"{y}>{hi}"] if hi else [])
     return parts[0] if len(parts) == 1 else f"OR({','.join(parts)})"
+
+
+# -- the way back (`cmmwb read`) ---------------------------------------------------------------------
+
+def read_back(cells, rt) -> None:
+    """The Decision sheet's inputs back into ``rt.doc["decision"]`` (``cmmwb read``): r, max_pfa, k
+    and each tolerance's limits and measured value, by their defined names.  A value still equal to
+    the build-time one keeps the task file's form (``tol_mm`` around ``nominal_mm``); a changed limit
+    turns the entry into ``lsl_mm``/``usl_mm``."""
+    from openpyxl.utils import get_column_letter
+
+    tbl = rt.doc.get(SECTION)
+    if not isinstance(tbl, dict):
+        return
+
+    def value(name: str):
+        ws, r, c = cells.named(name)
+        x = cells.number(ws, r, c, name)
+        built = cells.snapshot.get(f"{ws.title}!{get_column_letter(c)}{r}")
+        return x, built, cells.where(ws, r, c)
+
+    for key, name in (("r", "decision_r"), ("max_pfa", "decision_max_pfa"), ("k", "decision_k")):
+        if name not in cells.wb.defined_names:
+            continue
+        x, built, where = value(name)
+        if key in tbl or built is None or x != built:
+            tbl[key] = x
+        rt.sources[f"[{SECTION}] {key}"] = where
+    entries = tbl.get("tolerances")
+    if not isinstance(entries, list):
+        return
+    for n, t in enumerate(entries, start=1):
+        if not isinstance(t, dict):
+            continue
+        got = {}
+        for key in ("lsl_mm", "usl_mm", "measured_mm"):
+            name = f"tol{n}_{key}"
+            if name in cells.wb.defined_names:
+                got[key] = value(name)
+                rt.sources[_where(n, key)] = got[key][2]
+        if "measured_mm" in got and got["measured_mm"][0] != got["measured_mm"][1]:
+            t["measured_mm"] = got["measured_mm"][0]
+        limits = {k_: v for k_, v in got.items() if k_ != "measured_mm"}
+        if any(x != built for x, built, _ in limits.values()):
+            t.pop("tol_mm", None)
+            t.pop("nominal_mm", None)
+            for key, (x, _, where) in limits.items():
+                t[key] = x
+            rt.sources[_where(n, "tol_mm")] = next(iter(limits.values()))[2]

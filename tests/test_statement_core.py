@@ -46,3 +46,7 @@ def test_decimals_for_and_round_to():
     assert round_to(-2.345, 2) == -2.35
     with pytest.raises(ModelError, match="positive"):
         decimals_for(0.0)
+
+
+def test_a_value_that_rounds_to_zero_has_no_minus_sign():
+    assert statement("y0_mm", -1.2e-17, "mm", 1.4, "µm", 2).startswith("y0_mm = 0.0000 mm")

@@ -49,7 +49,7 @@ def round_uncertainty(U: float, digits: int = 2, mode: str = "nearest") -> tuple
 
 def fmt(x: float, decimals: int) -> str:
     """``x`` shown with ``decimals`` places (none when ``decimals`` <= 0)."""
-    return f"{round_to(x, decimals):.{max(decimals, 0)}f}"
+    return f"{round_to(x, decimals) + 0.0:.{max(decimals, 0)}f}"     # + 0.0: no "-0.000"
 
 
 def coverage_text(k: float, p_percent: float | None = 95.0) -> str:
