@@ -24,6 +24,7 @@ from typing import Any
 from openpyxl.chart import Reference
 
 from xlfuncs import conformity as cf
+from xlfuncs import dof
 from xlfuncs.errors import ModelError
 from xlfuncs.statement import statement
 
@@ -35,16 +36,22 @@ from .workbook.xlref import cell, col, quote_sheet
 SHEET = "Decision"
 SECTION = "decision"
 TOL_SECTION = "[[decision.tolerances]]"
-RULE_KEYS = {"rule", "r", "max_pfa", "k", "tolerances"}
+RULE_KEYS = {"rule", "r", "max_pfa", "k", "k_from_dof", "tolerances"}
 #: the key(s) that name the characteristic of a tolerance, per task kind
 IDENT_KEYS = {"budget": ("characteristic",), "pointcloud": ("from", "to"), "feature": ("parameter",)}
-LIMIT_KEYS = {"nominal_mm", "tol_mm", "lsl_mm", "usl_mm", "measured_mm"}
+LIMIT_KEYS = {"nominal_mm", "tol_mm", "lsl_mm", "usl_mm", "measured_mm", "s_um", "n_repeats"}
 FMT_P = "0.000000"
 HEADER_ROW = 7
 FIRST_ROW = HEADER_ROW + 1     #: the first characteristic's row
 #: columns of the decision table (first row of the table: headers with units)
-COLUMNS = ["#", "characteristic", "value_mm", "u_um", "U_um", "lsl_mm", "usl_mm", "w_um",
-           "A_L_mm", "A_U_mm", "R_L_mm", "R_U_mm", "p_c", "outcome", "zone"]
+COLUMNS = ["#", "characteristic", "value_mm", "u_task_um", "s_um", "n_repeats", "u_A_um", "nu_A", "u_um", "nu_eff",
+           "k", "U_um", "lsl_mm", "usl_mm", "w_um", "A_L_mm", "A_U_mm", "R_L_mm", "R_U_mm", "p_c", "outcome",
+           "zone"]
+
+
+def column(name: str) -> int:
+    """1-based column of the Decision table (``COLUMNS``)."""
+    return COLUMNS.index(name) + 1
 #: chart data: deviations from the reference (tolerance midpoint or the one limit), µm
 CHART_COLUMNS = ["dev_um", "dev_plus_U_um", "dev_minus_U_um", "lsl_dev_um", "usl_dev_um",
                  "A_L_dev_um", "A_U_dev_um"]
@@ -62,6 +69,12 @@ class ToleranceSpec:
     lsl_mm: float | None = None
     usl_mm: float | None = None
     measured_mm: float | None = None
+    s_um: float | None = None        #: standard deviation of n repeated measurements (type A)
+    n_repeats: float | None = None   #: the number of repeated measurements whose mean is the value
+
+    @property
+    def type_a(self) -> bool:
+        return self.s_um is not None
 
     def tolerance(self, nominal_default: float) -> cf.Tolerance:
         if self.tol_mm is not None:
@@ -78,6 +91,7 @@ class ToleranceSpec:
 class DecisionSpec:
     rule: cf.DecisionRule
     k: float | None
+    k_from_dof: bool = False
     tolerances: list[ToleranceSpec] = field(default_factory=list)
 
 
@@ -126,7 +140,10 @@ def read_spec(path: Path, doc: dict, kind: str) -> DecisionSpec | None:
     except ModelError as e:
         key = "r" if "r =" in str(e) else "max_pfa"
         raise InputError(str(e), file=path, where=f"[{SECTION}] {key}") from None
-    spec = DecisionSpec(rule, (2.0 if k is None else k) if kind == "feature" else None)
+    kfd = tbl.get("k_from_dof", False)
+    if not isinstance(kfd, bool):
+        raise InputError(f"must be true or false, got {kfd!r}", file=path, where=f"[{SECTION}] k_from_dof")
+    spec = DecisionSpec(rule, (2.0 if k is None else k) if kind == "feature" else None, kfd)
     raw = tbl.get("tolerances")
     if not isinstance(raw, list) or not raw:
         raise InputError("no tolerances: add [[decision.tolerances]] tables (the characteristic and its "
@@ -157,6 +174,15 @@ def read_spec(path: Path, doc: dict, kind: str) -> DecisionSpec | None:
         if t.tol_mm is None and t.lsl_mm is None and t.usl_mm is None:
             raise InputError("no limits: give lsl_mm and/or usl_mm, or tol_mm (nominal ± tol_mm)", file=path,
                              where=_where(n))
+        if (t.s_um is None) != (t.n_repeats is None):
+            raise InputError("a type A repeatability needs both s_um (standard deviation of the repeated "
+                             "measurements, µm) and n_repeats (their number)", file=path,
+                             where=_where(n, "n_repeats" if t.n_repeats is None else "s_um"))
+        if t.s_um is not None and not t.s_um > 0:
+            raise InputError(f"must be positive, got {t.s_um!r}", file=path, where=_where(n, "s_um"))
+        if t.n_repeats is not None and not (t.n_repeats == int(t.n_repeats) and 2 <= t.n_repeats <= 1e6):
+            raise InputError(f"must be a whole number of repeated measurements >= 2, got {t.n_repeats!r}",
+                             file=path, where=_where(n, "n_repeats"))
         if t.nominal_mm is not None and t.tol_mm is None:
             raise InputError("nominal_mm is the centre of tol_mm; with lsl_mm/usl_mm leave it out", file=path,
                              where=_where(n, "nominal_mm"))
@@ -226,14 +252,36 @@ def decide_all(path: Path, kind: str, spec: DecisionSpec, results: dict) -> list
                              file=path, where=_where(t.n, key))
         tol = t.tolerance(row.value_mm)
         value = row.value_mm if t.measured_mm is None else t.measured_mm
+        dof = combined(row, t, spec)
         try:
-            d = cf.decide(value, row.u_um, tol, spec.rule, row.k)
+            d = cf.decide(value, dof["u_um"], tol, spec.rule, dof["k"])
         except ModelError as e:
             raise InputError(str(e), file=path, where=_where(t.n)) from None
         entry = {"characteristic": t.label, **{k_: v for k_, v in t.ident.items()},
                  "value_source": "measured_mm" if t.measured_mm is not None else "task", **d.as_dict(),
-                 "statement": statement(symbol(kind, t.label), value, "mm", d.U_um, "µm", row.k)}
+                 **{k_: v for k_, v in dof.items() if k_ not in ("u_um", "k")},
+                 "statement": statement(symbol(kind, t.label), value, "mm", d.U_um, "µm", d.k)}
         out.append(entry)
+    return out
+
+
+def combined(row: Row, t: ToleranceSpec, spec: DecisionSpec) -> dict:
+    """u, ν_eff and k of one characteristic: the task's u (type B, ν = ∞) and, when the tolerance
+    gives a repeatability s_um of n repeated measurements, u_A = s/√n with ν_A = n - 1 (GUM 4.2),
+    combined in quadrature; ν_eff by Welch–Satterthwaite (GUM G.4.1); k = t_95.45(⌊ν_eff⌋) when
+    ``[decision] k_from_dof`` (GUM G.6.4), else the task's k."""
+    out = {"u_task_um": row.u_um, "distribution": "normal", "u_A_um": None, "nu_A": None, "nu_eff": None}
+    u, k = row.u_um, row.k
+    if t.type_a:
+        u_a = t.s_um / math.sqrt(t.n_repeats)
+        nu_a = t.n_repeats - 1
+        u = math.hypot(row.u_um, u_a)
+        nu = dof.nu_eff([row.u_um, u_a], [math.inf, nu_a])
+        out.update(u_A_um=u_a, nu_A=nu_a, nu_eff=nu)
+        if spec.k_from_dof:
+            k = dof.coverage_factor(nu)
+            out["distribution"] = "t"
+    out.update(u_um=u, k=k)
     return out
 
 
@@ -251,6 +299,8 @@ def rule_json(spec: DecisionSpec) -> dict:
         out["max_pfa"] = r.max_pfa
     if spec.k is not None:
         out["k"] = spec.k
+    if spec.k_from_dof:
+        out["k_from_dof"] = True
     return out
 
 
@@ -294,7 +344,13 @@ def write_sheet(book: Book, kind: str, spec: DecisionSpec, results: dict, decisi
     h = HEADER_ROW
     book.header(ws, h, 1, COLUMNS + CHART_COLUMNS, notes=[
         None, "the characteristic (Results row)", "measured value (input) or the task's value (from Results)",
-        "standard uncertainty", "expanded uncertainty U = k·u", "lower specification limit (input)",
+        "the task's standard uncertainty (type B, ν = ∞)",
+        "repeatability: standard deviation of the n repeated measurements whose mean is the value (input)",
+        "number of repeated measurements (input)", "type A: u_A = s/√n (GUM 4.2.3)", "ν_A = n - 1 (GUM G.3.3)",
+        "combined standard uncertainty u = √(u_task² + u_A²)",
+        "effective degrees of freedom, Welch–Satterthwaite (GUM G.4.1, eq. (G.2b))",
+        "coverage factor: t_95.45(⌊ν_eff⌋) with [decision] k_from_dof (GUM G.6.4), else the task's k",
+        "expanded uncertainty U = k·u", "lower specification limit (input)",
         "upper specification limit (input)", "guard band; > 0: acceptance interval inside the tolerance",
         "lower acceptance limit A_L = T_L + w (JCGM 106:2012, 8.3)", "upper acceptance limit A_U = T_U - w",
         "below R_L: does not conform", "above R_U: does not conform",
@@ -318,12 +374,40 @@ def write_sheet(book: Book, kind: str, spec: DecisionSpec, results: dict, decisi
                          note="the task's value (Results); give [[decision.tolerances]] measured_mm for a measured one")
             cache[at("value_mm")] = d["value_mm"]
         u_ref = f"{results_sheet}!{cell(rr, rcols[row.u_col])}"
-        book.formula(ws, r, c["u_um"], f"={u_ref}" if row.u_scale == 1 else f"={u_ref}*{row.u_scale:g}", fmt=FMT_UM)
-        cache[at("u_um")] = d["u_um"]
-        if row.U_col is not None:
-            book.formula(ws, r, c["U_um"], f"={results_sheet}!{cell(rr, rcols[row.U_col])}", fmt=FMT_UM)
+        book.formula(ws, r, c["u_task_um"], f"={u_ref}" if row.u_scale == 1 else f"={u_ref}*{row.u_scale:g}",
+                     fmt=FMT_UM)
+        cache[at("u_task_um")] = d["u_task_um"]
+        # the task's own coverage factor: U/u of its Results (budget, pointcloud) or [decision] k
+        k_task = (f"{results_sheet}!{cell(rr, rcols[row.U_col])}/{u_ref}" if row.U_col is not None
+                  else "decision_k")
+        if t.type_a:
+            book.input(ws, r, c["s_um"], f"{t.name_prefix}_s_um", t.s_um, lo=0.0, fmt=FMT_UM,
+                       note="standard deviation of the repeated measurements (µm)")
+            book.input(ws, r, c["n_repeats"], f"{t.name_prefix}_n_repeats", t.n_repeats, lo=2.0, fmt="0",
+                       note="number of repeated measurements")
+            book.formula(ws, r, c["u_A_um"], f"={at('s_um')}/SQRT({at('n_repeats')})", fmt=FMT_UM)
+            book.formula(ws, r, c["nu_A"], f"={at('n_repeats')}-1", fmt="0")
+            book.formula(ws, r, c["u_um"], f"=SQRT({at('u_task_um')}^2+{at('u_A_um')}^2)", fmt=FMT_UM)
+            book.formula(ws, r, c["nu_eff"], f"={at('u_um')}^4/({at('u_A_um')}^4/{at('nu_A')})", fmt="0.00")
+            cache.update({at("u_A_um"): d["u_A_um"], at("nu_A"): d["nu_A"], at("nu_eff"): d["nu_eff"]})
+            if spec.k_from_dof:
+                book.formula(ws, r, c["k"], f"=_xlfn.T.INV.2T(1-{dof.P_K2},INT({at('nu_eff')}))", fmt="0.000",
+                             note="t_95.45(ν) for ν = ⌊ν_eff⌋ (GUM G.6.4)")
+            else:
+                book.formula(ws, r, c["k"], f"={k_task}", fmt="0.000")
+            book.formula(ws, r, c["U_um"], f"={at('k')}*{at('u_um')}", fmt=FMT_UM)
         else:
-            book.formula(ws, r, c["U_um"], f"=decision_k*{at('u_um')}", fmt=FMT_UM)
+            for name in ("s_um", "n_repeats", "u_A_um", "nu_A"):
+                book.text(ws, r, c[name], "—")
+            book.text(ws, r, c["nu_eff"], "∞")
+            book.formula(ws, r, c["u_um"], f"={at('u_task_um')}", fmt=FMT_UM)
+            book.formula(ws, r, c["k"], f"={k_task}", fmt="0.000")
+            if row.U_col is not None:
+                book.formula(ws, r, c["U_um"], f"={results_sheet}!{cell(rr, rcols[row.U_col])}", fmt=FMT_UM)
+            else:
+                book.formula(ws, r, c["U_um"], f"={at('k')}*{at('u_um')}", fmt=FMT_UM)
+        cache[at("u_um")] = d["u_um"]
+        cache[at("k")] = d["k"]
         cache[at("U_um")] = d["U_um"]
         tol = d
         for key in ("lsl_mm", "usl_mm"):
@@ -471,14 +555,15 @@ def read_back(cells, rt) -> None:
         if not isinstance(t, dict):
             continue
         got = {}
-        for key in ("lsl_mm", "usl_mm", "measured_mm"):
+        for key in ("lsl_mm", "usl_mm", "measured_mm", "s_um", "n_repeats"):
             name = f"tol{n}_{key}"
             if name in cells.wb.defined_names:
                 got[key] = value(name)
                 rt.sources[_where(n, key)] = got[key][2]
-        if "measured_mm" in got and got["measured_mm"][0] != got["measured_mm"][1]:
-            t["measured_mm"] = got["measured_mm"][0]
-        limits = {k_: v for k_, v in got.items() if k_ != "measured_mm"}
+        for key in ("measured_mm", "s_um", "n_repeats"):
+            if key in got and got[key][0] != got[key][1]:
+                t[key] = got[key][0]
+        limits = {k_: v for k_, v in got.items() if k_ in ("lsl_mm", "usl_mm")}
         if any(x != built for x, built, _ in limits.values()):
             t.pop("tol_mm", None)
             t.pop("nominal_mm", None)

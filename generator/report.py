@@ -25,7 +25,7 @@ from typing import Any
 from xlfuncs.statement import coverage_text, statement
 
 from . import __version__
-from .decision import symbol
+from .decision import column, symbol
 from .errors import InputError
 from .taskfile import check_keys
 from .workbook.book import HEADER_FONT, TITLE_FONT, Book
@@ -197,10 +197,15 @@ def write_sheet(book: Book, kind: str, results: dict, *, decision_rows: dict[str
         book.text(ws, rr, 1, it["label"])
         dec = decisions.get(it["label"])
         drow = (decision_rows or {}).get(it["label"])
+        k = it["k"]
+        k_part = f'" ({coverage_text(k)})"'
         if drow is not None and dec is not None:
-            y = cell(drow, 3, "Decision")
-            U = cell(drow, 5, "Decision")
-            value, Uv = dec["value_mm"], dec["U_um"]
+            y = cell(drow, column("value_mm"), "Decision")
+            U = cell(drow, column("U_um"), "Decision")
+            value, Uv, k = dec["value_mm"], dec["U_um"], dec["k"]
+            if dec.get("distribution") == "t":      # k = t_95.45(ν_eff): live, two decimals
+                k_part = (f'" (k = "&FIXED({cell(drow, column("k"), "Decision")},2,TRUE)&", coverage probability '
+                          f'≈ 95 %)"')
         else:
             y = f"{res}!${rcols[it['value_col']]}${it['row']}"
             if it["U_col"] is not None:
@@ -214,14 +219,14 @@ def write_sheet(book: Book, kind: str, results: dict, *, decision_rows: dict[str
         Ur = f"ROUND({U},1-INT(LOG10({U})))"
         dU = f"(1-INT(LOG10({Ur})))"
         text = (f'="{symbol(kind, it["label"])} = "&FIXED({y},{dU}+{shift},TRUE)&" {it["unit"]}, U = "'
-                f'&FIXED({Ur},{dU},TRUE)&" {it["U_unit"]} ({coverage_text(it["k"])})"')
+                f'&FIXED({Ur},{dU},TRUE)&" {it["U_unit"]}"&{k_part}')
         book.formula(ws, rr, 2, text, fmt=None, note="rounded statement of the Results (or Decision) cells; "
                                                      "GUM 7.2.6")
-        cache[cell(rr, 2, absolute=False)] = statement(symbol(kind, it["label"]), value, it["unit"], Uv, it["U_unit"], it["k"],
-                                                      unit_ratio=it["ratio"])
+        cache[cell(rr, 2, absolute=False)] = statement(symbol(kind, it["label"]), value, it["unit"], Uv,
+                                                      it["U_unit"], k, unit_ratio=it["ratio"])
         if drow is not None and dec is not None:
-            book.formula(ws, rr, 3, f"={cell(drow, 14, 'Decision')}", fmt=None)
-            book.formula(ws, rr, 4, f"={cell(drow, 13, 'Decision')}", fmt="0.0000")
+            book.formula(ws, rr, 3, f"={cell(drow, column('outcome'), 'Decision')}", fmt=None)
+            book.formula(ws, rr, 4, f"={cell(drow, column('p_c'), 'Decision')}", fmt="0.0000")
             cache[cell(rr, 3, absolute=False)] = dec["outcome"]
             cache[cell(rr, 4, absolute=False)] = dec["p_c"]
         else:

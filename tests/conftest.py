@@ -34,7 +34,7 @@ NUMERIC_MODULES = {
     "test_diagnose_core", "test_diagnose_book", "test_diagnose_rates",
     "test_templates", "test_roundtrip", "test_lowrank", "test_diagnose_structured", "test_import",
     "test_diagnose_second", "test_exact_option", "test_diagnose_discrepancy", "test_kernels", "test_diagnose_new_candidates",
-    "test_conformity_core", "test_statement_core", "test_decision_workbook", "test_provenance",
+    "test_conformity_core", "test_statement_core", "test_dof_core", "test_decision_workbook", "test_provenance",
 }
 
 

@@ -17,14 +17,17 @@ import tomllib
 from pathlib import Path
 
 import openpyxl
+from openpyxl.utils import get_column_letter
 import pytest
 import tomli_w
 
 from conftest import close
+from generator import decision
 from generator.build import build_task
 from generator.errors import InputError
 from generator.workbook.recalc import recalculate
 from xlfuncs import conformity as cf
+from xlfuncs import dof
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "generator" / "examples"
 KNUCKLE = EXAMPLES / "knuckle.toml"
@@ -41,6 +44,11 @@ def build(tmp: Path, source: Path, edit=None, name: str | None = None):
     task.write_text(tomli_w.dumps(doc), encoding="utf-8")
     results, files = build_task(task, tmp / "out", plots=False)
     return results, next(f for f in files if f.suffix == ".xlsx")
+
+
+def at(row: int, name: str) -> str:
+    """The coordinate of a Decision-table cell by its column name."""
+    return f"{get_column_letter(decision.column(name))}{row}"
 
 
 def cached(book: Path, sheets=("Decision", "Summary")) -> dict[str, dict[str, object]]:
@@ -91,10 +99,30 @@ def test_json_decisions_are_the_core_decisions(knuckle):
     for d in results["decisions"]:
         c = chars[d["characteristic"]]
         tol = cf.Tolerance(d["lsl_mm"], d["usl_mm"])
-        want = cf.decide(d["value_mm"], c["u_um"], tol, cf.DecisionRule("iso14253"), results["mpe"]["k"])
+        assert d["u_task_um"] == c["u_um"]
+        want = cf.decide(d["value_mm"], d["u_um"], tol, cf.DecisionRule("iso14253"), d["k"])
         assert d["p_c"] == pytest.approx(want.p_c, rel=1e-12)
-        assert d["U_um"] == pytest.approx(c["U_um"], rel=1e-12)
         assert d["outcome"] == want.outcome
+        if d["u_A_um"] is None:                       # no repeatability: the task's own u and U
+            assert (d["u_um"], d["U_um"]) == pytest.approx((c["u_um"], c["U_um"]), rel=1e-12)
+
+
+def test_a_type_a_repeatability_gives_nu_eff_and_a_t_coverage_factor(knuckle):
+    """S1_S2_distance: mean of n = 5 repeats with s = 2.5 µm: u_A = s/√5, ν_A = 4 (GUM 4.2.3, G.3.3);
+    u = √(u_task² + u_A²), ν_eff by Welch–Satterthwaite (G.4.1), k = t_95.45(⌊ν_eff⌋) (G.6.4)."""
+    results, _ = knuckle
+    d = next(x for x in results["decisions"] if x["characteristic"] == "S1_S2_distance")
+    u_task = next(c["u_um"] for c in results["characteristics"] if c["name"] == "S1_S2_distance")
+    u_a = 2.5 / math.sqrt(5)
+    assert d["u_A_um"] == pytest.approx(u_a, rel=1e-15) and d["nu_A"] == 4
+    assert d["u_um"] == pytest.approx(math.hypot(u_task, u_a), rel=1e-15)
+    assert d["nu_eff"] == pytest.approx(4 * (d["u_um"] / u_a) ** 4, rel=1e-12)
+    assert d["distribution"] == "t" and math.floor(d["nu_eff"]) == 64
+    assert d["k"] == pytest.approx(dof.coverage_factor(64), rel=1e-12) and 2.03 < d["k"] < 2.05
+    assert d["U_um"] == pytest.approx(d["k"] * d["u_um"], rel=1e-15)
+    assert "(k = 2.04, coverage probability ≈ 95 %)" in d["statement"]
+    others = [x for x in results["decisions"] if x["characteristic"] != "S1_S2_distance"]
+    assert all(x["distribution"] == "normal" and x["k"] == 2 and x["nu_eff"] is None for x in others)
 
 
 def test_symmetric_tolerance_is_around_the_nominal_or_the_task_value(knuckle):
@@ -136,9 +164,9 @@ def test_a_measured_value_typed_into_the_sheet_changes_the_decision(knuckle, tmp
     edited = tmp_path / "edited.xlsx"
     wb.save(edited)
     v = recalculate(edited, "formulas")["Decision"]
-    assert v["N8"] == "cannot be decided"
-    want = cf.probability_of_conformance(0.045, v["D8"], cf.Tolerance(usl_mm=0.05))
-    assert close(v["M8"], want, rel=1e-9)
+    assert v[at(8, "outcome")] == "cannot be decided"
+    want = cf.probability_of_conformance(0.045, v[at(8, "u_um")], cf.Tolerance(usl_mm=0.05))
+    assert close(v[at(8, "p_c")], want, rel=1e-9)
 
 
 # -- JCGM 106:2012, 7.3 Table 1 in the workbook --------------------------------------------------
@@ -174,7 +202,7 @@ def test_table1_probabilities_of_conformance_in_the_workbook(table1, engine):
     results, book = table1
     v = recalculate(book, engine)["Decision"]
     for i, (d, (p_c, _)) in enumerate(zip(results["decisions"], TABLE1)):
-        got = v[f"M{8 + i}"]
+        got = v[at(8 + i, "p_c")]
         assert close(got, d["p_c"], rel=1e-9)
         decimals = len(str(p_c).split(".")[1])
         assert abs(got - p_c) <= 0.5 * 10 ** -decimals
@@ -241,6 +269,9 @@ def test_libreoffice_agrees_for_each_rule(rule_books, label):
     (lambda d: d["decision"]["tolerances"].append(dict(d["decision"]["tolerances"][0])), "#5 key 'characteristic'",
      "has a tolerance already"),
     (lambda d: d["decision"].pop("tolerances"), "[decision] tolerances", "no tolerances"),
+    (lambda d: d["decision"]["tolerances"][2].pop("n_repeats"), "#3 key 'n_repeats'", "both s_um"),
+    (lambda d: d["decision"]["tolerances"][2].update(n_repeats=1), "#3 key 'n_repeats'", ">= 2"),
+    (lambda d: d["decision"].update(k_from_dof="yes"), "[decision] k_from_dof", "true or false"),
 ])
 def test_bad_decision_input_names_the_key(tmp_path, edit, where, message):
     with pytest.raises(InputError) as e:

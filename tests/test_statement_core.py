@@ -50,3 +50,8 @@ def test_decimals_for_and_round_to():
 
 def test_a_value_that_rounds_to_zero_has_no_minus_sign():
     assert statement("y0_mm", -1.2e-17, "mm", 1.4, "µm", 2).startswith("y0_mm = 0.0000 mm")
+
+
+def test_a_t_distribution_k_shows_two_decimals():
+    assert statement("d", 10.0, "mm", 2.0, "µm", 2.2816).endswith("(k = 2.28, coverage probability ≈ 95 %)")
+    assert statement("d", 10.0, "mm", 2.0, "µm", 2.0).endswith("(k = 2, coverage probability ≈ 95 %)")

@@ -53,8 +53,9 @@ def fmt(x: float, decimals: int) -> str:
 
 
 def coverage_text(k: float, p_percent: float | None = 95.0) -> str:
-    """"k = 2, coverage probability ≈ 95 %" (the probability omitted when unknown)."""
-    ks = f"{k:g}"
+    """"k = 2, coverage probability ≈ 95 %" (the probability omitted when unknown); a k that is
+    not a whole number (a t-distribution's, GUM G.6.4) with two decimals: "k = 2.28"."""
+    ks = f"{round(k):d}" if abs(k - round(k)) < 1e-9 else f"{k:.2f}"
     return f"k = {ks}" + (f", coverage probability ≈ {p_percent:g} %" if p_percent is not None else "")
 
 

@@ -393,9 +393,10 @@ class Book:
         page number in the footer.  ``landscape`` None chooses by the width of the used columns;
         ``title_rows`` = the last header row repeated on every page (-1: row 1 when it holds bold
         headers, None: none); ``area`` a print area; ``row_breaks`` rows that start a new page
-        (e.g. one budget per page); ``one_page``: scaled to fit one page (the Summary).  ``matrix`` = (rows, columns) of a large matrix at B2: only
-        its top-left corner prints, with ``caption`` in the page header saying so (a 156 x 156
-        V_X would otherwise fill 60 pages)."""
+        (e.g. one budget per page); ``one_page``: scaled to fit one page (the Summary).  ``matrix``
+        = (rows, columns) of a large matrix at B2: only its top-left corner prints, with
+        ``caption`` in the page header saying so (a 156 x 156 V_X would otherwise fill 60 pages).
+        With an ``area``, only its columns count for the width (landscape, pages across)."""
         self._print[ws.title] = dict(landscape=landscape, title_rows=title_rows, area=area,
                                      row_breaks=tuple(row_breaks), fit_widths=fit_widths, matrix=matrix,
                                      caption=caption, one_page=one_page)
@@ -577,11 +578,11 @@ def fit_widths(ws: Worksheet) -> None:
             ws.column_dimensions[letter].width = round(width, 1)
 
 
-def _used_width(ws: Worksheet) -> float:
+def _used_width(ws: Worksheet, last_column: int | None = None) -> float:
     from openpyxl.utils import get_column_letter
 
     total = 0.0
-    for column in range(1, ws.max_column + 1):
+    for column in range(1, (last_column or ws.max_column) + 1):
         letter = get_column_letter(column)
         dim = ws.column_dimensions[letter] if letter in ws.column_dimensions else None
         total += dim.width if dim is not None and dim.width else 8.43
@@ -619,7 +620,12 @@ def _page_setup(ws: Worksheet, *, landscape: bool | None = None, title_rows: int
     if caption:
         ws.oddHeader.center.text = caption
         ws.oddHeader.center.size = 9
-    width = _used_width(ws)
+    last_column = None
+    if area:                      # only the printed columns count (chart data may lie beyond)
+        from openpyxl.utils import range_boundaries
+
+        last_column = range_boundaries(area.replace("$", ""))[2]
+    width = _used_width(ws, last_column)
     if landscape is None:
         landscape = width > 100
     ws.page_setup.orientation = "landscape" if landscape else "portrait"
