@@ -51,6 +51,7 @@ distances = [
 kind = "pointcloud"
 name = "stepgauge_{scenario}_{mpe}"
 notes = [
+  "The [decision] tolerances and measured values are realistic drawing tolerances and illustrative values chosen for cmmwb's demonstration, not taken from the paper.",
   "Forbes 2025 Table 5 prints u_PQ = sigma_PQ/sqrt(2) for two-probe distances; eq. (9)/(34) would give sigma_PQ*sqrt(2). The tables are reproduced with sigma_PQ,k = sigma_PQ/2 per probe (probe overrides); [parameters] sigma_PQ_um keeps Table 3's value for the summary formula (33)-(34).",
   "P_mm = 50 is Table 3's longest probe length for the MPE check; the step-gauge probes are 20 mm long.",
 ]
