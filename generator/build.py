@@ -328,4 +328,6 @@ def build_task(task_path: Path, out_dir: Path, *, plots: bool = True, force: boo
             made += print_books([tmp / f"{name}.xlsx"])
     for b in staging.backups:
         print(f"cmmwb: kept a backup of the replaced file: {b}", file=sys.stderr)
+    for r in staging.removed:
+        print(f"cmmwb: removed {r}: written by this task's previous build, not by this one", file=sys.stderr)
     return results, [Path(out_dir) / p.name for p in made]

@@ -426,7 +426,8 @@ def write_sheet(book: Book, kind: str, spec: DecisionSpec, results: dict, decisi
         cache[at("w_um")] = d["w_um"]
         wc = at("w_um")
         acc = [None, None]
-        for j, (lim, sign, a_name, r_name) in enumerate(((lsl, "+", "A_L_mm", "R_L_mm"), (usl, "-", "A_U_mm", "R_U_mm"))):
+        sides = ((lsl, "+", "A_L_mm", "R_L_mm"), (usl, "-", "A_U_mm", "R_U_mm"))
+        for j, (lim, sign, a_name, r_name) in enumerate(sides):
             if lim is None:
                 book.text(ws, r, c[a_name], "—")
                 book.text(ws, r, c[r_name], "—")
@@ -499,10 +500,12 @@ def write_sheet(book: Book, kind: str, spec: DecisionSpec, results: dict, decisi
               ChartSeries("value − U", xs, ref_of("dev_minus_U_um"), colour="1F77B4"),
               ChartSeries("lower specification limit", xs, ref_of("lsl_dev_um"), markers=False, colour="D62728",
                           dash="solid", bold=True),
-              ChartSeries("upper specification limit", xs, ref_of("usl_dev_um"), markers=False, colour="D62728", dash="solid", bold=True),
+              ChartSeries("upper specification limit", xs, ref_of("usl_dev_um"), markers=False, colour="D62728",
+                          dash="solid", bold=True),
               ChartSeries("lower acceptance limit", xs, ref_of("A_L_dev_um"), markers=False, colour="2CA02C",
                           dash="dash"),
-              ChartSeries("upper acceptance limit", xs, ref_of("A_U_dev_um"), markers=False, colour="2CA02C", dash="dash")]
+              ChartSeries("upper acceptance limit", xs, ref_of("A_U_dev_um"), markers=False, colour="2CA02C",
+                          dash="dash")]
     book.scatter(ws, f"B{last + 3}", "Measured value ± U against the specification (red) and acceptance (green) "
                  "limits", "characteristic # (rows of the table)", "deviation from the tolerance midpoint (µm)",
                  series, width=24, height=11, x_min=0)

@@ -256,7 +256,8 @@ def summary_lines(results: dict, most: int = 4) -> list[str]:
         return out
     items = summary_items(results["kind"], results)
     for it in items[:most]:
-        out.append(statement(symbol(results["kind"], it["label"]), it["value"], it["unit"], it["U"], it["U_unit"], it["k"], unit_ratio=it["ratio"]))
+        out.append(statement(symbol(results["kind"], it["label"]), it["value"], it["unit"], it["U"], it["U_unit"],
+                             it["k"], unit_ratio=it["ratio"]))
     if len(items) > most:
         out.append(f"... {len(items) - most} more in the Results sheet and the JSON")
     return out

@@ -278,3 +278,12 @@ def test_bad_decision_input_names_the_key(tmp_path, edit, where, message):
         build(tmp_path, KNUCKLE, edit)
     assert where in str(e.value) and message in str(e.value), str(e.value)
     assert not (tmp_path / "out").exists() or not any((tmp_path / "out").glob("*.xlsx"))
+
+
+def test_build_prints_rounded_statements_and_decisions(tmp_path, capsys):
+    from generator.cli import main
+
+    assert main(["build", str(KNUCKLE), "--out", str(tmp_path / "out"), "--no-plots"]) == 0
+    out = capsys.readouterr().out
+    assert "S3_position = 0.041 mm, U = 11 µm (k = 2, coverage probability ≈ 95 %): cannot be decided" in out
+    assert "S1_S2_distance = 90.0120 mm, U = 4.6 µm (k = 2.04, coverage probability ≈ 95 %): conforms" in out
