@@ -44,7 +44,7 @@ FMT_P = "0.000000"
 HEADER_ROW = 7
 FIRST_ROW = HEADER_ROW + 1     #: the first characteristic's row
 #: columns of the decision table (first row of the table: headers with units)
-COLUMNS = ["#", "characteristic", "value_mm", "u_task_um", "s_um", "n_repeats", "u_A_um", "nu_A", "u_um", "nu_eff",
+COLUMNS = ["item", "characteristic", "value_mm", "u_task_um", "s_um", "n_repeats", "u_A_um", "nu_A", "u_um", "nu_eff",
            "k", "U_um", "lsl_mm", "usl_mm", "w_um", "A_L_mm", "A_U_mm", "R_L_mm", "R_U_mm", "p_c", "outcome",
            "zone"]
 
@@ -364,7 +364,7 @@ def write_sheet(book: Book, kind: str, spec: DecisionSpec, results: dict, decisi
         row = rows[t.label]
         rr = row.index + 2
         at = lambda name: cell(r, c[name], absolute=False)  # noqa: E731
-        ws.cell(r, c["#"]).value = i + 1
+        ws.cell(r, c["item"]).value = i + 1
         book.text(ws, r, c["characteristic"], t.label)
         if t.measured_mm is not None:
             book.input(ws, r, c["value_mm"], f"{t.name_prefix}_measured_mm", t.measured_mm, fmt=FMT_MM,
@@ -490,7 +490,7 @@ def write_sheet(book: Book, kind: str, spec: DecisionSpec, results: dict, decisi
             cache[at(aname)] = (d["acceptance_limits_mm"][j] - ref_v) * 1000
     n = len(spec.tolerances)
     last = h + n
-    xs = Reference(ws, min_col=c["#"], min_row=h + 1, max_row=last)
+    xs = Reference(ws, min_col=c["item"], min_row=h + 1, max_row=last)
 
     def ref_of(name):
         return Reference(ws, min_col=c[name], min_row=h + 1, max_row=last)
@@ -507,7 +507,7 @@ def write_sheet(book: Book, kind: str, spec: DecisionSpec, results: dict, decisi
               ChartSeries("upper acceptance limit", xs, ref_of("A_U_dev_um"), markers=False, colour="2CA02C",
                           dash="dash")]
     book.scatter(ws, f"B{last + 3}", "Measured value ± U against the specification (red) and acceptance (green) "
-                 "limits", "characteristic # (rows of the table)", "deviation from the tolerance midpoint (µm)",
+                 "limits", "item (row of the table)", "deviation from the tolerance midpoint (µm)",
                  series, width=24, height=11, x_min=0)
     for name, width in (("characteristic", 18), ("outcome", 18), ("zone", 22)):
         ws.column_dimensions[col(c[name])].width = width
