@@ -252,14 +252,14 @@ def decide_all(path: Path, kind: str, spec: DecisionSpec, results: dict) -> list
                              file=path, where=_where(t.n, key))
         tol = t.tolerance(row.value_mm)
         value = row.value_mm if t.measured_mm is None else t.measured_mm
-        dof = combined(row, t, spec)
+        unc = combined(row, t, spec)
         try:
-            d = cf.decide(value, dof["u_um"], tol, spec.rule, dof["k"])
+            d = cf.decide(value, unc["u_um"], tol, spec.rule, unc["k"])
         except ModelError as e:
             raise InputError(str(e), file=path, where=_where(t.n)) from None
         entry = {"characteristic": t.label, **{k_: v for k_, v in t.ident.items()},
                  "value_source": "measured_mm" if t.measured_mm is not None else "task", **d.as_dict(),
-                 **{k_: v for k_, v in dof.items() if k_ not in ("u_um", "k")},
+                 **{k_: v for k_, v in unc.items() if k_ not in ("u_um", "k")},
                  "statement": statement(symbol(kind, t.label), value, "mm", d.U_um, "µm", d.k)}
         out.append(entry)
     return out
