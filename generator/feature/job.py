@@ -612,4 +612,16 @@ lambda_P = 0.5
 [[probes]]
 id = "P1"
 offset_mm = [0.0, 0.0, -50.0]
+
+# Optional: conformity decisions (docs/conformity.md) and report fields for the Summary sheet.
+# [decision]
+# rule = "iso14253"             # iso14253 | simple | guarded_acceptance (r) | guarded_rejection (r) | specific_risk (max_pfa)
+# k = 2                         # U = k·u
+# [[decision.tolerances]]
+# parameter = "r0_mm"           # a length parameter of the fit
+# lsl_mm = 24.995               # or tol_mm around nominal_mm
+# usl_mm = 25.005
+# measured_mm = 25.001          # optional; s_um and n_repeats add a type A repeatability
+# [report]
+# lab = "..."                   # also operator, cmm, artefact, job_id, notes
 '''

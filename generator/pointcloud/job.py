@@ -318,4 +318,15 @@ file = "points.csv"             # id,x,y,z,nx,ny,nz,probe  (mm; n = outward unit
 # from = "F1"
 # to = "F2"
 # group = "LR"                  # free label used in the charts
+
+# Optional: conformity decisions (docs/conformity.md) and report fields for the Summary sheet.
+# [decision]
+# rule = "iso14253"             # iso14253 | simple | guarded_acceptance (r) | guarded_rejection (r) | specific_risk (max_pfa)
+# [[decision.tolerances]]
+# from = "G1L"
+# to = "G1R"
+# tol_mm = 0.002                # nominal_mm ± tol_mm (nominal: the task's d), or lsl_mm / usl_mm
+# measured_mm = 100.0008        # optional; s_um and n_repeats add a type A repeatability
+# [report]
+# lab = "..."                   # also operator, cmm, artefact, job_id, notes
 '''
