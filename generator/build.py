@@ -23,12 +23,14 @@ from openpyxl.utils.exceptions import IllegalCharacterError
 
 from xlfuncs.errors import ModelError
 
+from . import decision as decisions
+from . import report
 from .errors import InputError, os_error_reason
 from .jobs import job
 from .taskfile import collecting_notes, read_toml, task_kind_and_name
 from .workbook import cache as cached_values
 from .workbook.atomic import write_text
-from .workbook.book import describing
+from .workbook.book import adding_sheets, describing
 
 
 def non_finite(obj, where: str = "results"):
@@ -100,10 +102,14 @@ class Staging:
 
     MANIFEST = ".cmmwb-manifest.json"
 
-    def __init__(self, out_dir: Path, *, force: bool = False):
+    def __init__(self, out_dir: Path, *, force: bool = False, task: str | None = None):
         self.out_dir = Path(out_dir)
         self.created = not self.out_dir.exists()
         self.force = force
+        #: the task whose outputs these are: the files its previous build wrote and this one does not
+        #: write again (a PDF of an earlier ``--pdf`` build) are removed, or kept as backups when edited
+        self.task = task
+        self.removed: list[Path] = []
         self.backups: list[Path] = []
         self.made_dirs: list[Path] = []     # folders this run created, outermost first
 
@@ -180,28 +186,47 @@ class Staging:
                 break                        # not empty: someone else's files are in it
 
     def _commit(self) -> None:
-        manifest = self._manifest()
+        manifest, tasks = self._manifest()
         files = sorted(self.tmp.iterdir())
+        new_names = {f.name for f in files}
+        # the previous build of this task: what it wrote that this one does not write again
+        stale = [n for n in tasks.get(self.task, []) if n not in new_names and (self.out_dir / n).is_file()] \
+            if self.task is not None else []
         edited = [f.name for f in files if (self.out_dir / f.name).exists()
                   and manifest.get(f.name) != self._sha256(self.out_dir / f.name)]
-        if edited and not self.force:
+        edited_stale = [n for n in stale if manifest.get(n) != self._sha256(self.out_dir / n)]
+        if (edited or edited_stale) and not self.force:
             raise InputError("changed since cmmwb wrote it, or not written by cmmwb: not overwritten (use "
                              "--force to replace it and keep a backup, or another --out)",
-                             file=self.out_dir / edited[0])
-        for name in edited:
+                             file=self.out_dir / (edited + edited_stale)[0])
+        for name in edited + edited_stale:
             self.backups.append(self._backup(self.out_dir / name))
+        for name in stale:
+            if name not in edited_stale:
+                (self.out_dir / name).unlink()
+                self.removed.append(self.out_dir / name)
+            manifest.pop(name, None)
         for f in files:
             manifest[f.name] = self._sha256(f)
             os.replace(f, self.out_dir / f.name)
+        if self.task is not None:
+            tasks[self.task] = sorted(new_names)
         write_text(self.out_dir / self.MANIFEST,
-                   json.dumps({"format": 1, "files": manifest}, indent=1, sort_keys=True) + "\n")
+                   json.dumps({"format": 1, "files": manifest, "tasks": tasks}, indent=1, sort_keys=True) + "\n")
 
-    def _manifest(self) -> dict:
+    def _manifest(self) -> tuple[dict, dict]:
+        """(file name -> SHA-256, task name -> the files its last build wrote)."""
         try:
-            files = json.loads((self.out_dir / self.MANIFEST).read_text(encoding="utf-8"))["files"]
-            return {str(k): str(v) for k, v in files.items()}
+            doc = json.loads((self.out_dir / self.MANIFEST).read_text(encoding="utf-8"))
+            files = {str(k): str(v) for k, v in doc["files"].items()}
         except (OSError, ValueError, KeyError, TypeError, AttributeError):
-            return {}
+            return {}, {}
+        tasks = doc.get("tasks") if isinstance(doc, dict) else None
+        if not isinstance(tasks, dict):
+            tasks = {}
+        tasks = {str(k): [str(n) for n in v if isinstance(n, str) and "/" not in n and n not in (".", "..")]
+                 for k, v in tasks.items() if isinstance(v, list)}
+        return files, tasks
 
     @staticmethod
     def _sha256(path: Path) -> str:
@@ -244,17 +269,42 @@ def load_task(task_path: Path):
     return kind, mod, doc, task
 
 
+def sheet_writers(kind: str, spec, results: dict, cache: dict) -> list:
+    """The sheets every book of the task gets besides its kind's: ``Decision`` (when the task has a
+    ``[decision]`` table) and ``Summary``; the values they cache go into ``cache``."""
+    rows: dict[str, int] = {}
+
+    def decision_sheet(book):
+        got = decisions.write_sheet(book, kind, spec, results, results["decisions"])
+        rows.update({t.label: decisions.FIRST_ROW + i for i, t in enumerate(spec.tolerances)})
+        for sheet, vals in got.items():
+            cache.setdefault(sheet, {}).update(vals)
+
+    def summary_sheet(book):
+        got = report.write_sheet(book, kind, results, decision_rows=rows,
+                                 k_feature=spec.k if spec is not None and spec.k is not None else 2.0)
+        for sheet, vals in got.items():
+            cache.setdefault(sheet, {}).update(vals)
+
+    return ([decision_sheet] if spec is not None else []) + [summary_sheet]
+
+
 def build_task(task_path: Path, out_dir: Path, *, plots: bool = True, force: bool = False,
-               cache: str = "results", exact: bool = False) -> tuple[dict, list[Path]]:
+               cache: str = "results", exact: bool = False, pdf: bool = False,
+               built_utc: str | None = None) -> tuple[dict, list[Path]]:
     """Build one task into ``out_dir``: workbook, JSON and plots, all or nothing.
 
     ``force``: replace outputs someone edited (keeping backups); ``cache``: which formula cells
     get cached values for programs that do not calculate (see :mod:`generator.workbook.cache`);
     ``exact``: no approximation even for large tasks (the job's ``force_exact``, if it has one:
-    a feature task's V_A; the other kinds are always exact)."""
+    a feature task's V_A; the other kinds are always exact); ``pdf``: the workbook printed to PDF by
+    LibreOffice, inside the same all-or-nothing commit (so the manifest lists it, and a later build
+    without ``pdf`` removes it); ``built_utc``: the build time to record (default: now)."""
     task_path = Path(task_path)
     with collecting_notes() as notes:
         kind, mod, doc, task = load_task(task_path)
+        spec = decisions.read_spec(task_path, doc, kind)
+        rep = report.read_report(task_path, doc)
     if exact and hasattr(mod, "force_exact"):
         mod.force_exact(task)
     try:
@@ -263,30 +313,44 @@ def build_task(task_path: Path, out_dir: Path, *, plots: bool = True, force: boo
             results = mod.compute(task)
     except ModelError as e:
         raise InputError(str(e), file=task_path) from None
+    if spec is not None:
+        results["decision_rule"] = decisions.rule_json(spec)
+        results["decisions"] = decisions.decide_all(task_path, kind, spec, results)
+    results["provenance"] = report.provenance(task_path, doc, built_utc)
+    if rep is not None:
+        results["report"] = rep
 
     results["warnings"] = list(notes)     # docs/cli.md: what was detected or looks implausible
     bad = non_finite(results)
     if bad is not None:
         raise InputError(f"the model gives {bad[1]!r} for {bad[0]}: check the inputs for extreme values "
                          "(e.g. a length scale so small that its square underflows)", file=task_path)
-    staging = Staging(out_dir, force=force)
+    staging = Staging(out_dir, force=force, task=results["name"])
     with staging as tmp:
         name = results["name"]
         book = tmp / f"{name}.xlsx"
+        extra_cache: dict = {}
         try:
-            with describing({"kind": kind, "name": name, "doc": doc, "task_file": task_path.name}):
+            with describing({"kind": kind, "name": name, "doc": doc, "task_file": task_path.name}), \
+                    adding_sheets(kind, *sheet_writers(kind, spec, results, extra_cache)):
                 mod.write_book(task, results, book)
         except IllegalCharacterError:
             raise InputError("a text (a point, probe or characteristic name, or a note) contains a control "
                              "character that a workbook cannot store", file=task_path) from None
-        cached_values.store(book, kind, results, cache)
+        cached_values.store(book, kind, results, cache, extra=extra_cache)
         (tmp / f"{name}.json").write_text(json.dumps(results, indent=1, ensure_ascii=False) + "\n",
                                           encoding="utf-8")
         made = [tmp / f"{name}.xlsx", tmp / f"{name}.json"]
         if plots:
             made += list(mod.write_plots(task, results, tmp))
+        if pdf:
+            from .workbook.pdf import print_books
+
+            made += print_books([tmp / f"{name}.xlsx"])
     for w in notes:
         print(f"cmmwb: warning: {w}", file=sys.stderr)
     for b in staging.backups:
         print(f"cmmwb: kept a backup of the replaced file: {b}", file=sys.stderr)
+    for r in staging.removed:
+        print(f"cmmwb: removed {r}: written by this task's previous build, not by this one", file=sys.stderr)
     return results, [Path(out_dir) / p.name for p in made]

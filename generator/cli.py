@@ -26,6 +26,7 @@ from .build import build_task
 from .commands import add_command, examples_epilog
 from .errors import InputError, os_error_reason
 from .jobs import available, job
+from .report import summary_lines
 from .taskfile import KINDS
 from .workbook.atomic import write_text
 
@@ -44,13 +45,9 @@ def cmd_build(args) -> int:
 
         require_libreoffice()   # before anything is written
     results, files = build_task(Path(args.task), Path(args.out), plots=not args.no_plots,
-                                force=args.force, cache=args.cache, exact=args.exact)
-    if args.pdf:
-        from .workbook.pdf import print_books
-
-        files += print_books([f for f in files if f.suffix == ".xlsx"])
+                                force=args.force, cache=args.cache, exact=args.exact, pdf=args.pdf)
     print(f"[{results['kind']}] {results['name']}")
-    for line in job(results["kind"]).summary(results):
+    for line in job(results["kind"]).summary(results) + summary_lines(results):
         print(f"    {line}")
     for f in files:
         print(f"    -> {f}")
@@ -100,9 +97,9 @@ def cmd_demo(args) -> int:
         mod = job(kind)
         for example in mod.EXAMPLES:
             t = time.perf_counter()
-            results, files = build_task(EXAMPLES_DIR / example, out / kind)
+            results, files = build_task(EXAMPLES_DIR / example, out / kind, pdf=getattr(args, "pdf", False))
             print(f"\n[{kind}] {results['name']}  ({time.perf_counter() - t:.1f} s)")
-            for line in mod.summary(results):
+            for line in mod.summary(results) + summary_lines(results):
                 print(f"    {line}")
             for f in files:
                 print(f"    -> {f}")
@@ -116,7 +113,7 @@ def cmd_demo(args) -> int:
         from .workbook.pdf import print_books
 
         t = time.perf_counter()
-        pdfs = print_books(sorted(out.rglob("*.xlsx")))
+        pdfs = print_books(sorted(b for b in out.rglob("*.xlsx") if not b.with_suffix(".pdf").exists()))
         print(f"\n[pdf] {len(pdfs)} workbooks printed by LibreOffice ({time.perf_counter() - t:.1f} s)")
         for f in pdfs:
             print(f"    -> {f}")

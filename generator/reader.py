@@ -35,6 +35,7 @@ from pathlib import Path
 from xlfuncs.errors import ModelError
 
 from . import __version__
+from .decision import read_back as read_decision
 from .errors import InputError
 from .jobs import available, job
 from .taskfile import KINDS
@@ -42,7 +43,7 @@ from .workbook.readback import Cells, ReadTask
 from .workbook.tasksheet import TASK_INFO_FORMAT, TASK_SHEET
 
 #: the sheets `read` takes values from (the others are not even loaded)
-INPUT_SHEETS = {"Instructions", "Inputs", "Points", "Local", "Planning", "Characteristics", TASK_SHEET}
+INPUT_SHEETS = {"Instructions", "Inputs", "Points", "Local", "Planning", "Characteristics", "Decision", TASK_SHEET}
 
 
 # -- reading the task information -------------------------------------------------------------------
@@ -115,6 +116,7 @@ def read_workbook(path: Path, points_file: str = "points.csv") -> ReadTask:
         from .feature.reader import read_feature
 
         read_feature(cells, rt, points_file)
+    read_decision(cells, rt)
     return rt
 
 

@@ -30,6 +30,8 @@ KINDS = ("pointcloud", "budget", "feature", "characteristic")
 MAX_TASK_BYTES = MAX_BYTES["task"]
 MAX_CSV_BYTES = MAX_BYTES["points"]
 NORMAL_TOL = 1e-3
+#: tables every task kind accepts, read by the build itself: conformity decisions and report fields
+COMMON_TABLES = frozenset({"decision", "report"})
 
 
 MAX_DEPTH = 16           # tables and arrays nested deeper than this are refused

@@ -75,7 +75,7 @@ def build_one(kind: str, example: Path | None, target: Path) -> Path:
                 (task.parent / name).write_text(text, encoding="utf-8")
         else:
             task = example
-        results, files = build_task(task, tmp / "out", plots=False)
+        results, files = build_task(task, tmp / "out", plots=False, built_utc=FIXED_DATE)
         book = next(f for f in files if f.suffix == ".xlsx")
         normalise(book)
         target.parent.mkdir(parents=True, exist_ok=True)

@@ -22,7 +22,7 @@ from xlfuncs.limits import coordinate_problem
 
 from .. import __version__
 from ..errors import InputError
-from ..taskfile import check_keys, number, table, task_kind_and_name, text_list
+from ..taskfile import COMMON_TABLES, check_keys, number, table, task_kind_and_name, text_list
 from ..workbook.xlref import check_name
 from .task import MODEL_KEYS, Characteristic, Task, distance_name
 
@@ -37,7 +37,7 @@ RESULT_COLUMNS = ["name", "variant", "value_mm", "u_um", "U_um"]
 
 _POINT_NAME = re.compile(r"^[A-Za-z][A-Za-z0-9_]{0,19}$")
 _CHAR_NAME = re.compile(r"^[A-Za-z][A-Za-z0-9_]{0,30}$")
-RESERVED_SHEETS = {"inputs", "results", "instructions"}
+RESERVED_SHEETS = {"inputs", "results", "instructions", "decision", "summary"}
 
 
 # -- reading the task file ----------------------------------------------------------------------
@@ -190,7 +190,7 @@ def load(path: Path, doc: dict) -> Task:
     kind, name = task_kind_and_name(path, doc)
     if kind != KIND:
         raise _err(path, "[task] kind", f"expected {KIND!r}, got {kind!r}")
-    check_keys(path, doc, "task file", {"task", "mpe", "points", "datum_system", "characteristics"})
+    check_keys(path, doc, "task file", {"task", "mpe", "points", "datum_system", "characteristics"} | COMMON_TABLES)
     task_tbl = table(path, doc, "task")
     check_keys(path, task_tbl, "task", {"kind", "name", "notes"})
     notes = text_list(path, task_tbl, "task", "notes")

@@ -51,6 +51,7 @@ distances = [
 kind = "pointcloud"
 name = "stepgauge_{scenario}_{mpe}"
 notes = [
+  "The [decision] tolerances and measured values are realistic drawing tolerances and illustrative values chosen for cmmwb's demonstration, not taken from the paper.",
   "Forbes 2025 Table 5 prints u_PQ = sigma_PQ/sqrt(2) for two-probe distances; eq. (9)/(34) would give sigma_PQ*sqrt(2). The tables are reproduced with sigma_PQ,k = sigma_PQ/2 per probe (probe overrides); [parameters] sigma_PQ_um keeps Table 3's value for the summary formula (33)-(34).",
   "P_mm = 50 is Table 3's longest probe length for the MPE check; the step-gauge probes are 20 mm long.",
 ]
@@ -79,6 +80,31 @@ lambda_P = 0.5
 {probes}
 [points]
 file = "stepgauge_{scenario}.csv"
+
+# Conformity decisions (not in the paper): realistic permissible deviations of the step gauge's
+# lengths (± 1.5 µm up to 100 mm, ± 3 µm beyond) and illustrative measured values; the specific-risk
+# rule of JCGM 106:2012, 9.3 accepts a length when its probability of conformance is >= 0.95.
+[decision]
+rule = "specific_risk"
+max_pfa = 0.05
+
+[[decision.tolerances]]    # first step, 20 mm
+from = "L1"
+to = "L2"
+tol_mm = 0.0015
+measured_mm = 20.0004
+
+[[decision.tolerances]]    # one face to another, 500 mm
+from = "L1"
+to = "L26"
+tol_mm = 0.003
+measured_mm = 500.0021
+
+[[decision.tolerances]]    # the whole gauge, 510 mm
+from = "L1"
+to = "R26"
+tol_mm = 0.003
+measured_mm = 509.9988
 '''
 
 

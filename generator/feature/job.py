@@ -33,7 +33,7 @@ from xlfuncs.limits import MAX_COORDINATE_MM, coordinate_problem
 
 from .. import __version__
 from ..errors import InputError
-from ..taskfile import (check_keys, number, read_parameters, read_point_cloud, read_probes, text_list,
+from ..taskfile import (COMMON_TABLES, check_keys, number, read_parameters, read_point_cloud, read_probes, text_list,
                        string, table, task_kind_and_name, vector3)
 from .task import KIND, Planning, Task
 
@@ -142,7 +142,7 @@ def load(path: Path, doc: dict) -> Task:
     path = Path(path)
     kind, name = task_kind_and_name(path, doc)
     check_keys(path, doc, "task file", {"task", "feature", "points", "sampling", "planning",
-                                        "parameters", "probes"})
+                                        "parameters", "probes"} | COMMON_TABLES)
     t = table(path, doc, "task")
     check_keys(path, t, "task", {"kind", "name", "notes"})
     notes = text_list(path, t, "task", "notes")
@@ -612,4 +612,16 @@ lambda_P = 0.5
 [[probes]]
 id = "P1"
 offset_mm = [0.0, 0.0, -50.0]
+
+# Optional: conformity decisions (docs/conformity.md) and report fields for the Summary sheet.
+# [decision]
+# rule = "iso14253"             # iso14253 | simple | guarded_acceptance (r) | guarded_rejection (r) | specific_risk (max_pfa)
+# k = 2                         # U = k·u
+# [[decision.tolerances]]
+# parameter = "r0_mm"           # a length parameter of the fit
+# lsl_mm = 24.995               # or tol_mm around nominal_mm
+# usl_mm = 25.005
+# measured_mm = 25.001          # optional; s_um and n_repeats add a type A repeatability
+# [report]
+# lab = "..."                   # also operator, cmm, artefact, job_id, notes
 '''

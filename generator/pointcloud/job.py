@@ -18,7 +18,7 @@ from xlfuncs.errors import ModelError
 
 from .. import __version__
 from ..errors import InputError
-from ..taskfile import check_keys, number, read_point_cloud, string, table, task_kind_and_name, text_list
+from ..taskfile import COMMON_TABLES, check_keys, number, read_point_cloud, string, table, task_kind_and_name, text_list
 from ..workbook.book import Book
 from ..workbook.xlref import Block, block, cell
 from .book import (KIND, MPE_GRID_POINTS, RESULT_COLUMNS, budget_chart, extra_inputs, results_rows,
@@ -55,7 +55,7 @@ class Task:
 def load(path: Path, doc: dict) -> Task:
     path = Path(path)
     kind, name = task_kind_and_name(path, doc)
-    check_keys(path, doc, "task file", {"task", "mpe", "parameters", "probes", "points", "distances"})
+    check_keys(path, doc, "task file", {"task", "mpe", "parameters", "probes", "points", "distances"} | COMMON_TABLES)
     check_keys(path, table(path, doc, "task"), "task", {"kind", "name", "notes", "K"})
     cloud, params, pts = read_point_cloud(path, doc)
     notes = text_list(path, doc["task"], "task", "notes")
@@ -318,4 +318,15 @@ file = "points.csv"             # id,x,y,z,nx,ny,nz,probe  (mm; n = outward unit
 # from = "F1"
 # to = "F2"
 # group = "LR"                  # free label used in the charts
+
+# Optional: conformity decisions (docs/conformity.md) and report fields for the Summary sheet.
+# [decision]
+# rule = "iso14253"             # iso14253 | simple | guarded_acceptance (r) | guarded_rejection (r) | specific_risk (max_pfa)
+# [[decision.tolerances]]
+# from = "G1L"
+# to = "G1R"
+# tol_mm = 0.002                # nominal_mm ± tol_mm (nominal: the task's d), or lsl_mm / usl_mm
+# measured_mm = 100.0008        # optional; s_um and n_repeats add a type A repeatability
+# [report]
+# lab = "..."                   # also operator, cmm, artefact, job_id, notes
 '''

@@ -51,6 +51,9 @@ INSTRUCTIONS = "Instructions"
 #: the task description :meth:`Book.save` stores when the writer did not call task_info itself
 #: (set by ``generator.build.build_task`` around ``write_book`` with :func:`describing`)
 _TASK_INFO: ContextVar[dict | None] = ContextVar("cmmwb_task_info", default=None)
+#: sheets the build adds to every book of the task (Decision, Summary): ``writer(book)`` called by
+#: :meth:`Book.save` before the layout is finished (set with :func:`adding_sheets`)
+_EXTRA_SHEETS: ContextVar[tuple] = ContextVar("cmmwb_extra_sheets", default=())
 
 
 @contextmanager
@@ -62,6 +65,17 @@ def describing(info: dict) -> Iterator[None]:
         yield
     finally:
         _TASK_INFO.reset(token)
+
+
+@contextmanager
+def adding_sheets(kind: str, *writers) -> Iterator[None]:
+    """Every :class:`Book` of ``kind`` saved inside this block gets the sheets ``writer(book)``
+    adds (in order), written before the column widths and print setup are finished."""
+    token = _EXTRA_SHEETS.set((kind, writers))
+    try:
+        yield
+    finally:
+        _EXTRA_SHEETS.reset(token)
 
 
 def _finite(value: float, what: str) -> float:
@@ -371,19 +385,21 @@ class Book:
     # -- printing and column widths --------------------------------------------------------------
     def print_setup(self, ws: Worksheet, *, landscape: bool | None = None, title_rows: int | None = -1,
                     area: str | None = None, row_breaks: Sequence[int] = (), fit_widths: bool = True,
-                    matrix: tuple[int, int] | None = None, caption: str | None = None) -> None:
+                    matrix: tuple[int, int] | None = None, caption: str | None = None,
+                    one_page: bool = False) -> None:
         """How ``ws`` prints (applied by :meth:`save`; sheets without a call get the defaults).
 
         Every sheet a person reads prints on A4, scaled to the page width, with the sheet name and
         page number in the footer.  ``landscape`` None chooses by the width of the used columns;
         ``title_rows`` = the last header row repeated on every page (-1: row 1 when it holds bold
         headers, None: none); ``area`` a print area; ``row_breaks`` rows that start a new page
-        (e.g. one budget per page).  ``matrix`` = (rows, columns) of a large matrix at B2: only
-        its top-left corner prints, with ``caption`` in the page header saying so (a 156 x 156
-        V_X would otherwise fill 60 pages)."""
+        (e.g. one budget per page); ``one_page``: scaled to fit one page (the Summary).  ``matrix``
+        = (rows, columns) of a large matrix at B2: only its top-left corner prints, with
+        ``caption`` in the page header saying so (a 156 x 156 V_X would otherwise fill 60 pages).
+        With an ``area``, only its columns count for the width (landscape, pages across)."""
         self._print[ws.title] = dict(landscape=landscape, title_rows=title_rows, area=area,
                                      row_breaks=tuple(row_breaks), fit_widths=fit_widths, matrix=matrix,
-                                     caption=caption)
+                                     caption=caption, one_page=one_page)
 
     def _finish_layout(self) -> None:
         """Column widths that fit what each column shows, and the print setup of every sheet."""
@@ -435,6 +451,10 @@ class Book:
     def save(self, path: Path) -> Path:
         """Write the workbook atomically (temporary file in the same folder, then rename)."""
         path = Path(path)
+        extra = _EXTRA_SHEETS.get()
+        if extra and extra[0] == self.kind:
+            for writer in extra[1]:
+                writer(self)
         self._flush_validations()
         self._finish_layout()
         info = self._task_info if self._task_info is not None else _TASK_INFO.get()
@@ -558,11 +578,11 @@ def fit_widths(ws: Worksheet) -> None:
             ws.column_dimensions[letter].width = round(width, 1)
 
 
-def _used_width(ws: Worksheet) -> float:
+def _used_width(ws: Worksheet, last_column: int | None = None) -> float:
     from openpyxl.utils import get_column_letter
 
     total = 0.0
-    for column in range(1, ws.max_column + 1):
+    for column in range(1, (last_column or ws.max_column) + 1):
         letter = get_column_letter(column)
         dim = ws.column_dimensions[letter] if letter in ws.column_dimensions else None
         total += dim.width if dim is not None and dim.width else 8.43
@@ -571,13 +591,14 @@ def _used_width(ws: Worksheet) -> float:
 
 def _page_setup(ws: Worksheet, *, landscape: bool | None = None, title_rows: int | None = -1,
                 area: str | None = None, row_breaks: Sequence[int] = (),
-                matrix: tuple[int, int] | None = None, caption: str | None = None) -> None:
+                matrix: tuple[int, int] | None = None, caption: str | None = None,
+                one_page: bool = False) -> None:
     from openpyxl.utils import get_column_letter
     from openpyxl.worksheet.pagebreak import Break
 
     ws.page_setup.paperSize = ws.PAPERSIZE_A4
     ws.page_setup.fitToWidth = 1
-    ws.page_setup.fitToHeight = 0
+    ws.page_setup.fitToHeight = 1 if one_page else 0
     ws.sheet_properties.pageSetUpPr.fitToPage = True
     ws.print_options.gridLines = False
     ws.page_margins.left = ws.page_margins.right = 0.5
@@ -599,7 +620,12 @@ def _page_setup(ws: Worksheet, *, landscape: bool | None = None, title_rows: int
     if caption:
         ws.oddHeader.center.text = caption
         ws.oddHeader.center.size = 9
-    width = _used_width(ws)
+    last_column = None
+    if area:                      # only the printed columns count (chart data may lie beyond)
+        from openpyxl.utils import range_boundaries
+
+        last_column = range_boundaries(area.replace("$", ""))[2]
+    width = _used_width(ws, last_column)
     if landscape is None:
         landscape = width > 100
     ws.page_setup.orientation = "landscape" if landscape else "portrait"

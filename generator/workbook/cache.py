@@ -208,9 +208,12 @@ def _formulas_of(xml: bytes, coords: set[str]) -> dict[str, str]:
 
 # -- entry point ---------------------------------------------------------------------------------
 
-def store(path: Path, kind: str, results: dict, mode: str = "results") -> int:
+def store(path: Path, kind: str, results: dict, mode: str = "results",
+          extra: dict[str, dict[str, Any]] | None = None) -> int:
     """Write cached values into the workbook at ``path`` (rewritten atomically); returns the
-    number of cells that got a value."""
+    number of cells that got a value.  ``extra`` = {sheet: {coordinate: value}} of other formula
+    cells whose values the core computed (the Decision and Summary sheets), cached in mode
+    ``results`` too."""
     if mode not in MODES:
         raise ValueError(f"unknown cache mode {mode!r}; choose one of {', '.join(MODES)}")
     if mode == "none":
@@ -226,6 +229,9 @@ def store(path: Path, kind: str, results: dict, mode: str = "results") -> int:
             arrays = True
         else:
             per_part = _results_values(z, parts, kind, results)
+            for sheet, vals in (extra or {}).items():
+                if sheet in parts:
+                    per_part.setdefault(parts[sheet], {}).update(vals)
             arrays = False
         new = {}
         count = 0

@@ -1,0 +1,57 @@
+"""Rounded result statements (xlfuncs.statement): GUM (JCGM 100:2008) 7.2.6, U to two
+significant digits and the value to the same decimal place; full precision is kept elsewhere."""
+
+from __future__ import annotations
+
+import pytest
+
+from xlfuncs.errors import ModelError
+from xlfuncs.statement import decimals_for, round_to, round_uncertainty, statement
+
+
+@pytest.mark.parametrize("U, rounded, decimals", [
+    (11.634609795116338, 12.0, 0),      # the knuckle's U_POS: "U_um 11.634610" in the issue
+    (3.4449, 3.4, 1),
+    (3.45, 3.5, 1),                     # halves away from zero, on the decimal text
+    (0.0712, 0.071, 3),
+    (0.125, 0.13, 2),
+    (134.0, 130.0, -1),
+    (9.96, 10.0, 0),                    # carries into a new digit: 10, two significant digits
+    (0.0009951, 0.0010, 4),             # "0.0010"
+])
+def test_U_rounds_to_two_significant_digits(U, rounded, decimals):
+    r, dec = round_uncertainty(U)
+    assert r == pytest.approx(rounded, rel=1e-15)
+    assert dec == decimals
+
+
+def test_rounding_up_when_asked():
+    assert round_uncertainty(3.41, mode="up") == (3.5, 1)
+    assert round_uncertainty(3.40, mode="up") == (3.4, 1)
+
+
+def test_value_to_the_decimal_place_of_U_across_units():
+    # U = 3.4 µm is 0.0034 mm: the value in mm gets four decimals
+    s = statement("d", 100.012345, "mm", 3.4449, "µm", 2)
+    assert s == "d = 100.0123 mm, U = 3.4 µm (k = 2, coverage probability ≈ 95 %)"
+    # U = 12 µm: the value to 0.001 mm
+    assert statement("l", 63.0, "mm", 11.6346, "µm", 2).startswith("l = 63.000 mm, U = 12 µm")
+    # same unit on both sides (angles in rad)
+    assert statement("a", 0.7853981, "rad", 2.345e-6, "rad", 2, unit_ratio=1) == \
+        "a = 0.7853981 rad, U = 0.0000023 rad (k = 2, coverage probability ≈ 95 %)"
+
+
+def test_decimals_for_and_round_to():
+    assert decimals_for(0.5) == 2 and decimals_for(5.0) == 1 and decimals_for(50.0) == 0
+    assert round_to(-2.345, 2) == -2.35
+    with pytest.raises(ModelError, match="positive"):
+        decimals_for(0.0)
+
+
+def test_a_value_that_rounds_to_zero_has_no_minus_sign():
+    assert statement("y0_mm", -1.2e-17, "mm", 1.4, "µm", 2).startswith("y0_mm = 0.0000 mm")
+
+
+def test_a_t_distribution_k_shows_two_decimals():
+    assert statement("d", 10.0, "mm", 2.0, "µm", 2.2816).endswith("(k = 2.28, coverage probability ≈ 95 %)")
+    assert statement("d", 10.0, "mm", 2.0, "µm", 2.0).endswith("(k = 2, coverage probability ≈ 95 %)")

@@ -1,0 +1,283 @@
+"""Conformity decisions with measurement uncertainty (JCGM 106:2012, ISO 14253-1:2017).
+
+The measurand's state of knowledge after measurement is taken as normal, N(y, u²), with y the
+measured value and u its standard uncertainty (JCGM 106:2012, 7.2-7.3).  A tolerance interval
+[T_L, T_U] (one limit may be absent: a one-sided interval) specifies the conforming values.
+
+* :func:`probability_of_conformance`: p_c = Φ((T_U - y)/u) - Φ((T_L - y)/u)
+  (JCGM 106:2012, 7.3.2 eq. (9)-(10) one-sided, 7.4 eq. (12) two-sided).
+* :func:`acceptance_limits`: the acceptance interval [A_L, A_U] of a decision rule: guard band
+  w = r·U inside the tolerance interval (guarded acceptance, JCGM 106:2012, 8.3.2), outside it
+  (guarded rejection, 8.3.3), none (simple acceptance, 8.2), or w = z·u with
+  z = Φ⁻¹(1 - α) for a stated largest probability of false acceptance α (specific risk, 8.3.2 and
+  9.3: an accepted item at the acceptance limit of a one-sided interval has p_c = 1 - α).
+* :func:`decide`: the outcome for one characteristic: ``conforms``, ``does not conform`` or
+  ``cannot be decided``, and the zone the measured value falls in.
+
+Units: values and limits in mm, uncertainties in µm (the project's convention); the functions
+convert with :data:`UM_PER_MM`.  numpy and the standard library only; no spreadsheet knowledge.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from .errors import ModelError
+
+UM_PER_MM = 1000.0
+
+#: the decision rules (``DecisionRule.kind``)
+RULES = ("simple", "iso14253", "guarded_acceptance", "guarded_rejection", "specific_risk")
+RULE_TEXT = {
+    "simple": "simple acceptance (JCGM 106:2012, 8.2; ILAC-G8 shared risk): accepted when the "
+              "measured value lies in the tolerance interval",
+    "iso14253": "ISO 14253-1:2017 default rule: conformance proven when the measured value lies in the "
+                "tolerance interval reduced by U on each side, non-conformance proven when it lies "
+                "outside the interval enlarged by U; between them the result cannot be decided",
+    "guarded_acceptance": "guarded acceptance (JCGM 106:2012, 8.3.2): acceptance interval = tolerance "
+                          "interval reduced by the guard band w = r·U",
+    "guarded_rejection": "guarded rejection (JCGM 106:2012, 8.3.3): acceptance interval = tolerance "
+                         "interval enlarged by the guard band w = r·U",
+    "specific_risk": "specific risk (JCGM 106:2012, 9.3): accepted when the probability of conformance "
+                     "p_c is at least 1 - max_pfa (the largest probability of false acceptance)",
+}
+
+CONFORMS = "conforms"
+DOES_NOT_CONFORM = "does not conform"
+UNDECIDED = "cannot be decided"
+
+
+def norm_cdf(z):
+    """Φ(z), the standard normal distribution function (via erfc: accurate in both tails)."""
+    z = np.asarray(z, float)
+    out = 0.5 * np.vectorize(math.erfc, otypes=[float])(-z / math.sqrt(2.0))
+    return float(out) if out.ndim == 0 else out
+
+
+def norm_ppf(p: float) -> float:
+    """Φ⁻¹(p) for 0 < p < 1: Acklam's rational start, refined by Newton steps on Φ (full double
+    precision; numpy-only, no scipy)."""
+    p = float(p)
+    if not 0.0 < p < 1.0:
+        raise ModelError(f"a probability must lie strictly between 0 and 1, got {p!r}")
+    a = (-3.969683028665376e+01, 2.209460984245205e+02, -2.759285104469687e+02,
+         1.383577518672690e+02, -3.066479806614716e+01, 2.506628277459239e+00)
+    b = (-5.447609879822406e+01, 1.615858368580409e+02, -1.556989798598866e+02,
+         6.680131188771972e+01, -1.328068155288572e+01)
+    c = (-7.784894002430293e-03, -3.223964580411365e-01, -2.400758277161838e+00,
+         -2.549732539343734e+00, 4.374664141464968e+00, 2.938163982698783e+00)
+    d = (7.784695709041462e-03, 3.224671290700398e-01, 2.445134137142996e+00, 3.754408661907416e+00)
+    lo = 0.02425
+    if p < lo:
+        q = math.sqrt(-2 * math.log(p))
+        x = (((((c[0] * q + c[1]) * q + c[2]) * q + c[3]) * q + c[4]) * q + c[5]) / \
+            ((((d[0] * q + d[1]) * q + d[2]) * q + d[3]) * q + 1)
+    elif p > 1 - lo:
+        q = math.sqrt(-2 * math.log1p(-p))
+        x = -(((((c[0] * q + c[1]) * q + c[2]) * q + c[3]) * q + c[4]) * q + c[5]) / \
+            ((((d[0] * q + d[1]) * q + d[2]) * q + d[3]) * q + 1)
+    else:
+        q = p - 0.5
+        r = q * q
+        x = (((((a[0] * r + a[1]) * r + a[2]) * r + a[3]) * r + a[4]) * r + a[5]) * q / \
+            (((((b[0] * r + b[1]) * r + b[2]) * r + b[3]) * r + b[4]) * r + 1)
+    for _ in range(3):          # Newton on Φ(x) - p; in the upper tail on the complement
+        pdf = math.exp(-0.5 * x * x) / math.sqrt(2 * math.pi)
+        if pdf == 0.0:
+            break
+        if p > 0.5:
+            err = (1.0 - p) - 0.5 * math.erfc(x / math.sqrt(2.0))
+            x -= err / pdf
+        else:
+            err = 0.5 * math.erfc(-x / math.sqrt(2.0)) - p
+            x -= err / pdf
+    return x
+
+
+@dataclass(frozen=True)
+class Tolerance:
+    """A tolerance interval [lsl_mm, usl_mm] (JCGM 106:2012, 3.3.5); ``None`` = no such limit
+    (a one-sided interval).  :meth:`symmetric` builds nominal ± tol."""
+
+    lsl_mm: float | None = None
+    usl_mm: float | None = None
+
+    def __post_init__(self):
+        if self.lsl_mm is None and self.usl_mm is None:
+            raise ModelError("a tolerance needs a lower or an upper specification limit (lsl_mm, usl_mm)")
+        for name in ("lsl_mm", "usl_mm"):
+            v = getattr(self, name)
+            if v is not None and not math.isfinite(float(v)):
+                raise ModelError(f"{name} = {v!r} is not a finite number")
+        if self.lsl_mm is not None and self.usl_mm is not None and not self.lsl_mm < self.usl_mm:
+            raise ModelError(f"the lower specification limit lsl_mm = {self.lsl_mm} must be below the "
+                             f"upper usl_mm = {self.usl_mm}")
+
+    @classmethod
+    def symmetric(cls, nominal_mm: float, tol_mm: float) -> "Tolerance":
+        if not (math.isfinite(tol_mm) and tol_mm > 0):
+            raise ModelError(f"tol_mm = {tol_mm!r} must be a positive number (the interval is nominal ± tol_mm)")
+        return cls(nominal_mm - tol_mm, nominal_mm + tol_mm)
+
+    @property
+    def two_sided(self) -> bool:
+        return self.lsl_mm is not None and self.usl_mm is not None
+
+    @property
+    def mid_mm(self) -> float | None:
+        return 0.5 * (self.lsl_mm + self.usl_mm) if self.two_sided else None
+
+
+@dataclass(frozen=True)
+class DecisionRule:
+    """How a measured value is turned into a decision.
+
+    ``kind``: one of :data:`RULES`; ``r``: guard band factor, w = r·U (guarded rules);
+    ``max_pfa``: the largest probability of false acceptance of the specific-risk rule."""
+
+    kind: str = "iso14253"
+    r: float = 1.0
+    max_pfa: float = 0.05
+
+    def __post_init__(self):
+        if self.kind not in RULES:
+            raise ModelError(f"unknown decision rule {self.kind!r}; choose one of {', '.join(RULES)}")
+        if not (math.isfinite(self.r) and self.r >= 0):
+            raise ModelError(f"r = {self.r!r} must be a number >= 0 (guard band w = r·U)")
+        if not (math.isfinite(self.max_pfa) and 0 < self.max_pfa < 0.5):
+            raise ModelError(f"max_pfa = {self.max_pfa!r} must lie strictly between 0 and 0.5")
+
+    @property
+    def text(self) -> str:
+        extra = ""
+        if self.kind in ("guarded_acceptance", "guarded_rejection"):
+            extra = f", r = {self.r:g}"
+        elif self.kind == "specific_risk":
+            extra = f", max_pfa = {self.max_pfa:g}"
+        return RULE_TEXT[self.kind] + extra
+
+
+@dataclass(frozen=True)
+class Decision:
+    """The outcome for one characteristic; lengths in mm, uncertainties in µm."""
+
+    value_mm: float
+    u_um: float
+    U_um: float
+    k: float
+    tolerance: Tolerance
+    rule: DecisionRule
+    w_um: float                      #: guard band (> 0 inside the tolerance interval, < 0 outside)
+    acceptance_mm: tuple[float | None, float | None]   #: [A_L, A_U]
+    rejection_mm: tuple[float | None, float | None]    #: beyond these: does not conform (iso14253)
+    p_c: float                       #: probability of conformance
+    outcome: str                     #: conforms / does not conform / cannot be decided
+    zone: str
+
+    def as_dict(self) -> dict:
+        return {"value_mm": self.value_mm, "u_um": self.u_um, "U_um": self.U_um, "k": self.k,
+                "lsl_mm": self.tolerance.lsl_mm, "usl_mm": self.tolerance.usl_mm,
+                "rule": self.rule.kind, "r": self.rule.r, "max_pfa": self.rule.max_pfa,
+                "w_um": self.w_um, "acceptance_limits_mm": list(self.acceptance_mm),
+                "acceptance_interval_empty": empty(self.acceptance_mm),
+                "p_c": self.p_c, "outcome": self.outcome, "zone": self.zone}
+
+
+def probability_of_conformance(value_mm, u_um, tolerance: Tolerance):
+    """p_c = Pr(T_L <= Y <= T_U | y) for Y ~ N(y, u²) (JCGM 106:2012, 7.3 and 7.4).
+
+    ``value_mm`` and ``u_um`` may be arrays (broadcast)."""
+    y = np.asarray(value_mm, float)
+    u_mm = np.asarray(u_um, float) / UM_PER_MM
+    if np.any(~(u_mm > 0)):
+        raise ModelError("the standard uncertainty u must be positive to compute a probability of conformance")
+    p = np.ones(np.broadcast(y, u_mm).shape)
+    if tolerance.usl_mm is not None:
+        p = norm_cdf((tolerance.usl_mm - y) / u_mm)
+    if tolerance.lsl_mm is not None:
+        p = p - norm_cdf((tolerance.lsl_mm - y) / u_mm)
+    p = np.asarray(p, float)
+    return float(p) if p.ndim == 0 else p
+
+
+def guard_band_um(rule: DecisionRule, U_um: float, k: float) -> float:
+    """The guard band w (µm), positive when the acceptance interval lies inside the tolerance
+    interval: r·U (guarded acceptance), -r·U (guarded rejection), 0 (simple acceptance),
+    U (ISO 14253-1 conformance zone), z·u with z = Φ⁻¹(1 - max_pfa) (specific risk)."""
+    if rule.kind == "simple":
+        return 0.0
+    if rule.kind == "iso14253":
+        return float(U_um)
+    if rule.kind == "guarded_acceptance":
+        return rule.r * float(U_um)
+    if rule.kind == "guarded_rejection":
+        return -rule.r * float(U_um)
+    return norm_ppf(1.0 - rule.max_pfa) * float(U_um) / float(k)
+
+
+def acceptance_limits(tolerance: Tolerance, w_um: float) -> tuple[float | None, float | None]:
+    """[A_L, A_U] = [T_L + w, T_U - w] (JCGM 106:2012, 8.3.1); a missing limit stays None.
+
+    A guard band of half the tolerance or more gives A_L >= A_U: an empty acceptance interval, in
+    which no measured value lies (the uncertainty is too large for the tolerance, JCGM 106:2012,
+    8.3.2); every value is then rejected (``does not conform``) or, by the ISO 14253-1 rule, at best
+    undecided."""
+    w = w_um / UM_PER_MM
+    lo = None if tolerance.lsl_mm is None else tolerance.lsl_mm + w
+    hi = None if tolerance.usl_mm is None else tolerance.usl_mm - w
+    return lo, hi
+
+
+def empty(limits: tuple[float | None, float | None]) -> bool:
+    """True when an acceptance interval [A_L, A_U] holds no value (A_L > A_U)."""
+    lo, hi = limits
+    return lo is not None and hi is not None and lo > hi
+
+
+def _inside(y: float, lo: float | None, hi: float | None) -> bool:
+    return (lo is None or y >= lo) and (hi is None or y <= hi)
+
+
+def decide(value_mm: float, u_um: float, tolerance: Tolerance, rule: DecisionRule, k: float = 2.0) -> Decision:
+    """The decision for one characteristic measured as ``value_mm`` with standard uncertainty
+    ``u_um`` and expanded uncertainty U = k·u.
+
+    Binary rules (simple, guarded acceptance/rejection, specific risk) accept (``conforms``,
+    acceptance zone) or reject (``does not conform``, rejection zone).  The ISO 14253-1 rule has
+    three outcomes: conformance zone, non-conformance zone, and the uncertainty range between
+    them (``cannot be decided``)."""
+    y = float(value_mm)
+    u = float(u_um)
+    if not (math.isfinite(y) and math.isfinite(u) and u > 0 and math.isfinite(k) and k > 0):
+        raise ModelError(f"a decision needs a finite value and u > 0, k > 0 (value {y!r} mm, u {u!r} µm, k {k!r})")
+    U = k * u
+    p_c = probability_of_conformance(y, u, tolerance)
+    w = guard_band_um(rule, U, k)
+    acc = acceptance_limits(tolerance, w)
+    rej: tuple[float | None, float | None] = (None, None)
+    if rule.kind == "iso14253":
+        rej = acceptance_limits(tolerance, -U)
+        if _inside(y, *acc):
+            outcome, zone = CONFORMS, "conformance zone"
+        elif not _inside(y, *rej):
+            outcome, zone = DOES_NOT_CONFORM, "non-conformance zone"
+        else:
+            outcome, zone = UNDECIDED, "uncertainty range"
+    elif rule.kind == "specific_risk":
+        ok = p_c >= 1.0 - rule.max_pfa
+        outcome, zone = (CONFORMS, "acceptance zone") if ok else (DOES_NOT_CONFORM, "rejection zone")
+    else:
+        ok = _inside(y, *acc)
+        outcome, zone = (CONFORMS, "acceptance zone") if ok else (DOES_NOT_CONFORM, "rejection zone")
+    return Decision(value_mm=y, u_um=u, U_um=U, k=float(k), tolerance=tolerance, rule=rule, w_um=w,
+                    acceptance_mm=acc, rejection_mm=rej, p_c=p_c, outcome=outcome, zone=zone)
+
+
+def measurement_capability_index(tolerance: Tolerance, u_um: float) -> float:
+    """C_m = (T_U - T_L) / (4 u) (JCGM 106:2012, 7.6 eq. (15)); two-sided intervals only."""
+    if not tolerance.two_sided:
+        raise ModelError("the measurement capability index needs a two-sided tolerance interval")
+    return (tolerance.usl_mm - tolerance.lsl_mm) * UM_PER_MM / (4.0 * float(u_um))

@@ -1,0 +1,121 @@
+"""Degrees of freedom: Welch–Satterthwaite and the t-distribution's coverage factor
+(GUM, JCGM 100:2008, G.4 and G.6; numpy and the standard library only).
+
+* :func:`nu_eff`: ν_eff = u_c⁴ / Σ (c_i u_i)⁴ / ν_i (GUM G.4.1, eq. (G.2b)); ν_i = inf for inputs
+  known exactly enough (type B inputs, GUM G.4.3) contribute nothing to the sum.
+* :func:`t_cdf`, :func:`t_quantile`: Student's t by the regularized incomplete beta function
+  (continued fraction) and its inverse (bisection refined by Newton steps).
+* :func:`coverage_factor`: k_p = t_p(ν_eff) with ν_eff truncated to the next lower integer
+  (GUM G.6.4), p = 0.9545 by default (k = 2 for ν = ∞, GUM G.1.3, G.6.6).
+"""
+
+from __future__ import annotations
+
+import math
+
+from .errors import ModelError
+
+P_K2 = 0.9545          #: the coverage probability of k = 2 for a normal distribution (GUM G.1.3)
+
+
+def nu_eff(u_contributions, nus) -> float:
+    """Welch–Satterthwaite (GUM G.4.1, eq. (G.2b)): ``u_contributions`` = |c_i| u(x_i) (any unit),
+    ``nus`` their degrees of freedom (``math.inf`` for type B)."""
+    us = [abs(float(u)) for u in u_contributions]
+    ns = [float(n) for n in nus]
+    if len(us) != len(ns) or not us:
+        raise ModelError("nu_eff needs one degrees-of-freedom value per uncertainty contribution")
+    for n in ns:
+        if not n > 0:
+            raise ModelError(f"degrees of freedom must be positive, got {n!r}")
+    uc2 = sum(u * u for u in us)
+    den = sum(u ** 4 / n for u, n in zip(us, ns) if math.isfinite(n))
+    if den == 0.0:
+        return math.inf
+    return uc2 * uc2 / den
+
+
+def _betacf(a: float, b: float, x: float) -> float:
+    """Continued fraction of the incomplete beta function (modified Lentz)."""
+    tiny = 1e-300
+    qab, qap, qam = a + b, a + 1.0, a - 1.0
+    c, d = 1.0, 1.0 - qab * x / qap
+    d = 1.0 / (d if abs(d) > tiny else tiny)
+    h = d
+    for m in range(1, 400):
+        m2 = 2 * m
+        aa = m * (b - m) * x / ((qam + m2) * (a + m2))
+        d = 1.0 + aa * d
+        d = 1.0 / (d if abs(d) > tiny else tiny)
+        c = 1.0 + aa / c
+        c = c if abs(c) > tiny else tiny
+        h *= d * c
+        aa = -(a + m) * (qab + m) * x / ((a + m2) * (qap + m2))
+        d = 1.0 + aa * d
+        d = 1.0 / (d if abs(d) > tiny else tiny)
+        c = 1.0 + aa / c
+        c = c if abs(c) > tiny else tiny
+        de = d * c
+        h *= de
+        if abs(de - 1.0) < 1e-16:
+            break
+    return h
+
+
+def _betainc(a: float, b: float, x: float) -> float:
+    """The regularized incomplete beta function I_x(a, b)."""
+    if x <= 0.0:
+        return 0.0
+    if x >= 1.0:
+        return 1.0
+    lbt = math.lgamma(a + b) - math.lgamma(a) - math.lgamma(b) + a * math.log(x) + b * math.log1p(-x)
+    if x < (a + 1.0) / (a + b + 2.0):
+        return math.exp(lbt) * _betacf(a, b, x) / a
+    return 1.0 - math.exp(lbt) * _betacf(b, a, 1.0 - x) / b
+
+
+def t_cdf(t: float, nu: float) -> float:
+    """Pr(T <= t) for Student's t with ν degrees of freedom."""
+    if not nu > 0:
+        raise ModelError(f"degrees of freedom must be positive, got {nu!r}")
+    if math.isinf(nu):
+        return 0.5 * math.erfc(-t / math.sqrt(2.0))
+    tail = 0.5 * _betainc(nu / 2.0, 0.5, nu / (nu + t * t))
+    return 1.0 - tail if t > 0 else tail
+
+
+def t_quantile(p: float, nu: float) -> float:
+    """The t with Pr(T <= t) = p (0 < p < 1)."""
+    if not 0.0 < p < 1.0:
+        raise ModelError(f"a probability must lie strictly between 0 and 1, got {p!r}")
+    if p < 0.5:
+        return -t_quantile(1.0 - p, nu)
+    if p == 0.5:
+        return 0.0
+    lo, hi = 0.0, 1.0
+    while t_cdf(hi, nu) < p:
+        hi *= 2.0
+        if hi > 1e12:
+            break
+    for _ in range(200):
+        mid = 0.5 * (lo + hi)
+        if t_cdf(mid, nu) < p:
+            lo = mid
+        else:
+            hi = mid
+        if hi - lo <= 1e-15 * hi:
+            break
+    return 0.5 * (lo + hi)
+
+
+def coverage_factor(nu: float, p: float = P_K2) -> float:
+    """k_p = t_p(ν) of the two-sided interval of probability ``p`` (GUM G.3.4), ν truncated to
+    the next lower integer (GUM G.6.4); ν = inf gives the normal value (2.000 for p = 0.9545)."""
+    if math.isinf(nu):
+        from .conformity import norm_ppf
+
+        return norm_ppf(0.5 + p / 2.0)
+    n = math.floor(nu)
+    if n < 1:
+        raise ModelError(f"an effective degrees of freedom below 1 ({nu!r}) gives no coverage factor")
+    return t_quantile(0.5 + p / 2.0, n)
