@@ -24,7 +24,7 @@ from xlfuncs.errors import ModelError
 
 from .errors import InputError
 from .jobs import job
-from .taskfile import read_toml, task_kind_and_name
+from .taskfile import naming_lines, read_toml, task_kind_and_name
 from .workbook import cache as cached_values
 from .workbook.atomic import write_text
 from .workbook.book import describing
@@ -212,10 +212,11 @@ def load_task(task_path: Path):
     Every problem is an :class:`InputError` (exit status 2)."""
     task_path = Path(task_path)
     doc = read_toml(task_path)
-    kind, _ = task_kind_and_name(task_path, doc)
+    with naming_lines(task_path):
+        kind, _ = task_kind_and_name(task_path, doc)
     mod = job(kind)
     try:
-        with warnings.catch_warnings():
+        with warnings.catch_warnings(), naming_lines(task_path):
             warnings.simplefilter("ignore", RuntimeWarning)
             task = mod.load(task_path, doc)
     except ModelError as e:

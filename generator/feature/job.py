@@ -488,7 +488,7 @@ def write_book(task: Task, results: dict, path: Path) -> None:
 
 
 def write_plots(task: Task, results: dict, out_dir: Path) -> list[Path]:
-    from ..workbook.plots import pyplot
+    from ..workbook.plots import log_scale, pyplot
 
     plt = pyplot()
     files = []
@@ -516,7 +516,8 @@ def write_plots(task: Task, results: dict, out_dir: Path) -> list[Path]:
         fig, ax = plt.subplots(figsize=(7, 4.2), dpi=110)
         x = [r[pl["sweep"]] for r in pl["rows"]]
         for n in pl["parameter_names"]:
-            ax.semilogy(x, [r["s"][n] for r in pl["rows"]], "o-", ms=3, label=f"s({n})")
+            ax.plot(x, [r["s"][n] for r in pl["rows"]], "o-", ms=3, label=f"s({n})")
+        log_scale(ax, "y")
         ax.set_xlabel(pl["sweep"])
         ax.set_ylabel("s(a) = sqrt(diag V)")
         ax.set_title(f"{results['name']}: {pl['pattern']} (Forbes 2022)")

@@ -234,7 +234,8 @@ def write_VB(book: Book) -> Block:
     """V_B of Forbes 2025 eq. (13) in (µm/mm)² on the Inputs sheet (right of the parameters)."""
     ws = book.wb["Inputs"]
     r0, c0 = 1, 7
-    book.text(ws, r0, c0, "V_B, Forbes 2025 eq. (13), (µm/mm)^2 = (0.001 ppm)^2")
+    book.text(ws, r0, c0, "V_B, Forbes 2025 eq. (13), in (µm/mm)²: 1 µm/mm = 1000 ppm, so an entry "
+              "is (sigma_ppm x 0.001)²")
     names = ["sigma_S_ppm"] + ["sigma_Sa_ppm"] * 3 + ["sigma_Q_ppm"] * 3
     labels = ["b_aa", "b_xx", "b_yy", "b_zz", "b_xy", "b_xz", "b_yz"]
     for k, lab in enumerate(labels):
