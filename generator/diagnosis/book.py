@@ -24,7 +24,7 @@ from xlfuncs import effects as fx
 from xlfuncs.diagnose import Diagnosis, effect_estimates
 from xlfuncs.pointcloud import Parameters
 
-from ..workbook.book import Book, ChartSeries, Formula
+from ..workbook.book import FMT_SCI, Book, ChartSeries, Formula
 from ..workbook.xlref import Block, block, cell
 
 NATIVE_MAX_OBS = 160
@@ -602,12 +602,12 @@ def _gls(book: Book, diag: Diagnosis, obs: dict, native: bool) -> dict:
                             "(Forbes 2025 eqs. 28-29), computed by the core")
         for i in range(n):
             for j in range(n):
-                book.number(wc, 2 + i, 1 + j, prep.C[i, j], fmt="0.000E+00", computed=True)
+                book.number(wc, 2 + i, 1 + j, prep.C[i, j], fmt=FMT_SCI, computed=True)
         Cb = Block("Cov", 2, 1, n, n)
         wi = book.sheet("Cinv")
         book.text(wi, 1, 1, "C^-1 = MINVERSE(C)")
         Ci = Block("Cinv", 2, 1, n, n)
-        book.array(Ci, f"=MINVERSE({Cb.ref})", fmt="0.000E+00", note="inverse of the covariance C")
+        book.array(Ci, f"=MINVERSE({Cb.ref})", fmt=FMT_SCI, note="inverse of the covariance C")
         from openpyxl.utils import get_column_letter
 
         for w_ in (wc, wi):
@@ -788,11 +788,11 @@ def _fill_after(book: Book, diag: Diagnosis, obs: dict, gls: dict) -> None:
             stat("chi2_after", f"=SUMSQ({yw})", "no effect chosen")
         stat("dof_after", f"={count}-{p}", "minus every fitted parameter", fmt="0")
     stat("p_before", f"=CHIDIST({stats['chi2_before']},{stats['dof_before']})",
-         "chi-square tail probability", fmt="0.000E+00")
+         "chi-square tail probability", fmt=FMT_SCI)
     # the targeted gate (docs/recordings.md section 7): the smallest Bonferroni-adjusted p-value of the
     # candidates of the first step, from the core's search (Candidates sheet)
     book.text(wg, row, c0, "p_targeted")
-    book.number(wg, row, c0 + 1, math.exp(diag.logp_targeted) if diag.targeted_K else 1.0, fmt="0.000E+00",
+    book.number(wg, row, c0 + 1, math.exp(diag.logp_targeted) if diag.targeted_K else 1.0, fmt=FMT_SCI,
                 computed=True)
     stats["p_targeted"] = cell(row, c0 + 1, "GLS")
     row += 1
@@ -803,7 +803,7 @@ def _fill_after(book: Book, diag: Diagnosis, obs: dict, gls: dict) -> None:
     stats["mismatch"] = cell(row, c0 + 1, "GLS")
     row += 1
     stat("p_after", f"=CHIDIST({stats['chi2_after']},{stats['dof_after']})",
-         "chi-square tail probability of what remains after the refit", fmt="0.000E+00")
+         "chi-square tail probability of what remains after the refit", fmt=FMT_SCI)
     book.text(wg, row, c0, "explained")
     book.formula(wg, row, c0 + 1, f"=IF({stats['p_after']}>=alpha,\"yes\",\"no\")", fmt=None,
                  note="the remaining chi-square passes: p_after >= alpha (docs/recordings.md section 7)")

@@ -44,7 +44,7 @@ from xlfuncs import pointcloud as pc
 from .. import __version__
 from ..pointcloud.large_book import LIVE, addin_ranges, write_xlwings_conf
 from ..pointcloud.vx_sheets import explain_inputs, write_inputs, write_point_cloud_model, write_points
-from ..workbook.book import Book, Formula
+from ..workbook.book import FMT_SCI, Book, Formula
 from ..workbook.xlref import Block, block, cell
 from .task import KIND, Task
 
@@ -62,7 +62,7 @@ FEATURE_NATIVE_MAX_POINTS = 100
 FMT = "0.000000000"
 #: core-computed V_A blocks are written x 1e12 (see _write_V_A)
 VALUE_SCALE = 1e12
-SMALL = "0.000E+00"
+SMALL = FMT_SCI
 
 
 def write_feature_book(task: Task, results: dict, path, fit, method: str, *,
@@ -227,7 +227,7 @@ def _write_fit(book: Book, f, task: Task) -> dict:
         if isinstance(value, str):
             book.text(ws, r, 2, value)
         else:  # numbers as numbers: the rms of an exact fit is rounding noise, not text to compare
-            book.number(ws, r, 2, value, fmt="0" if isinstance(value, int) else "0.000E+00", computed=True)
+            book.number(ws, r, 2, value, fmt="0" if isinstance(value, int) else FMT_SCI, computed=True)
         r += 1
     ws.column_dimensions["A"].width = 28
     for c in "BCD":

@@ -43,7 +43,9 @@ NUMBER_FORMAT = "0.000000"
 FMT_MM = "0.0000"          # lengths and coordinates in mm (0.1 µm resolution)
 FMT_UM = "0.0000"          # uncertainties in µm (3-4 significant digits at 0.1-10 µm)
 FMT_SENS = "0.0000"        # sensitivities (dimensionless)
-FMT_SCI = "0.000E+00"      # quantities spanning decades (matrix entries, p-values)
+#: quantities spanning decades (matrix entries, p-values); an exact zero (and the -0 a product
+#: of zeros gives in LibreOffice) prints as 0, not as -0.000E+00
+FMT_SCI = "0.000E+00;-0.000E+00;0"
 
 PARA_WIDTH = 95
 RESULTS = "Results"
@@ -594,11 +596,13 @@ def _page_setup(ws: Worksheet, *, landscape: bool | None = None, title_rows: int
             f"{ws.title}: top-left {rows} x {cols} of the {n_rows} x {n_cols} matrix; "
             "the whole matrix is in the workbook, not in the printout")
         ws.oddHeader.center.size = 9
+        _room_for_caption(ws)
         ws.page_setup.orientation = "landscape"
         return
     if caption:
         ws.oddHeader.center.text = caption
         ws.oddHeader.center.size = 9
+        _room_for_caption(ws)
     width = _used_width(ws)
     if landscape is None:
         landscape = width > 100
@@ -619,3 +623,10 @@ def _page_setup(ws: Worksheet, *, landscape: bool | None = None, title_rows: int
     for r in row_breaks:
         if r > 1:
             ws.row_breaks.append(Break(id=r - 1))
+
+
+def _room_for_caption(ws: Worksheet) -> None:
+    """A page header (caption) of its own above the sheet's first row: with the default margins
+    LibreOffice printed the caption clipped, across the sheet's title."""
+    ws.page_margins.header = 0.3
+    ws.page_margins.top = 1.0
