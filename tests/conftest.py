@@ -34,6 +34,7 @@ NUMERIC_MODULES = {
     "test_diagnose_core", "test_diagnose_book", "test_diagnose_rates",
     "test_templates", "test_roundtrip", "test_lowrank", "test_diagnose_structured", "test_import",
     "test_diagnose_second", "test_exact_option", "test_diagnose_discrepancy", "test_kernels", "test_diagnose_new_candidates",
+    "test_readable",
 }
 
 

@@ -258,6 +258,26 @@ def _approach_formula(n: str) -> str:
 
 # -- records -------------------------------------------------------------------------------------
 
+#: columns of the recordings (docs/recordings.md names them without a unit) that are in mm: their
+#: headers in the workbook carry it (x1_mm ...)
+LENGTH_MM_COLUMNS = frozenset({"x1", "y1", "z1", "x2", "y2", "z2", "p1x", "p1y", "p1z", "p2x", "p2y", "p2z"})
+POINT_MM_COLUMNS = frozenset({"x_nom", "y_nom", "z_nom", "x", "y", "z", "px", "py", "pz"})
+
+
+def shown(key: str, mm_columns) -> str:
+    """The header a person reads for column ``key``: ``x1_mm`` for a coordinate of the
+    recordings; an effect's design column ``name:label`` with its unit, µm of the record per unit
+    of the effect (``squareness_xy:squareness_xy (µm per µrad)``); other keys carry their unit
+    already (``residual_um``) or have none (``z``, ``n1x``)."""
+    if key in mm_columns:
+        return f"{key}_mm"
+    if ":" in key:
+        name = key.split(":", 1)[0]
+        unit = "µm" if name == "outlier" else _display_unit(fx.BY_NAME[name].unit)
+        return f"{key} (µm per {unit})"
+    return key
+
+
 def _input_column(book: Book, ws, r0: int, c: int, values) -> None:
     """A column of numeric input cells (styled, unlocked, validated by :meth:`Book.number`)."""
     for k, v in enumerate(values):
@@ -291,7 +311,7 @@ def _length_records(book: Book, diag: Diagnosis, inputs: dict):
              "ux1_mm": "ram position x - p (Forbes 2025 section 5.3, multiple probes)",
              "fitted_um": "sum of the chosen effects: row of X times b (GLS sheet)",
              "residual_after_um": "r - fitted", "z_after": "(r - fitted)/u"}
-    book.header(ws, 1, 1, header, [notes.get(h) for h in header])
+    book.header(ws, 1, 1, [shown(h, LENGTH_MM_COLUMNS) for h in header], [notes.get(h) for h in header])
     P1, P2 = D.P1, D.P2
     pid = D.probe_ids
     data = {"x1": rec.X1_mm[:, 0], "y1": rec.X1_mm[:, 1], "z1": rec.X1_mm[:, 2],
@@ -443,7 +463,7 @@ def _point_records(book: Book, diag: Diagnosis, inputs: dict):
     ci = {k: i + 1 for i, k in enumerate(header)}
     notes = {"yx_mm": "nominal point in machine coordinates y = R0 x_nom + t0 (Inputs)",
              "ux_mm": "ram position y - p"}
-    book.header(ws, 1, 1, header, [notes.get(h) for h in header])
+    book.header(ws, 1, 1, [shown(h, POINT_MM_COLUMNS) for h in header], [notes.get(h) for h in header])
     data = {"x_nom": rec.X_nom_mm[:, 0], "y_nom": rec.X_nom_mm[:, 1], "z_nom": rec.X_nom_mm[:, 2],
             "x": rec.X_mm[:, 0], "y": rec.X_mm[:, 1], "z": rec.X_mm[:, 2],
             "px": D.P[:, 0], "py": D.P[:, 1], "pz": D.P[:, 2]}
@@ -491,7 +511,7 @@ def _point_records(book: Book, diag: Diagnosis, inputs: dict):
     header = ["point", "axis", "residual_um", "u_um", "z"] + al + chosen_cols + \
              ["fitted_um", "residual_after_um", "z_after", "baseline_um", "residual_before_um"]
     cc = {k: i + 1 for i, k in enumerate(header)}
-    book.header(wc, 1, 1, header, [
+    book.header(wc, 1, 1, [shown(h, ()) for h in header], [
         None, None, "r = (x - y) * 1000 (y: nominal in machine coordinates)",
         "standard uncertainty of the residual after the baseline alignment: sqrt(C_qq - a_q Ma^-1 a_q')",
         "(r - baseline)/u", *["alignment (nuisance): translation µm, small rotation µrad about the centroid"] * len(al),
@@ -992,7 +1012,7 @@ def _chart(book: Book, diag: Diagnosis, obs: dict) -> None:
     # draws the first series on top, shows it over "before" (see Book.scatter)
     anchor_row = r1 + 3
     book.scatter(ws, f"A{anchor_row}", "Standardized residuals z before and after the refit",
-                 x_title, "z", series[::-1], width=24, height=13)
+                 x_title, "z", series[::-1], width=24, height=13, page=book)
     book.print_setup(ws, row_breaks=[anchor_row - 1])
 
 

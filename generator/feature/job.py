@@ -35,7 +35,7 @@ from .. import __version__
 from ..errors import InputError
 from ..taskfile import (check_keys, number, read_parameters, read_point_cloud, read_probes, text_list,
                        string, table, task_kind_and_name, vector3)
-from .task import KIND, Planning, Task
+from .task import KIND, Planning, Task, fit_state
 
 EXAMPLES = [
     "feature_cylinder_bore.toml",
@@ -416,6 +416,7 @@ def _cov(V):
 def compute(task: Task) -> dict:
     f, unc = fitted(task)
     names = list(f.names)
+    step_norm = float(np.linalg.norm(f.gauss_newton_step()))
     feature = {
         "type": task.element,
         "parameters": {n: float(v) for n, v in zip(names, f.values)},
@@ -440,7 +441,8 @@ def compute(task: Task) -> dict:
                     "standard position, rot_x/rot_y small rotations about the frame axes",
         },
         "fit": {"m": f.m, "iterations": f.iterations, "rms_residual_mm": f.rms_mm,
-                "source": task.source},
+                "source": task.source, "gauss_newton_step_norm": step_norm,
+                "state": fit_state(step_norm)},
     }
     if unc.approximation is not None:
         feature["approximation"] = unc.approximation.as_dict()
