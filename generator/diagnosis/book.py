@@ -24,7 +24,7 @@ from xlfuncs import effects as fx
 from xlfuncs.diagnose import Diagnosis, effect_estimates
 from xlfuncs.pointcloud import Parameters
 
-from ..workbook.book import FMT_SCI, Book, ChartSeries, Formula
+from ..workbook.book import FMT_SCI, FMT_UM, Book, ChartSeries, Formula
 from ..workbook.xlref import Block, block, cell
 
 NATIVE_MAX_OBS = 160
@@ -696,11 +696,11 @@ def _gls(book: Book, diag: Diagnosis, obs: dict, native: bool) -> dict:
         label(row, c0 + 2, "u(b) = sqrt(M^-1_jj)")
         label(row, c0 + 3, "unit")
         b = Block("GLS", row + 1, c0 + 1, p, 1)
-        book.array(b, f"=MMULT({Minv.ref},{g.ref})", fmt="0.000000E+00",
+        book.array(b, f"=MMULT({Minv.ref},{g.ref})", fmt=FMT_UM,
                    note="GLS estimates: alignment (nuisance) and the chosen effects")
         for j, (e, l) in enumerate(diag.sel_labels):
             book.text(ws, row + 1 + j, c0, l if e == "alignment" else (e if l == e else f"{e} {l}"))
-            book.formula(ws, row + 1 + j, c0 + 2, f"=SQRT({Minv.cell(j, j)})", fmt="0.000000E+00")
+            book.formula(ws, row + 1 + j, c0 + 2, f"=SQRT({Minv.cell(j, j)})", fmt=FMT_UM)
             unit = (("µm" if l.startswith("t") else "µrad") if e == "alignment" else "µm" if e == "outlier"
                     else "mm" if l == "period_mm" else _display_unit(fx.BY_NAME[e].unit))
             book.text(ws, row + 1 + j, c0 + 3, unit)

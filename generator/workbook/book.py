@@ -41,6 +41,7 @@ BOX = Border(left=THIN, right=THIN, top=THIN, bottom=THIN)
 NUMBER_FORMAT = "0.000000"
 #: display formats by meaning (the cells keep full precision; only the display changes)
 FMT_MM = "0.0000"          # lengths and coordinates in mm (0.1 µm resolution)
+FMT_COORD = "0.0#####"     # measured coordinates in mm: as entered, to 1 nm (General showed 1E-16)
 FMT_UM = "0.0000"          # uncertainties in µm (3-4 significant digits at 0.1-10 µm)
 FMT_SENS = "0.0000"        # sensitivities (dimensionless)
 #: quantities spanning decades (matrix entries, p-values); an exact zero (and the -0 a product
