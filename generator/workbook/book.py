@@ -678,8 +678,20 @@ CM_PER_CHAR = 0.25
 
 
 def _width_cm(ws: Worksheet) -> float:
-    """The width (cm) of the columns of ``ws`` that print across one page."""
-    return CM_PER_CHAR * _used_width(ws) / max(1, ws.page_setup.fitToWidth or 1)
+    """The width (cm) of what ``ws`` prints across one page: its columns, or a text that runs on
+    past the last column (the MPE sheet's notes), whichever reaches further."""
+    from openpyxl.utils import get_column_letter
+
+    chars = _used_width(ws)
+    left = 0.0
+    for column in range(1, ws.max_column + 1):
+        letter = get_column_letter(column)
+        dim = ws.column_dimensions[letter] if letter in ws.column_dimensions else None
+        longest = max((len(c.value) for (c,) in ws.iter_rows(min_col=column, max_col=column)
+                       if isinstance(c.value, str) and c.data_type == "s"), default=0)
+        chars = max(chars, left + longest)
+        left += dim.width if dim is not None and dim.width else 8.43
+    return CM_PER_CHAR * chars / max(1, ws.page_setup.fitToWidth or 1)
 
 
 def _size_to_page(ws: Worksheet, chart) -> None:
