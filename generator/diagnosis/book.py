@@ -989,10 +989,16 @@ def _results(book: Book, diag: Diagnosis, gls: dict, inputs: dict) -> list[dict]
         rows.append([e if l == e else f"{e} {l}", Formula(f"={b}"), Formula(f"={u}"),
                      "µm" if e == "outlier" else _display_unit(fx.BY_NAME[e].unit)])
         cached.append({"value": float(diag.beta[j]), "u": u_value})
-    book.results(["quantity", "value", "u", "unit"], rows, [
+    ws = book.results(["quantity", "value", "u", "unit"], rows, [
         "chi2_before ... rms_after_um as in diagnosis.json; then one row per estimated effect parameter",
         "in the row's unit", "standard uncertainty, in the row's unit",
         "unit of value and u (diagnosis.json spells µm as um, µrad as urad: docs/recordings.md section 5)"])
+    for r, row in enumerate(rows, start=2):
+        # as a person reads them: p-values span decades (p_targeted 1e-10 showed as 0.000000)
+        q = str(row[0])
+        ws.cell(row=r, column=2).number_format = (FMT_SCI if q.startswith("p_") else "0" if q.startswith("dof")
+                                                  else "0.00" if q.startswith("chi2") else FMT_UM)
+        ws.cell(row=r, column=3).number_format = FMT_UM
     return cached
 
 

@@ -39,6 +39,8 @@ formulas.  Such workbooks also carry, as the large point-cloud workbook does
 
 from __future__ import annotations
 
+from openpyxl.styles import Alignment
+
 from xlfuncs import pointcloud as pc
 
 from .. import __version__
@@ -140,6 +142,10 @@ def _write_results(book: Book, f, rows: list[tuple[str, int]]) -> None:
                "is not a formula: read the workbook back (cmmwb read) and build it again."],
         formats=[None, "0.000000", FMT_SCI, None, "0.0000", "0.0000", None])
     last = 1 + len(rows)
+    for r in range(2, last + 1):   # unit and '—' centred: a right-aligned 0 ran into the unit '1'
+        for c in (4, 5, 6):
+            if ws.cell(row=r, column=c).data_type == "s":
+                ws.cell(row=r, column=c).alignment = Alignment(horizontal="center")
     book.flag_unless(ws, f"G2:G{last}", FIT_CURRENT)
     for col, width in (("B", 16), ("C", 12), ("E", 10), ("F", 10), ("G", 12)):
         ws.column_dimensions[col].width = width
