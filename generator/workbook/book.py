@@ -683,15 +683,22 @@ def _width_cm(ws: Worksheet) -> float:
     from openpyxl.utils import get_column_letter
 
     chars = _used_width(ws)
+    longest: dict[int, int] = {}
+    # notes sit near the top; a large book's Budget has 10^5 rows, which are not read
+    for row in ws.iter_rows(min_row=1, max_row=min(ws.max_row, OVERFLOW_ROWS)):
+        for c in row:
+            if isinstance(c.value, str) and c.data_type == "s":
+                longest[c.column] = max(longest.get(c.column, 0), len(c.value))
     left = 0.0
     for column in range(1, ws.max_column + 1):
         letter = get_column_letter(column)
         dim = ws.column_dimensions[letter] if letter in ws.column_dimensions else None
-        longest = max((len(c.value) for (c,) in ws.iter_rows(min_col=column, max_col=column)
-                       if isinstance(c.value, str) and c.data_type == "s"), default=0)
-        chars = max(chars, left + longest)
+        chars = max(chars, left + longest.get(column, 0))
         left += dim.width if dim is not None and dim.width else 8.43
     return CM_PER_CHAR * chars / max(1, ws.page_setup.fitToWidth or 1)
+
+
+OVERFLOW_ROWS = 200   # rows searched for a text running past the last column
 
 
 def _size_to_page(ws: Worksheet, chart) -> None:
