@@ -23,7 +23,7 @@ from generator.feature.task import FIT_CURRENT, FIT_STALE
 from generator.taskfile import key_line
 from generator.workbook import plots
 from generator.workbook.book import CM_PER_CHAR, FMT_SCI
-from generator.workbook.recalc import recalculate, results_rows, soffice
+from generator.workbook.recalc import recalculate, results_rows
 
 CMMWB = [sys.executable, "-m", "generator"]
 
@@ -226,7 +226,7 @@ def test_without_an_excess_the_summary_gives_the_delta_chi2_of_the_targeted_test
     assert d.gate == "targeted" and d.chosen == ["squareness_xy"]
     assert c.delta_chi2 > d.chi2_before - d.dof_before
     assert "of the excess" not in d.summary
-    assert f"test aimed at the candidates finds a squareness error" in d.summary
+    assert "test aimed at the candidates finds a squareness error" in d.summary
     assert f"delta chi2 = {c.delta_chi2:.1f} on 1 dof" in d.summary
 
 

@@ -18,8 +18,8 @@ import subprocess
 import sys
 import tempfile
 from contextlib import contextmanager
-from types import SimpleNamespace
 from pathlib import Path
+from types import SimpleNamespace
 from typing import Any
 
 import openpyxl
