@@ -27,7 +27,7 @@ from . import decision as decisions
 from . import report
 from .errors import InputError, os_error_reason
 from .jobs import job
-from .taskfile import collecting_notes, read_toml, task_kind_and_name
+from .taskfile import collecting_notes, naming_lines, read_toml, task_kind_and_name
 from .workbook import cache as cached_values
 from .workbook.atomic import write_text
 from .workbook.book import adding_sheets, describing
@@ -256,10 +256,11 @@ def load_task(task_path: Path):
     Every problem is an :class:`InputError` (exit status 2)."""
     task_path = Path(task_path)
     doc = read_toml(task_path)
-    kind, _ = task_kind_and_name(task_path, doc)
+    with naming_lines(task_path):
+        kind, _ = task_kind_and_name(task_path, doc)
     mod = job(kind)
     try:
-        with warnings.catch_warnings():
+        with warnings.catch_warnings(), naming_lines(task_path):
             warnings.simplefilter("ignore", RuntimeWarning)
             task = mod.load(task_path, doc)
     except ModelError as e:

@@ -150,8 +150,8 @@ def cmd_recalc(args) -> int:
         keys = list(rows[0])
         print("\t".join(keys))
         for r in rows:
-            print("\t".join(f"{v:.6g}" if isinstance(v, float) else "" if v is None else str(v)
-                            for v in r.values()))
+            print("\t".join(f"{v + 0.0:.6g}" if isinstance(v, float) else "" if v is None else str(v)
+                            for v in r.values()))   # + 0.0: a -0 prints as 0
     if errors:
         print(f"cmmwb: {len(errors)} Results cells evaluate to errors, e.g. {errors[0][0]} = {errors[0][1]}",
               file=sys.stderr)

@@ -80,12 +80,13 @@ def read_toml(path: Path) -> dict:
                          file=path, where=_too_deep(text)) from None
     except ValueError as e:   # an integer of more than 4300 digits (Python's own limit)
         raise InputError(f"malformed TOML: an integer too large ({str(e).split(':')[0]})", file=path) from None
-    _check_structure(path, doc, "", 0)
+    with naming_lines(path, text):
+        _check_structure(path, doc, "", 0)
     return doc
 
 
 _TABLE_HEADER = re.compile(r"^\s*\[\[?\s*([^\]]*?)\s*\]\]?\s*(#.*)?$")
-_KEY = re.compile(r"^\s*([^=\[{#]+?)\s*=")
+_DEEP_KEY = re.compile(r"^\s*([^=\[{#]+?)\s*=")
 
 
 def _too_deep(text: str) -> str | None:
@@ -98,7 +99,7 @@ def _too_deep(text: str) -> str | None:
             if m:
                 table = m.group(1).strip()
                 continue
-            m = _KEY.match(line)
+            m = _DEEP_KEY.match(line)
             if m:
                 key = f"{table}.{m.group(1).strip()}" if table else m.group(1).strip()
         k = 0
@@ -125,6 +126,86 @@ def _too_deep(text: str) -> str | None:
         if quote == '"':
             quote = None
     return None
+
+
+# -- the line of a key ------------------------------------------------------------------------------
+
+#: the place an InputError names: ``[table] key``, ``[[array]] #n key 'k'``, ``[[[array]] #n] key``,
+#: ``[points] rows #3 key 'x'``, or the dotted ``table.key[2]`` of the structure check
+_WHERE = re.compile(r"^\[+\s*(?P<table>[^\]\s#]+)\s*\]+\s*(?:#(?P<index>\d+)\]?)?\s*(?:key\s+)?"
+                    r"['\"]?(?P<key>[A-Za-z0-9_\-]+)?")
+_HEADER = re.compile(r"^\s*(?P<open>\[\[?)\s*(?P<name>[A-Za-z0-9_\-]+|\"[^\"]*\")\s*\]\]?")
+_KEY = re.compile(r"^\s*(?P<key>[A-Za-z0-9_\-]+|\"[^\"]*\"|'[^']*')\s*[=.]")
+
+
+def key_line(text: str, where: str) -> int | None:
+    """The line (1-based) of the TOML source ``text`` that holds the key named by ``where`` (as
+    the readers name places: ``[parameters] sigma_R_um``, ``[[probes]] #2 offset_mm``,
+    ``[[characteristics]] #3 key 'model'``, ``parameters.sigma_R_um``); the line of its table's
+    header when the key itself is not written (a missing key), None when neither is found.
+
+    tomllib keeps no positions, so the source is scanned: table headers (``[t]``, ``[[t]]``
+    counted per name) and ``key =`` at the start of a line; a table written inline at the top
+    level (``t = {...}``) or as dotted keys (``t.k = ...``) is found by its first line."""
+    m = _WHERE.match(where)
+    if m:
+        table, index, key = m["table"], m["index"], m["key"]
+    else:
+        parts = re.split(r"[.\[]", where)
+        if len(parts) < 1 or not parts[0]:
+            return None
+        table, index, key = parts[0], None, (parts[1].rstrip("]") if len(parts) > 1 else None)
+        if key is not None and key.isdigit():   # table[2].k: the third table of an array
+            index, key = str(int(key) + 1), (parts[2] if len(parts) > 2 else None)
+    index = int(index) if index else None
+    current, count, header_line = None, {}, None
+    for n, line in enumerate(text.splitlines(), start=1):
+        h = _HEADER.match(line)
+        if h:
+            name = h["name"].strip('"')
+            count[name] = count.get(name, 0) + 1
+            current = (name, count[name] if h["open"] == "[[" else None)
+            if name == table and (index is None or current[1] == index):
+                header_line = n
+            continue
+        k = _KEY.match(line)
+        if k is None:
+            continue
+        found = k["key"].strip("\"'")
+        if current is None and found == table:
+            if key is None or header_line is None:
+                header_line = header_line or n   # t = {...} or t.k = ... at the top level
+            if key is not None and re.match(rf"^\s*{re.escape(k['key'])}\s*\.\s*{re.escape(key)}\s*=", line):
+                return n
+        elif current is not None and current[0] == table and (index is None or current[1] == index) \
+                and key is not None and found == key:
+            return n
+    return header_line
+
+
+@contextmanager
+def naming_lines(path: Path, text: str | None = None):
+    """Inside this block, an :class:`InputError` about the task file ``path`` that names a key
+    also names its line (``[parameters] sigma_R_um (line 14)``), as the README promises."""
+    try:
+        yield
+    except InputError as e:
+        add_line(e, path, text)
+        raise
+
+
+def add_line(err: InputError, path: Path, text: str | None = None) -> None:
+    """Append ``(line N)`` to ``err.where`` when it names a key of the TOML file ``path``."""
+    if err.file != str(path) or not err.where or re.search(r"\bline \d+", err.where):
+        return
+    if text is None:
+        try:
+            text = read_text(Path(path), "task")
+        except (InputError, OSError):
+            return
+    n = key_line(text, err.where)
+    if n is not None:
+        err.where = f"{err.where} (line {n})"
 
 
 def _check_structure(path: Path, value, where: str, depth: int) -> None:

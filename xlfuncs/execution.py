@@ -62,12 +62,15 @@ class ProgressBar:
     """``progress(done, total)`` callback drawing ``label [#####     ]  48%  3.1 s`` on a stream.
 
     Silent for the first ``delay_s`` seconds, so quick runs print nothing; ends the line when
-    ``done == total``.
+    ``done == total``.  Without a ``stream`` it draws on stderr only when stderr is a terminal: a
+    bar of carriage returns is noise in a log file or a pipe (``cmmwb build ... 2>&1 | tee``).
     """
 
     def __init__(self, label: str = "", stream=None, width: int = 30, delay_s: float = 1.0):
         self.label = label
-        self.stream = stream if stream is not None else sys.stderr
+        if stream is None:
+            stream = sys.stderr if _is_terminal(sys.stderr) else None
+        self.stream = stream
         self.width = width
         self.delay_s = delay_s
         self.t0 = time.perf_counter()
@@ -79,7 +82,7 @@ class ProgressBar:
         now = time.perf_counter()
         elapsed = now - self.t0
         finished = done >= total * (1 - 1e-12)
-        if self.closed or (elapsed < self.delay_s and not self.shown):
+        if self.stream is None or self.closed or (elapsed < self.delay_s and not self.shown):
             return
         if not finished and now - self.last < 0.2:
             return
@@ -93,3 +96,10 @@ class ProgressBar:
             self.stream.write("\n")
             self.closed = True
         self.stream.flush()
+
+
+def _is_terminal(stream) -> bool:
+    try:
+        return bool(stream is not None and stream.isatty())
+    except (AttributeError, ValueError):   # no isatty, or a closed stream
+        return False

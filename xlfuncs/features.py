@@ -243,6 +243,12 @@ class FeatureFit:
         """G_A|D = -(J^T W J)^{-1} J^T W, n x (k m) (eqs. (8), (12))."""
         return -np.linalg.solve(self.H, self.J.T * self.w2[None, :])
 
+    def gauss_newton_step(self) -> np.ndarray:
+        """delta = -(J^T W J)^{-1} J^T W d from the fitted values, in the paper parameters
+        (Forbes 2022 section 3: J^T W d = 0 at the solution, so delta = 0 up to rounding; the
+        workbooks compute the same step on 'H' to show when edited points need a refit)."""
+        return -np.linalg.solve(self.H, self.J.T @ (self.w2 * self.residuals_mm))
+
     def values_dict(self) -> dict[str, float]:
         return {n: float(v) for n, v in zip(self.names, self.values)}
 

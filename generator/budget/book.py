@@ -19,9 +19,11 @@ import json
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from openpyxl.styles import Alignment
+
 from xlfuncs import budget as bd
 
-from ..workbook.book import HEADER_FONT, Book, Formula
+from ..workbook.book import FMT_SCI, HEADER_FONT, Book, Formula
 from ..workbook.xlref import block, cell
 from .task import MODEL_TEXT, distance_name
 
@@ -31,7 +33,7 @@ C_QTY, C_VX, C_VY, C_VZ, C_MEAN = 7, 8, 9, 10, 11
 
 FMT_X = "0.00##"          # mm, as entered
 FMT_S = "0.0000"          # sensitivities, 4 decimals
-FMT_Q = "0.000E+00"       # intermediate quantities (cross products span decades)
+FMT_Q = FMT_SCI           # intermediate quantities (cross products span decades)
 FMT_U = "0.0000"          # µm
 
 BUDGET_HEADER = ["input", "x_i_mm", "dl_dx_i_mm/mm", "u_i_um", "contribution_um"]
@@ -121,7 +123,7 @@ class _BlockWriter:
         self.book.text(self.ws, r, C_QTY, label)
         for k, f in enumerate(comps):
             self.book.formula(self.ws, r, C_VX + k, f"={f}", fmt=FMT_Q)
-        self.book.text(self.ws, r, C_MEAN, meaning)
+        _meaning(self.book, self.ws, r, meaning)
         self.qrow += 1
         return [cell(r, C_VX + k) for k in range(3)]
 
@@ -129,12 +131,19 @@ class _BlockWriter:
         r = self.qrow
         self.book.text(self.ws, r, C_QTY, label)
         self.book.formula(self.ws, r, C_VX, f"={formula}", fmt=FMT_Q)
-        self.book.text(self.ws, r, C_MEAN, meaning)
+        _meaning(self.book, self.ws, r, meaning)
         self.qrow += 1
         return cell(r, C_VX)
 
     def norm(self, v: list[str]) -> str:
         return f"SQRT(SUMSQ({v[0]}:{v[2]}))"
+
+
+def _meaning(book: Book, ws, r: int, meaning: str) -> None:
+    """The 'meaning' of an intermediate: indented away from the numbers on its left, wrapped
+    within its column (it ran into the z column's numbers)."""
+    c = book.text(ws, r, C_MEAN, meaning)
+    c.alignment = Alignment(horizontal="left", wrap_text=True, vertical="top", indent=1)
 
 
 def _point_refs(vec: bd.Vec) -> list[str]:
@@ -348,7 +357,7 @@ def _distance_section(book: Book, ws, r0: int, heading: str, d: bd.DistanceBudge
 
 def _set_widths(ws) -> None:
     for col, width in (("A", 30), ("B", 14), ("C", 14), ("D", 14), ("E", 16), ("F", 9),
-                       ("G", 14), ("H", 13), ("I", 13), ("J", 13), ("K", 34)):
+                       ("G", 14), ("H", 13), ("I", 13), ("J", 13), ("K", 48)):
         ws.column_dimensions[col].width = width
 
 

@@ -24,7 +24,7 @@ from xlfuncs import effects as fx
 from xlfuncs.diagnose import Diagnosis, effect_estimates
 from xlfuncs.pointcloud import Parameters
 
-from ..workbook.book import Book, ChartSeries, Formula
+from ..workbook.book import FMT_SCI, FMT_UM, Book, ChartSeries, Formula
 from ..workbook.xlref import Block, block, cell
 
 NATIVE_MAX_OBS = 160
@@ -258,6 +258,26 @@ def _approach_formula(n: str) -> str:
 
 # -- records -------------------------------------------------------------------------------------
 
+#: columns of the recordings (docs/recordings.md names them without a unit) that are in mm: their
+#: headers in the workbook carry it (x1_mm ...)
+LENGTH_MM_COLUMNS = frozenset({"x1", "y1", "z1", "x2", "y2", "z2", "p1x", "p1y", "p1z", "p2x", "p2y", "p2z"})
+POINT_MM_COLUMNS = frozenset({"x_nom", "y_nom", "z_nom", "x", "y", "z", "px", "py", "pz"})
+
+
+def shown(key: str, mm_columns) -> str:
+    """The header a person reads for column ``key``: ``x1_mm`` for a coordinate of the
+    recordings; an effect's design column ``name:label`` with its unit, µm of the record per unit
+    of the effect (``squareness_xy:squareness_xy (µm per µrad)``); other keys carry their unit
+    already (``residual_um``) or have none (``z``, ``n1x``)."""
+    if key in mm_columns:
+        return f"{key}_mm"
+    if ":" in key:
+        name = key.split(":", 1)[0]
+        unit = "µm" if name == "outlier" else _display_unit(fx.BY_NAME[name].unit)
+        return f"{key} (µm per {unit})"
+    return key
+
+
 def _input_column(book: Book, ws, r0: int, c: int, values) -> None:
     """A column of numeric input cells (styled, unlocked, validated by :meth:`Book.number`)."""
     for k, v in enumerate(values):
@@ -291,7 +311,7 @@ def _length_records(book: Book, diag: Diagnosis, inputs: dict):
              "ux1_mm": "ram position x - p (Forbes 2025 section 5.3, multiple probes)",
              "fitted_um": "sum of the chosen effects: row of X times b (GLS sheet)",
              "residual_after_um": "r - fitted", "z_after": "(r - fitted)/u"}
-    book.header(ws, 1, 1, header, [notes.get(h) for h in header])
+    book.header(ws, 1, 1, [shown(h, LENGTH_MM_COLUMNS) for h in header], [notes.get(h) for h in header])
     P1, P2 = D.P1, D.P2
     pid = D.probe_ids
     data = {"x1": rec.X1_mm[:, 0], "y1": rec.X1_mm[:, 1], "z1": rec.X1_mm[:, 2],
@@ -443,7 +463,7 @@ def _point_records(book: Book, diag: Diagnosis, inputs: dict):
     ci = {k: i + 1 for i, k in enumerate(header)}
     notes = {"yx_mm": "nominal point in machine coordinates y = R0 x_nom + t0 (Inputs)",
              "ux_mm": "ram position y - p"}
-    book.header(ws, 1, 1, header, [notes.get(h) for h in header])
+    book.header(ws, 1, 1, [shown(h, POINT_MM_COLUMNS) for h in header], [notes.get(h) for h in header])
     data = {"x_nom": rec.X_nom_mm[:, 0], "y_nom": rec.X_nom_mm[:, 1], "z_nom": rec.X_nom_mm[:, 2],
             "x": rec.X_mm[:, 0], "y": rec.X_mm[:, 1], "z": rec.X_mm[:, 2],
             "px": D.P[:, 0], "py": D.P[:, 1], "pz": D.P[:, 2]}
@@ -491,7 +511,7 @@ def _point_records(book: Book, diag: Diagnosis, inputs: dict):
     header = ["point", "axis", "residual_um", "u_um", "z"] + al + chosen_cols + \
              ["fitted_um", "residual_after_um", "z_after", "baseline_um", "residual_before_um"]
     cc = {k: i + 1 for i, k in enumerate(header)}
-    book.header(wc, 1, 1, header, [
+    book.header(wc, 1, 1, [shown(h, ()) for h in header], [
         None, None, "r = (x - y) * 1000 (y: nominal in machine coordinates)",
         "standard uncertainty of the residual after the baseline alignment: sqrt(C_qq - a_q Ma^-1 a_q')",
         "(r - baseline)/u", *["alignment (nuisance): translation µm, small rotation µrad about the centroid"] * len(al),
@@ -602,12 +622,12 @@ def _gls(book: Book, diag: Diagnosis, obs: dict, native: bool) -> dict:
                             "(Forbes 2025 eqs. 28-29), computed by the core")
         for i in range(n):
             for j in range(n):
-                book.number(wc, 2 + i, 1 + j, prep.C[i, j], fmt="0.000E+00", computed=True)
+                book.number(wc, 2 + i, 1 + j, prep.C[i, j], fmt=FMT_SCI, computed=True)
         Cb = Block("Cov", 2, 1, n, n)
         wi = book.sheet("Cinv")
         book.text(wi, 1, 1, "C^-1 = MINVERSE(C)")
         Ci = Block("Cinv", 2, 1, n, n)
-        book.array(Ci, f"=MINVERSE({Cb.ref})", fmt="0.000E+00", note="inverse of the covariance C")
+        book.array(Ci, f"=MINVERSE({Cb.ref})", fmt=FMT_SCI, note="inverse of the covariance C")
         from openpyxl.utils import get_column_letter
 
         for w_ in (wc, wi):
@@ -676,11 +696,11 @@ def _gls(book: Book, diag: Diagnosis, obs: dict, native: bool) -> dict:
         label(row, c0 + 2, "u(b) = sqrt(M^-1_jj)")
         label(row, c0 + 3, "unit")
         b = Block("GLS", row + 1, c0 + 1, p, 1)
-        book.array(b, f"=MMULT({Minv.ref},{g.ref})", fmt="0.000000E+00",
+        book.array(b, f"=MMULT({Minv.ref},{g.ref})", fmt=FMT_UM,
                    note="GLS estimates: alignment (nuisance) and the chosen effects")
         for j, (e, l) in enumerate(diag.sel_labels):
             book.text(ws, row + 1 + j, c0, l if e == "alignment" else (e if l == e else f"{e} {l}"))
-            book.formula(ws, row + 1 + j, c0 + 2, f"=SQRT({Minv.cell(j, j)})", fmt="0.000000E+00")
+            book.formula(ws, row + 1 + j, c0 + 2, f"=SQRT({Minv.cell(j, j)})", fmt=FMT_UM)
             unit = (("µm" if l.startswith("t") else "µrad") if e == "alignment" else "µm" if e == "outlier"
                     else "mm" if l == "period_mm" else _display_unit(fx.BY_NAME[e].unit))
             book.text(ws, row + 1 + j, c0 + 3, unit)
@@ -788,11 +808,11 @@ def _fill_after(book: Book, diag: Diagnosis, obs: dict, gls: dict) -> None:
             stat("chi2_after", f"=SUMSQ({yw})", "no effect chosen")
         stat("dof_after", f"={count}-{p}", "minus every fitted parameter", fmt="0")
     stat("p_before", f"=CHIDIST({stats['chi2_before']},{stats['dof_before']})",
-         "chi-square tail probability", fmt="0.000E+00")
+         "chi-square tail probability", fmt=FMT_SCI)
     # the targeted gate (docs/recordings.md section 7): the smallest Bonferroni-adjusted p-value of the
     # candidates of the first step, from the core's search (Candidates sheet)
     book.text(wg, row, c0, "p_targeted")
-    book.number(wg, row, c0 + 1, math.exp(diag.logp_targeted) if diag.targeted_K else 1.0, fmt="0.000E+00",
+    book.number(wg, row, c0 + 1, math.exp(diag.logp_targeted) if diag.targeted_K else 1.0, fmt=FMT_SCI,
                 computed=True)
     stats["p_targeted"] = cell(row, c0 + 1, "GLS")
     row += 1
@@ -803,7 +823,7 @@ def _fill_after(book: Book, diag: Diagnosis, obs: dict, gls: dict) -> None:
     stats["mismatch"] = cell(row, c0 + 1, "GLS")
     row += 1
     stat("p_after", f"=CHIDIST({stats['chi2_after']},{stats['dof_after']})",
-         "chi-square tail probability of what remains after the refit", fmt="0.000E+00")
+         "chi-square tail probability of what remains after the refit", fmt=FMT_SCI)
     book.text(wg, row, c0, "explained")
     book.formula(wg, row, c0 + 1, f"=IF({stats['p_after']}>=alpha,\"yes\",\"no\")", fmt=None,
                  note="the remaining chi-square passes: p_after >= alpha (docs/recordings.md section 7)")
@@ -969,10 +989,16 @@ def _results(book: Book, diag: Diagnosis, gls: dict, inputs: dict) -> list[dict]
         rows.append([e if l == e else f"{e} {l}", Formula(f"={b}"), Formula(f"={u}"),
                      "µm" if e == "outlier" else _display_unit(fx.BY_NAME[e].unit)])
         cached.append({"value": float(diag.beta[j]), "u": u_value})
-    book.results(["quantity", "value", "u", "unit"], rows, [
+    ws = book.results(["quantity", "value", "u", "unit"], rows, [
         "chi2_before ... rms_after_um as in diagnosis.json; then one row per estimated effect parameter",
         "in the row's unit", "standard uncertainty, in the row's unit",
         "unit of value and u (diagnosis.json spells µm as um, µrad as urad: docs/recordings.md section 5)"])
+    for r, row in enumerate(rows, start=2):
+        # as a person reads them: p-values span decades (p_targeted 1e-10 showed as 0.000000)
+        q = str(row[0])
+        ws.cell(row=r, column=2).number_format = (FMT_SCI if q.startswith("p_") else "0" if q.startswith("dof")
+                                                  else "0.00" if q.startswith("chi2") else FMT_UM)
+        ws.cell(row=r, column=3).number_format = FMT_UM
     return cached
 
 
@@ -992,7 +1018,7 @@ def _chart(book: Book, diag: Diagnosis, obs: dict) -> None:
     # draws the first series on top, shows it over "before" (see Book.scatter)
     anchor_row = r1 + 3
     book.scatter(ws, f"A{anchor_row}", "Standardized residuals z before and after the refit",
-                 x_title, "z", series[::-1], width=24, height=13)
+                 x_title, "z", series[::-1], width=24, height=13, page=book)
     book.print_setup(ws, row_breaks=[anchor_row - 1])
 
 

@@ -103,7 +103,7 @@ def register(sub) -> None:
 # -- the model ----------------------------------------------------------------------------------
 
 def load_model(task: str | None, sigma_um: float | None, *, default_mpe1: bool = False) -> tuple[dg.Model, str]:
-    from ..taskfile import read_parameters, read_probes, read_toml
+    from ..taskfile import naming_lines, read_parameters, read_probes, read_toml
 
     if task is not None and sigma_um is not None:
         raise InputError("give either --task or --sigma-um, not both")
@@ -117,8 +117,9 @@ def load_model(task: str | None, sigma_um: float | None, *, default_mpe1: bool =
         raise InputError("give the simulation: --task TASK.toml or --sigma-um S")
     path = Path(task)
     doc = read_toml(path)
-    params = read_parameters(path, doc)
-    probes = read_probes(path, doc)
+    with naming_lines(path):
+        params = read_parameters(path, doc)
+        probes = read_probes(path, doc)
     try:
         for p in probes:
             p.resolved(params)

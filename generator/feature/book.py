@@ -39,14 +39,17 @@ formulas.  Such workbooks also carry, as the large point-cloud workbook does
 
 from __future__ import annotations
 
+from openpyxl.styles import Alignment
+
 from xlfuncs import pointcloud as pc
 
 from .. import __version__
 from ..pointcloud.large_book import LIVE, addin_ranges, write_xlwings_conf
-from ..pointcloud.vx_sheets import explain_inputs, write_inputs, write_point_cloud_model, write_points
-from ..workbook.book import Book, Formula
+from ..pointcloud.vx_sheets import FACTOR_TITLES, explain_inputs, write_inputs, write_point_cloud_model, write_points
+from ..workbook.book import FMT_SCI, Book, Formula
+from ..workbook.cache import FEATURE_NOT_APPLICABLE
 from ..workbook.xlref import Block, block, cell
-from .task import KIND, Task
+from .task import FIT_CURRENT, FIT_STALE, KIND, STALE_STEP, Task
 
 #: native V_X formulas up to this many points (7 matrices of 3m x 3m plus J, G, V_A).  Measured
 #: with `python bench/bench_feature.py --workbooks 24 48 72 100` (cylinder, full model; formulas
@@ -62,7 +65,7 @@ FEATURE_NATIVE_MAX_POINTS = 100
 FMT = "0.000000000"
 #: core-computed V_A blocks are written x 1e12 (see _write_V_A)
 VALUE_SCALE = 1e12
-SMALL = "0.000E+00"
+SMALL = FMT_SCI
 
 
 def write_feature_book(task: Task, results: dict, path, fit, method: str, *,
@@ -95,17 +98,57 @@ def write_feature_book(task: Task, results: dict, path, fit, method: str, *,
         _write_planning(book, task, results)
     if not native:
         _write_live(book, task, f, va, probe_rows)
-    book.results(["parameter", "value", "u", "unit"],
-                 [[name, Formula(f"={cell(r, 2, 'Budget')}"),
-                   Formula(f"={cell(r, U_COLUMN, 'Budget')}/{u_display(name)[0]:g}"), _unit(name)]
-                  for name, r in rows],
-                 notes=[None, "fitted value, in the unit of column 'unit' (mm, rad, or 1 for a unit-vector "
-                        "component)", "standard uncertainty, in the unit of column 'unit'",
-                        "unit of value and u (the contract's columns parameter, value, u are in the "
-                        "parameter's unit: mm, rad or 1)"])
+    _write_results(book, f, rows)
     if not native:
         write_xlwings_conf(book)
     book.save(path)
+
+
+#: the Results columns: the contract's parameter, value, u (in the parameter's unit, docs/cli.md),
+#: then what a person reads: the unit, u in µm (lengths) or µrad (angles; for a unit-vector
+#: component u x 1e6, the tilt of the direction in µrad), and whether the fit is current
+RESULT_COLUMNS = ["parameter", "value", "u", "unit", "u_um", "u_urad", "fit_state"]
+NOT_APPLICABLE = FEATURE_NOT_APPLICABLE
+
+
+def result_row(name: str, budget_row: int, step: Block) -> list:
+    """One Results row of parameter ``name`` (its row on 'Budget'); ``step`` = the Gauss-Newton
+    step on 'H'."""
+    scale, shown = u_display(name)
+    u_shown = Formula(f"={cell(budget_row, U_COLUMN, 'Budget')}")
+    return [name, Formula(f"={cell(budget_row, 2, 'Budget')}"),
+            Formula(f"={cell(budget_row, U_COLUMN, 'Budget')}/{scale:g}"), _unit(name),
+            u_shown if shown == "µm" else NOT_APPLICABLE,
+            u_shown if shown != "µm" else NOT_APPLICABLE,
+            Formula(f'=IF(SQRT(SUMSQ({step.ref}))>{STALE_STEP:.9f},"{FIT_STALE}","{FIT_CURRENT}")')]
+
+
+def _write_results(book: Book, f, rows: list[tuple[str, int]]) -> None:
+    step = gn_step_block(f.n)
+    ws = book.results(
+        RESULT_COLUMNS, [result_row(name, r, step) for name, r in rows],
+        notes=[None, "fitted value, in the unit of column 'unit' (mm, rad, or 1 for a unit-vector "
+               "component)", "standard uncertainty, in the unit of column 'unit' (the contract's "
+               "column; u_um / u_urad show it in µm or µrad)",
+               "unit of value and u (the contract's columns parameter, value, u are in the "
+               "parameter's unit: mm, rad or 1)",
+               "u in µm, for a length (the same u as column u)",
+               "u in µrad, for an angle; for a unit-vector component u x 1e6 (to first order the "
+               "tilt of the direction in µrad)",
+               f"'{FIT_CURRENT}' while the fitted values on 'Fit' are the least-squares solution "
+               "of the points on 'Points'/'Local'; red when the Gauss-Newton step on 'H' is not "
+               f"zero (norm > {STALE_STEP:g} in mm and rad): the points or weights were edited, "
+               "the values on 'Fit' are no longer their fit, and the results are stale. The fit "
+               "is not a formula: read the workbook back (cmmwb read) and build it again."],
+        formats=[None, "0.000000", FMT_SCI, None, "0.0000", "0.0000", None])
+    last = 1 + len(rows)
+    for r in range(2, last + 1):   # unit and '—' centred: a right-aligned 0 ran into the unit '1'
+        for c in (4, 5, 6):
+            if ws.cell(row=r, column=c).data_type == "s":
+                ws.cell(row=r, column=c).alignment = Alignment(horizontal="center")
+    book.flag_unless(ws, f"G2:G{last}", FIT_CURRENT)
+    for col, width in (("B", 16), ("C", 12), ("E", 10), ("F", 10), ("G", 12)):
+        ws.column_dimensions[col].width = width
 
 
 def _label(f) -> str:
@@ -227,7 +270,7 @@ def _write_fit(book: Book, f, task: Task) -> dict:
         if isinstance(value, str):
             book.text(ws, r, 2, value)
         else:  # numbers as numbers: the rms of an exact fit is rounding noise, not text to compare
-            book.number(ws, r, 2, value, fmt="0" if isinstance(value, int) else "0.000E+00", computed=True)
+            book.number(ws, r, 2, value, fmt="0" if isinstance(value, int) else FMT_SCI, computed=True)
         r += 1
     ws.column_dimensions["A"].width = 28
     for c in "BCD":
@@ -548,7 +591,9 @@ def _budget_table(book: Book, ws, top: int, names, values, blocks: dict) -> list
     """One budget table from row ``top`` (header): parameter, value, unit, u_unit, u and u per
     factor, the uncertainties in µm / µrad (1e-6 for a unit-vector component) from the diagonal
     of the V_A blocks ``blocks`` (which are in the parameters' units squared)."""
-    cols = ["parameter", "value", "unit", "u_unit", "u", *[f"u_{fac}" for fac in pc.FACTORS]]
+    cols = ["parameter", with_units("value", [_unit(n) for n in names]), "unit", "u_unit",
+            *[with_units(u, [u_display(n)[1] for n in names]) for u in
+              ("u", *[f"u_{fac}" for fac in pc.FACTORS])]]
     notes = [None, "fitted value, in the unit of column 'unit'", None,
              "unit of u and u_R ... u_P in this row: µm for a length, µrad for an angle, 1e-6 for a "
              "unit-vector component",
@@ -562,14 +607,32 @@ def _budget_table(book: Book, ws, top: int, names, values, blocks: dict) -> list
         book.text(ws, r, 1, name)
         if isinstance(values[p], float):
             ws.cell(row=r, column=2).value = values[p]
+            ws.cell(row=r, column=2).number_format = FMT_VALUE
         else:
-            book.formula(ws, r, 2, f"={values[p]}", fmt=FMT)
+            book.formula(ws, r, 2, f"={values[p]}", fmt=FMT_VALUE)
         book.text(ws, r, 3, _unit(name))
         book.text(ws, r, 4, unit)
         for q, fac in enumerate(("total", *pc.FACTORS)):
             book.formula(ws, r, U_COLUMN + q, f"=SQRT(MAX(0,{blocks[fac].cell(p, p)}))*{scale:g}", fmt="0.0000")
         rows.append((name, r))
     return rows
+
+
+#: fitted values as a person reads them: 1 nm for lengths, 1e-6 rad / 1e-6 for angles and
+#: unit-vector components (the cells keep full precision)
+FMT_VALUE = "0.000000"
+#: how the units of one table's rows are written in its header: one unit as a suffix (u_um),
+#: several as "u (µm, 1e-6)", the row's unit being in column 'unit' / 'u_unit'
+_SUFFIX = {"mm": "mm", "µm": "um", "rad": "rad", "µrad": "urad"}
+
+
+def with_units(label: str, units) -> str:
+    """``label`` with the units of the rows of its column: ``u_um`` when all rows share one unit
+    that has a key suffix, otherwise ``u (µm, 1e-6)`` (a unit-vector component's unit is 1)."""
+    units = list(dict.fromkeys(units))
+    if len(units) == 1 and units[0] in _SUFFIX:
+        return f"{label}_{_SUFFIX[units[0]]}"
+    return f"{label} ({', '.join(units)})"
 
 
 def _write_budget(book: Book, f, va: dict, fitref: dict) -> list[tuple[str, int]]:
@@ -606,12 +669,20 @@ def _factor_chart(book: Book, ws, anchor: int, rows: list[tuple[str, int]]) -> N
         return
     first, last = U_COLUMN + 1, U_COLUMN + len(pc.FACTORS)
     book.print_setup(ws, row_breaks=[anchor - 1])   # the chart on its own printed page
-    book.bars(ws, f"A{anchor}", "u per influence factor of the length parameters (µm), "
+    # the chart's categories in words, in the row above it (the headers carry units)
+    book.text(ws, anchor, 1, "influence factor (chart axis)")
+    for q, fac in enumerate(pc.FACTORS):
+        book.text(ws, anchor, first + q, FACTOR_WORDS[fac])
+    book.bars(ws, f"A{anchor + 1}", "u per influence factor of the length parameters (µm), "
               "Forbes 2025 section 5.6", "u / µm",
-              Reference(ws, min_col=first, max_col=last, min_row=1),
+              Reference(ws, min_col=first, max_col=last, min_row=anchor),
               [(ws.cell(row=r, column=1).value, Reference(ws, min_col=first, max_col=last,
                                                           min_row=r, max_row=r))
-               for r in length_rows], horizontal=False, width=18, height=8)
+               for r in length_rows], horizontal=False, width=18, height=8, page=book)
+
+
+#: the influence factors of Forbes 2025 (Table 3) as the chart names them: "ET location errors"
+FACTOR_WORDS = {fac: f"{fac} {title.split(',')[0]}" for fac, title in FACTOR_TITLES.items()}
 
 
 def _unit(name: str) -> str:

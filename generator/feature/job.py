@@ -35,7 +35,7 @@ from .. import __version__
 from ..errors import InputError
 from ..taskfile import (COMMON_TABLES, check_keys, number, read_parameters, read_point_cloud, read_probes, text_list,
                        string, table, task_kind_and_name, vector3)
-from .task import KIND, Planning, Task
+from .task import KIND, Planning, Task, fit_state
 
 EXAMPLES = [
     "feature_cylinder_bore.toml",
@@ -416,6 +416,7 @@ def _cov(V):
 def compute(task: Task) -> dict:
     f, unc = fitted(task)
     names = list(f.names)
+    step_norm = float(np.linalg.norm(f.gauss_newton_step()))
     feature = {
         "type": task.element,
         "parameters": {n: float(v) for n, v in zip(names, f.values)},
@@ -440,7 +441,8 @@ def compute(task: Task) -> dict:
                     "standard position, rot_x/rot_y small rotations about the frame axes",
         },
         "fit": {"m": f.m, "iterations": f.iterations, "rms_residual_mm": f.rms_mm,
-                "source": task.source},
+                "source": task.source, "gauss_newton_step_norm": step_norm,
+                "state": fit_state(step_norm)},
     }
     if unc.approximation is not None:
         feature["approximation"] = unc.approximation.as_dict()
@@ -488,7 +490,7 @@ def write_book(task: Task, results: dict, path: Path) -> None:
 
 
 def write_plots(task: Task, results: dict, out_dir: Path) -> list[Path]:
-    from ..workbook.plots import pyplot
+    from ..workbook.plots import log_scale, pyplot
 
     plt = pyplot()
     files = []
@@ -516,7 +518,8 @@ def write_plots(task: Task, results: dict, out_dir: Path) -> list[Path]:
         fig, ax = plt.subplots(figsize=(7, 4.2), dpi=110)
         x = [r[pl["sweep"]] for r in pl["rows"]]
         for n in pl["parameter_names"]:
-            ax.semilogy(x, [r["s"][n] for r in pl["rows"]], "o-", ms=3, label=f"s({n})")
+            ax.plot(x, [r["s"][n] for r in pl["rows"]], "o-", ms=3, label=f"s({n})")
+        log_scale(ax, "y")
         ax.set_xlabel(pl["sweep"])
         ax.set_ylabel("s(a) = sqrt(diag V)")
         ax.set_title(f"{results['name']}: {pl['pattern']} (Forbes 2022)")

@@ -60,8 +60,13 @@ def budget_chart(book: Book, ws, task, first: int) -> None:
         # below the table, on its own printed page
         anchor_row = first + len(task.pairs) + 2
         book.scatter(ws, f"A{anchor_row}", "Expanded uncertainty U = K u(d) against d (Forbes 2025 Figures 6/7)",
-                     "d / mm", "U / µm", series, width=24, height=13, x_min=0, y_min=0)
+                     "d / mm", "U / µm", series, width=24, height=13, x_min=0, y_min=0, page=book)
         book.print_setup(ws, row_breaks=[anchor_row - 1])
+
+
+#: the legend of the MPE chart, in words, for columns MPE_um ... K_u_ER_um of the 'MPE' sheet
+MPE_LEGEND = ("MPE = A + d/B (µm)", "K u(d), eq. (33) (µm)", "K sigma_A: probing, repeatability, eq. (34)",
+              "K u_S: scale and squareness", "K u_ET: location errors", "K u_ER: rotation errors x P")
 
 
 def write_mpe(book: Book, task) -> None:
@@ -107,9 +112,10 @@ def write_mpe(book: Book, task) -> None:
 
     x = Reference(ws, min_col=1, min_row=first, max_row=first + n - 1)
     anchor_row = first + n + 1
-    book.scatter(ws, f"A{anchor_row}", "MPE and K u(d) with components (Forbes 2025 Figures 4/5)", "d / mm", "µm",
-                 [ChartSeries(None, x, Reference(ws, min_col=c, min_row=1, max_row=first + n - 1),
-                              markers=False, title_from_data=True,
-                              colour="000000" if c == 2 else None, bold=c in (2, 3)) for c in range(2, 8)],
-                 width=24, height=13, x_min=0, y_min=0)
+    book.scatter(ws, f"A{anchor_row}", "MPE and K u(d) with components (Forbes 2025 Figures 4/5)", "d / mm",
+                 "µm", [ChartSeries(MPE_LEGEND[c - 2], x,
+                                    Reference(ws, min_col=c, min_row=first, max_row=first + n - 1),
+                                    markers=False, colour="000000" if c == 2 else None, bold=c in (2, 3))
+                        for c in range(2, 8)],
+                 width=24, height=13, x_min=0, y_min=0, page=book)
     book.print_setup(ws, row_breaks=[anchor_row - 1])

@@ -36,7 +36,7 @@ from xlfuncs import pointcloud as pc
 
 from .. import __version__
 from ..errors import InputError
-from ..workbook.book import VALUE_FILL, Book
+from ..workbook.book import FMT_SCI, VALUE_FILL, Book
 from ..workbook.xlref import Block, block, cell
 from .book import KIND, RESULT_COLUMNS, budget_chart, extra_inputs, results_rows, write_mpe
 from .vx_sheets import NATIVE_MAX_POINTS, explain_inputs, write_inputs, write_points
@@ -49,7 +49,7 @@ MAX_BOOK_DISTANCES = 200_000
 MAX_BOOK_POINTS = 1_048_575
 LIVE = "Live_addin"
 GP = "GP_blocks"
-SMALL = "0.000E+00"
+SMALL = FMT_SCI
 
 BUDGET_COLUMNS = ["from", "to", "group", "d_mm", "u_um", "U_um", "u_R_um", "u_PQ_um", "u_S_um",
                   "u_ET_um", "u_ER_um", "u_P_um", "dx_mm", "dy_mm", "dz_mm", "nx", "ny", "nz",

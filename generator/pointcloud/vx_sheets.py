@@ -18,7 +18,7 @@ from dataclasses import dataclass
 
 from xlfuncs.pointcloud import FACTORS, Parameters, PointCloud
 
-from ..workbook.book import Book
+from ..workbook.book import FMT_COORD, Book
 from ..workbook.xlref import Block, cell
 
 # Workbook limit for native V_X formulas: 3m x 3m array formulas per factor.  Measured:
@@ -137,7 +137,8 @@ def write_points(book: Book, cloud: PointCloud, probe_rows: dict) -> tuple[Block
         k = int(cloud.probe_index[i])
         book.text(ws, r, 1, cloud.labels[i])
         for c in range(3):
-            book.number(ws, r, 2 + c, cloud.X_mm[i, c], fmt="General")   # mm, as entered
+            # mm, to 1 nm: General showed 11 digits and a sampled 0 as 6.12323399574E-16
+            book.number(ws, r, 2 + c, cloud.X_mm[i, c], fmt=FMT_COORD)
             book.number(ws, r, 5 + c, cloud.N[i, c], fmt="0.000000")
         book.text(ws, r, 8, cloud.probes[k].id)
         for c in range(3):
@@ -234,7 +235,8 @@ def write_VB(book: Book) -> Block:
     """V_B of Forbes 2025 eq. (13) in (µm/mm)² on the Inputs sheet (right of the parameters)."""
     ws = book.wb["Inputs"]
     r0, c0 = 1, 7
-    book.text(ws, r0, c0, "V_B, Forbes 2025 eq. (13), (µm/mm)^2 = (0.001 ppm)^2")
+    book.text(ws, r0, c0, "V_B, Forbes 2025 eq. (13), in (µm/mm)²: 1 µm/mm = 1000 ppm, so an entry "
+              "is (sigma_ppm x 0.001)²")
     names = ["sigma_S_ppm"] + ["sigma_Sa_ppm"] * 3 + ["sigma_Q_ppm"] * 3
     labels = ["b_aa", "b_xx", "b_yy", "b_zz", "b_xy", "b_xz", "b_yz"]
     for k, lab in enumerate(labels):

@@ -41,9 +41,12 @@ BOX = Border(left=THIN, right=THIN, top=THIN, bottom=THIN)
 NUMBER_FORMAT = "0.000000"
 #: display formats by meaning (the cells keep full precision; only the display changes)
 FMT_MM = "0.0000"          # lengths and coordinates in mm (0.1 µm resolution)
+FMT_COORD = "0.0#####"     # measured coordinates in mm: as entered, to 1 nm (General showed 1E-16)
 FMT_UM = "0.0000"          # uncertainties in µm (3-4 significant digits at 0.1-10 µm)
 FMT_SENS = "0.0000"        # sensitivities (dimensionless)
-FMT_SCI = "0.000E+00"      # quantities spanning decades (matrix entries, p-values)
+#: quantities spanning decades (matrix entries, p-values); an exact zero (and the -0 a product
+#: of zeros gives in LibreOffice) prints as 0, not as -0.000E+00
+FMT_SCI = "0.000E+00;-0.000E+00;0"
 
 PARA_WIDTH = 95
 RESULTS = "Results"
@@ -112,6 +115,8 @@ class Book:
         self._task_info: dict | None = None
         #: sheet title -> print settings given by the writer (see :meth:`print_setup`)
         self._print: dict[str, dict] = {}
+        #: charts sized to their printed page at save time (see :meth:`fill_page`)
+        self._page_charts: list[tuple[str, object]] = []
 
     # -- sheets ------------------------------------------------------------------------------
     def sheet(self, title: str, *, protect: bool = True) -> Worksheet:
@@ -291,12 +296,14 @@ class Book:
     @staticmethod
     def scatter(ws: Worksheet, anchor: str, title: str, x_title: str, y_title: str,
                 series: Sequence["ChartSeries"], *, width: float = 16, height: float = 9,
-                x_min: float | None = None, y_min: float | None = None) -> None:
+                x_min: float | None = None, y_min: float | None = None,
+                page: "Book | None" = None) -> None:
         """A native XY chart with explicit colours (LibreOffice draws unstyled markers white),
         visible axes at the lower and left edges of the plot (not crossing at zero), the legend
         below.  Every series stays visible where series coincide: marker series get distinct
         symbols and colours, hollow, growing in size (see the comment below); line series get
-        distinct dash patterns."""
+        distinct dash patterns.  ``page`` = the book: the chart stands alone on its printed page
+        and is sized to it when the book is saved (:meth:`fill_page`)."""
         from openpyxl.chart import ScatterChart, Series  # noqa: F811
 
         chart = ScatterChart()
@@ -324,10 +331,11 @@ class Book:
             if cs.markers:
                 s.marker.symbol = MARKERS[n_marker % len(MARKERS)]
                 # LibreOffice draws the FIRST series on top and fills every marker; Excel draws the
-                # last on top and honours hollow markers.  Growing sizes + hollow markers keep
-                # coinciding series visible in both: small filled ones on top of larger ones in
-                # LibreOffice, nested outlines in Excel.
-                s.marker.size = 4 + 2 * n_marker
+                # last on top and honours hollow markers.  Sizes growing by 3 points + hollow
+                # markers keep coinciding series visible in both: small filled ones on top of
+                # larger ones in LibreOffice (with a step of 2 points the step gauge's LL hid
+                # inside RR), nested outlines in Excel.
+                s.marker.size = min(5 + 3 * n_marker, 17)
                 s.marker.graphicalProperties.noFill = True
                 s.marker.graphicalProperties.line.solidFill = colour
                 s.marker.graphicalProperties.line.width = 15875  # 1.25 pt
@@ -343,11 +351,13 @@ class Book:
             chart.series.append(s)
         chart.width, chart.height = width, height
         ws.add_chart(chart, anchor)
+        if page is not None:
+            page.fill_page(ws, chart)
 
     @staticmethod
     def bars(ws: Worksheet, anchor: str, title: str, y_title: str, categories, values: Sequence,
              *, titles_from_data: bool = True, width: float = 16, height: float = 7.5,
-             horizontal: bool = True) -> None:
+             horizontal: bool = True, page: "Book | None" = None) -> None:
         """A native bar chart (one bar series per entry of ``values``: a column Reference whose
         first cell is the title, or (title, Reference)), categories from ``categories``, value
         axis at the edge, explicit colours."""
@@ -381,6 +391,15 @@ class Book:
             chart.legend = None
         chart.width, chart.height = width, height
         ws.add_chart(chart, anchor)
+        if page is not None:
+            page.fill_page(ws, chart)
+
+    def fill_page(self, ws: Worksheet, chart) -> None:
+        """Size ``chart`` (anchored in column A, alone on its printed page) to the printed page
+        of ``ws`` when the book is saved: as wide as the sheet's columns print across one page
+        (the sheet is scaled to the page width, so a fixed 24 cm chart on a 60 cm wide sheet
+        printed on a quarter of the page), as high as the page's proportions allow."""
+        self._page_charts.append((ws.title, chart))
 
     # -- printing and column widths --------------------------------------------------------------
     def print_setup(self, ws: Worksheet, *, landscape: bool | None = None, title_rows: int | None = -1,
@@ -411,21 +430,26 @@ class Book:
                     and ws.max_row * ws.max_column <= FIT_WIDTH_MAX_CELLS:
                 fit_widths(ws)
             _page_setup(ws, **{k: v for k, v in opts.items() if k != "fit_widths"})
+        for title, chart in self._page_charts:
+            _size_to_page(self.wb[title], chart)
 
     # -- the Results sheet ---------------------------------------------------------------------
     def results(self, columns: Sequence[str], rows: Iterable[Sequence[str | float]],
-                notes: Sequence[str | None] | None = None) -> Worksheet:
+                notes: Sequence[str | None] | None = None,
+                formats: Sequence[str | None] | None = None) -> Worksheet:
         """The contract's ``Results`` sheet: first row column names, one row per JSON entry.
 
         Entries that start with ``=`` are formulas (the computed columns); any other string is
-        written as text (labels such as point ids), numbers as numbers.
+        written as text (labels such as point ids), numbers as numbers.  ``formats``: the display
+        format of each column's formulas (None: :data:`NUMBER_FORMAT`).
         """
         ws = self.sheet(RESULTS)
         self.header(ws, 1, 1, columns, notes)
         for r, row in enumerate(rows, start=2):
             for c, value in enumerate(row, start=1):
                 if isinstance(value, Formula):
-                    self.formula(ws, r, c, value)
+                    fmt = formats[c - 1] if formats and formats[c - 1] else NUMBER_FORMAT
+                    self.formula(ws, r, c, value, fmt=fmt)
                 elif isinstance(value, str):
                     self.text(ws, r, c, value)
                 else:
@@ -434,6 +458,18 @@ class Book:
             ws.column_dimensions[ws.cell(row=1, column=k + 1).column_letter].width = 12
         ws.freeze_panes = "A2"
         return ws
+
+    @staticmethod
+    def flag_unless(ws: Worksheet, ref: str, ok: str) -> None:
+        """Cells of ``ref`` (e.g. ``G2:G8``) show in red, bold, whenever their value is not the
+        text ``ok``: a state a person must not overlook (conditional formatting, live in Excel
+        and LibreOffice)."""
+        from openpyxl.formatting.rule import CellIsRule
+
+        escaped = ok.replace('"', '""')
+        ws.conditional_formatting.add(ref, CellIsRule(
+            operator="notEqual", formula=[f'"{escaped}"'], font=Font(bold=True, color="9C0006"),
+            fill=PatternFill(start_color="FFC7CE", end_color="FFC7CE", fill_type="solid")))
 
     # -- the way back (`cmmwb read`) -------------------------------------------------------------
     def task_info(self, info: dict) -> None:
@@ -615,11 +651,13 @@ def _page_setup(ws: Worksheet, *, landscape: bool | None = None, title_rows: int
             f"{ws.title}: top-left {rows} x {cols} of the {n_rows} x {n_cols} matrix; "
             "the whole matrix is in the workbook, not in the printout")
         ws.oddHeader.center.size = 9
+        _room_for_caption(ws)
         ws.page_setup.orientation = "landscape"
         return
     if caption:
         ws.oddHeader.center.text = caption
         ws.oddHeader.center.size = 9
+        _room_for_caption(ws)
     last_column = None
     if area:                      # only the printed columns count (chart data may lie beyond)
         from openpyxl.utils import range_boundaries
@@ -645,3 +683,55 @@ def _page_setup(ws: Worksheet, *, landscape: bool | None = None, title_rows: int
     for r in row_breaks:
         if r > 1:
             ws.row_breaks.append(Break(id=r - 1))
+
+
+def _room_for_caption(ws: Worksheet) -> None:
+    """A page header (caption) of its own above the sheet's first row: with the default margins
+    LibreOffice printed the caption clipped, across the sheet's title."""
+    ws.page_margins.header = 0.3
+    ws.page_margins.top = 1.0
+
+
+#: A4 minus the margins of :func:`_page_setup` (cm): (width, height) landscape
+_PAGE_CM = (29.7 - 2 * 1.27, 21.0 - 2 * 1.52 - 1.5)
+
+
+#: printed cm per character of column width: Calibri 11 (Excel) gives 0.19, LibreOffice without
+#: Calibri or Carlito (its default font falls back to DejaVu Sans) 0.26 (measured on the demo
+#: books' PDFs); the larger one, so that the chart spans the page in both (where the columns are
+#: narrower than the chart, the page is scaled to the chart)
+CM_PER_CHAR = 0.25
+
+
+def _width_cm(ws: Worksheet) -> float:
+    """The width (cm) of what ``ws`` prints across one page: its columns, or a text that runs on
+    past the last column (the MPE sheet's notes), whichever reaches further."""
+    from openpyxl.utils import get_column_letter
+
+    chars = _used_width(ws)
+    longest: dict[int, int] = {}
+    # notes sit near the top; a large book's Budget has 10^5 rows, which are not read
+    for row in ws.iter_rows(min_row=1, max_row=min(ws.max_row, OVERFLOW_ROWS)):
+        for c in row:
+            if isinstance(c.value, str) and c.data_type == "s":
+                longest[c.column] = max(longest.get(c.column, 0), len(c.value))
+    left = 0.0
+    for column in range(1, ws.max_column + 1):
+        letter = get_column_letter(column)
+        dim = ws.column_dimensions[letter] if letter in ws.column_dimensions else None
+        chars = max(chars, left + longest.get(column, 0))
+        left += dim.width if dim is not None and dim.width else 8.43
+    return CM_PER_CHAR * chars / max(1, ws.page_setup.fitToWidth or 1)
+
+
+OVERFLOW_ROWS = 200   # rows searched for a text running past the last column
+
+
+def _size_to_page(ws: Worksheet, chart) -> None:
+    """The chart as wide as one printed page of ``ws`` and at most 80 % of its height (the sheet
+    prints scaled to the page width), never smaller than the writer made it."""
+    landscape = ws.page_setup.orientation == "landscape"
+    page_w, page_h = _PAGE_CM if landscape else _PAGE_CM[::-1]
+    width = max(chart.width, 0.97 * _width_cm(ws))
+    height = min(0.8 * page_h * width / page_w, 0.62 * width)
+    chart.width, chart.height = round(width, 2), round(max(chart.height, height), 2)

@@ -36,6 +36,8 @@ from .atomic import replacing
 
 MODES = ("results", "all", "none")
 FACTORS = ("R", "PQ", "S", "ET", "ER", "P")
+#: what the feature Results show where u_um or u_urad does not apply (generator.feature.book)
+FEATURE_NOT_APPLICABLE = "—"
 ERRORS = {"#NULL!", "#DIV/0!", "#VALUE!", "#REF!", "#NAME?", "#NUM!", "#N/A", "#GETTING_DATA"}
 
 _SHEET = re.compile(rb'<sheet\b[^>]*?\bname="([^"]*)"[^>]*?\br:id="([^"]*)"')
@@ -65,14 +67,25 @@ def results_table(kind: str, results: dict) -> list[dict[str, Any]]:
                  "U_um": c["U_um"]} for c in results["characteristics"]]
     if kind == "feature":
         fe = results["feature"]
-        return [{"parameter": n, "value": fe["parameters"][n], "u": fe["u"][n]} for n in fe["parameter_names"]]
+        state = fe.get("fit", {}).get("state")
+        rows = []
+        for n in fe["parameter_names"]:
+            row = {"parameter": n, "value": fe["parameters"][n], "u": fe["u"][n]}
+            # the columns a person reads (generator.feature.book.RESULT_COLUMNS): u in µm for a
+            # length, in µrad for an angle or (x 1e6) a unit-vector component
+            length = n.endswith("_mm")
+            row["u_um"] = fe["u"][n] * 1e3 if length else FEATURE_NOT_APPLICABLE
+            row["u_urad"] = FEATURE_NOT_APPLICABLE if length else fe["u"][n] * 1e6
+            if state is not None:
+                row["fit_state"] = state
+            rows.append(row)
+        return rows
     if kind == "characteristic":
         return [{"name": c["name"], "type": c["type"], "value": c["value"], "unit": c["unit"],
                  "u": c["u"], "u_unit": c["u_unit"]} for c in results["characteristics"]]
     if kind in ("diagnose", "calibrate"):
         # the diagnosis (calibration) book's Results rows, built by generator.diagnosis.book
-        # (generator.calibration.book) from the same numbers
-        # as diagnosis.json (the core's GLS estimates)
+        # (generator.calibration.book) from the same numbers as diagnosis.json (calibration.json)
         return list(results["rows"])
     raise ValueError(f"unknown kind {kind!r}")
 

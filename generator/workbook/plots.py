@@ -27,6 +27,46 @@ def _plt():
     return plt
 
 
+_SUPERSCRIPT = str.maketrans("-0123456789", "⁻⁰¹²³⁴⁵⁶⁷⁸⁹")
+
+
+def decade_label(value: float) -> str:
+    """A log-axis tick label as plain text: 0.01 ... 1000 as decimals, other powers of ten as
+    10 with a superscript exponent (10⁻⁴, 10⁵), anything else in %g."""
+    if not value > 0:
+        return ""
+    e = np.log10(value)
+    k = int(round(e))
+    if abs(e - k) > 1e-9:
+        return f"{value:g}"
+    if -2 <= k <= 3:
+        return f"{10.0 ** k:g}"
+    return "10" + str(k).translate(_SUPERSCRIPT)
+
+
+def log_scale(ax, axis: str = "y") -> None:
+    """A logarithmic ``axis`` ("x" or "y") whose tick labels are plain text.
+
+    :func:`pyplot` turns mathtext off (``text.parse_math``: names from the user's files may hold
+    '$'), and matplotlib's default log labels are mathtext (``$\\mathdefault{10^{1}}$``), which
+    then print literally; these formatters write no mathtext."""
+    from matplotlib.ticker import FuncFormatter
+
+    target = ax.yaxis if axis == "y" else ax.xaxis
+    (ax.set_yscale if axis == "y" else ax.set_xscale)("log")
+    target.set_major_formatter(FuncFormatter(lambda v, _pos: decade_label(v)))
+
+    def minor(v, _pos):
+        # 2 and 5 x a decade are labelled only when the axis spans less than two decades
+        lo, hi = sorted(target.get_view_interval())
+        if lo <= 0 or np.log10(hi / lo) >= 2:
+            return ""
+        mantissa = v / 10.0 ** np.floor(np.log10(v) + 1e-9)
+        return f"{v:g}" if min(abs(mantissa - 2), abs(mantissa - 5)) < 1e-6 else ""
+
+    target.set_minor_formatter(FuncFormatter(minor))
+
+
 def distance_plot(results: dict, path: Path) -> Path:
     """K u(d) against d per group (Forbes 2025 Figures 6/7), with the MPE line when known."""
     plt = _plt()

@@ -10,12 +10,16 @@ Both return ``{sheet name: {cell coordinate: value}}`` for every cell that holds
 
 from __future__ import annotations
 
+import functools
 import os
 import re
 import shutil
 import subprocess
+import sys
 import tempfile
+from contextlib import contextmanager
 from pathlib import Path
+from types import SimpleNamespace
 from typing import Any
 
 import openpyxl
@@ -68,11 +72,29 @@ def _sheet_map(path: Path) -> dict[str, str]:
         wb.close()
 
 
+@contextmanager
+def _progress_only_on_a_terminal():
+    """``formulas`` draws a tqdm bar on stderr while it compiles a workbook; a person at a terminal
+    sees it, a pipe or a log file (``cmmwb recalc BOOK 2>&1 | ...``) does not get it."""
+    import formulas.excel as engine
+
+    if sys.stderr is not None and sys.stderr.isatty():
+        yield
+        return
+    module = engine.tqdm
+    engine.tqdm = SimpleNamespace(tqdm=functools.partial(module.tqdm, disable=True))
+    try:
+        yield
+    finally:
+        engine.tqdm = module
+
+
 def _recalc_formulas(path: Path) -> Values:
     import formulas  # imported lazily: slow import
 
     names = _sheet_map(path)
-    model = formulas.ExcelModel().loads(str(path)).finish()
+    with _progress_only_on_a_terminal():
+        model = formulas.ExcelModel().loads(str(path)).finish()
     sol = model.calculate()
     _refuse_cycles(model, sol, names)
     out: Values = {s: {} for s in names.values()}

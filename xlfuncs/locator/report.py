@@ -487,11 +487,14 @@ def summary_text(diag: Diagnosis) -> str:
         tail = f"; the largest is {loc['id']} (z = {loc['z']:.1f})" if loc else ""
         return (head + "; none of the candidate effects explains it significantly: look at the records "
                 "listed under 'located'" + tail)
-    excess = max(diag.chi2_before - diag.dof_before, 1e-12)
-    shares = [max(0.0, min(1.0, diag.candidates[n].delta_chi2 / excess)) for n in diag.chosen]
-    shares = [v / max(1.0, sum(shares)) for v in shares]
+    # "x % of the excess" only where it means that: an excess chi2 - dof > 0 that the chosen
+    # effects' delta chi2 do not overrun.  A mismatch the targeted test found while chi2/dof <= 1
+    # (no excess at all), or effects worth more than the excess, are told by their delta chi2.
+    excess = diag.chi2_before - diag.dof_before
+    deltas = [float(diag.candidates[n].delta_chi2 or 0.0) for n in diag.chosen]
+    by_share = excess > 0 and sum(deltas) <= excess * (1 + 1e-9)
     parts = []
-    for name, share in zip(diag.chosen, shares):
+    for name, delta in zip(diag.chosen, deltas):
         c = diag.candidates[name]
         eff = fx.BY_NAME[name]
         est = effect_estimates(diag, name)
@@ -502,8 +505,15 @@ def summary_text(diag: Diagnosis) -> str:
         else:
             val = f"{_fmt_pm(est['estimate'], est['u'])} {PLAIN_UNITS[eff.unit]}"
         seen = where_seen(diag, name)
-        parts.append(f"{share * 100:.0f} % of the excess is explained by {eff.plain} of {val}"
-                     + (f", {seen}" if seen else ""))
+        if by_share:
+            lead = f"{delta / excess * 100:.0f} % of the excess is explained by {eff.plain} of {val}"
+        else:
+            p = f", adjusted p = {c.p_adjusted:.2g}" if c.p_adjusted is not None else ""
+            lead = f"{eff.plain} of {val} (delta chi2 = {delta:.1f} on {c.df} dof{p})"
+            if not parts:
+                lead = ("the test aimed at the candidates finds " if diag.gate == "targeted"
+                        else "the search finds ") + lead
+        parts.append(lead + (f", {seen}" if seen else ""))
     after = diag.chi2_after / max(diag.dof_after, 1)
     text = head + "; " + "; ".join(pieces + (["; then ".join(parts)] if parts else []))
     if diag.chosen or diag.outliers:
