@@ -498,14 +498,10 @@ def write_sheet(book: Book, kind: str, spec: DecisionSpec, results: dict, decisi
     series = [ChartSeries("measured value", xs, ref_of("dev_um"), colour="000000"),
               ChartSeries("value + U", xs, ref_of("dev_plus_U_um"), colour="1F77B4"),
               ChartSeries("value − U", xs, ref_of("dev_minus_U_um"), colour="1F77B4"),
-              ChartSeries("lower specification limit", xs, ref_of("lsl_dev_um"), markers=False, colour="D62728",
-                          dash="solid", bold=True),
-              ChartSeries("upper specification limit", xs, ref_of("usl_dev_um"), markers=False, colour="D62728",
-                          dash="solid", bold=True),
-              ChartSeries("lower acceptance limit", xs, ref_of("A_L_dev_um"), markers=False, colour="2CA02C",
-                          dash="dash"),
-              ChartSeries("upper acceptance limit", xs, ref_of("A_U_dev_um"), markers=False, colour="2CA02C",
-                          dash="dash")]
+              ChartSeries("lower specification limit", xs, ref_of("lsl_dev_um"), colour="D62728", symbol="dash"),
+              ChartSeries("upper specification limit", xs, ref_of("usl_dev_um"), colour="D62728", symbol="dash"),
+              ChartSeries("lower acceptance limit", xs, ref_of("A_L_dev_um"), colour="2CA02C", symbol="dash"),
+              ChartSeries("upper acceptance limit", xs, ref_of("A_U_dev_um"), colour="2CA02C", symbol="dash")]
     book.scatter(ws, f"B{last + 3}", "Measured value ± U against the specification (red) and acceptance (green) "
                  "limits", "item (row of the table)", "deviation from the tolerance midpoint (µm)",
                  series, width=24, height=11, x_min=0)

@@ -328,7 +328,15 @@ class Book:
                 s = Series(cs.y, cs.x, title_from_data=True)
             else:
                 s = Series(cs.y, cs.x, title=cs.title)
-            if cs.markers:
+            if cs.symbol is not None:
+                # one filled mark per point and no line: limits that belong to separate items
+                # (the Decision chart) must not be joined into a curve across them
+                s.marker.symbol = cs.symbol
+                s.marker.size = 14
+                s.marker.graphicalProperties.solidFill = colour
+                s.marker.graphicalProperties.line.solidFill = colour
+                s.graphicalProperties.line.noFill = True
+            elif cs.markers:
                 s.marker.symbol = MARKERS[n_marker % len(MARKERS)]
                 # LibreOffice draws the FIRST series on top and fills every marker; Excel draws the
                 # last on top and honours hollow markers.  Sizes growing by 3 points + hollow
@@ -527,6 +535,7 @@ class ChartSeries:
     colour: str | None = None     #: e.g. "000000" for a reference line such as the MPE
     dash: str | None = None       #: a DrawingML dash style; default: distinct per line series
     bold: bool = False            #: a thicker line (the reference line of the chart)
+    symbol: str | None = None     #: a fixed, filled marker (e.g. "dash": a limit drawn per item, no line)
 
 
 class Formula(str):
