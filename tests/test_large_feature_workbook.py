@@ -254,7 +254,7 @@ def test_live_addin_layout_and_notes(bore):
     wb = openpyxl.load_workbook(book)
     visible = [ws.title for ws in wb.worksheets if ws.sheet_state == "visible"]
     assert visible == ["Instructions", "Inputs", "Points", "Fit", "Local", "J", "H", "G_A_D", "G_A_X",
-                       "V_A", "Budget", large_book.LIVE, "Results", "xlwings.conf"]   # no V_X sheets
+                       "V_A", "Budget", large_book.LIVE, "Results", "xlwings.conf", "Summary"]   # no V_X sheets
     assert [c.value for c in wb["xlwings.conf"][1]] == ["UDF Modules", "xlfuncs.udf"]
     live = wb[large_book.LIVE]
     args = '"cylinder",Points!$A$2:$H$121,Inputs!$A$17:$H$18,Inputs!$A$2:$B$13'

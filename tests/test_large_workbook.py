@@ -216,7 +216,7 @@ def test_large_workbook_layout(book130):
     wb = openpyxl.load_workbook(book)
     visible = [ws.title for ws in wb.worksheets if ws.sheet_state == "visible"]
     assert visible == ["Instructions", "Inputs", "Points", large_book.GP, "Budget", large_book.LIVE,
-                       "Results", "xlwings.conf"]
+                       "Results", "xlwings.conf", "Summary"]
     assert not any(name.startswith("V_") for name in wb.sheetnames)      # no 3m x 3m matrices
     assert [c.value for c in wb["xlwings.conf"][1]] == ["UDF Modules", "xlfuncs.udf"]
     assert str(wb["Results"]["D2"].value).startswith("=Budget!")
