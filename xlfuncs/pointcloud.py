@@ -549,9 +549,10 @@ def _all_pairs_block(cloud, params, pa, b, out, base=0, ws=None):
     """The pairs i < j of row block ``b`` (:func:`row_blocks`) into the output arrays ``out`` of
     :func:`distance_components` from position ``b[2] - base`` on, in ``all_pairs`` order.
 
-    The variances are turned into u on the block's rectangle (the numbers of
+    The variances are clipped and summed on the block's rectangle (the numbers of
     :func:`store_distances`: every factor clipped at 0, summed in the order of ``FACTORS``), then
-    each row's part j > i is copied out; returns the number of pairs written."""
+    each row's part j > i goes out through the square root, written straight into ``out``;
+    returns the number of pairs written."""
     i0, rows, pos = b
     m = cloud.m
     ws = ws if ws is not None else PairWorkspace()
@@ -564,16 +565,18 @@ def _all_pairs_block(cloud, params, pa, b, out, base=0, ws=None):
         total = np.add(var["R"], var["PQ"], out=ws("total", d.shape))
         for f in FACTORS[2:]:
             total += var[f]
-        np.sqrt(total, out=total)
-        u = {f: (np.sqrt(v, out=v) if v.flags.writeable else np.sqrt(v)) for f, v in var.items()}
     start = pos - base
     p = start
     w = m - 1 - i0
-    keys = [("d_mm", d), ("u_um", total)] + [(f"u_{f}_um", u[f]) for f in FACTORS]
+    u_R = np.sqrt(var["R"][0, 0]) if var["R"].size else 0.0
+    roots = [("u_um", total)] + [(f"u_{f}_um", var[f]) for f in FACTORS[1:]]
     for q in range(rows):
-        for key, a in keys:
-            out[key][p:p + w - q] = a[q, q:]
-        p += w - q
+        e = p + w - q
+        out["d_mm"][p:e] = d[q, q:]
+        out["u_R_um"][p:e] = u_R
+        for key, a in roots:
+            np.sqrt(a[q, q:], out=out[key][p:e])
+        p = e
     seg = out["d_mm"][start:p]
     if np.any(seg <= 1e-9):
         i, j = all_pairs_index(m, i0, rows, int(np.flatnonzero(seg <= 1e-9)[0]))
