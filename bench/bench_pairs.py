@@ -94,7 +94,8 @@ check = [float(u[0]), float(u[len(u) // 2]), float(u[-1])]
 }
 
 TAIL = """
-print("RESULT", json.dumps({"seconds": seconds, "cpu": cpu, "peak_MB": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
+print("RESULT", json.dumps({"seconds": seconds, "cpu": cpu,
+                            "peak_MB": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
                             "check": check}))
 """
 

@@ -540,8 +540,8 @@ def row_blocks(m: int, block: int) -> list[tuple[int, int, int]]:
 
 #: pairs per block of the all-pairs kernel: the 22 buffers of a thread's :class:`PairWorkspace`
 #: (2.9 MB) stay in the cache while the Python overhead per block (about 130 numpy calls) stays
-#: small (measured at m = 3,000, one thread, CPU time per pair: 82 ns with blocks of 4,096 pairs,
-#: 74 ns 8,192, 67 ns 16,384, 69 ns 32,768, 72 ns 65,536; bench/results/pairs.md)
+#: small (measured at m = 3,000, one thread, CPU time per pair under load: 76 ns with blocks of
+#: 4,096 pairs, 69 ns 8,192, 62 ns 16,384, 63 ns 32,768, 69 ns 65,536; bench/results/pairs.md)
 PAIR_BLOCK = 16_384
 
 
