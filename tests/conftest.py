@@ -35,6 +35,7 @@ NUMERIC_MODULES = {
     "test_templates", "test_roundtrip", "test_lowrank", "test_diagnose_structured", "test_import",
     "test_diagnose_second", "test_exact_option", "test_diagnose_discrepancy", "test_kernels", "test_diagnose_new_candidates",
     "test_diagnose_structured_lengths", "test_rank_refusal", "test_all_pairs_stream",
+    "test_all_pairs_probe_tables",
 }
 
 
