@@ -41,6 +41,7 @@ NUMERIC_MODULES = {
     "test_calibrate_core", "test_calibrate_loop",
     "test_conformity_core", "test_statement_core", "test_dof_core", "test_decision_workbook", "test_provenance",
     "test_readable",
+    "test_all_pairs_probe_tables",
 }
 
 

@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import math
 import os
+import threading
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
 
@@ -370,63 +371,108 @@ def _distance_block(cloud: PointCloud, params: Parameters, pa: dict, i: np.ndarr
 
 def pair_arrays(cloud: PointCloud, pa: dict) -> dict:
     """Per-point arrays of the all-pairs kernel :func:`rect_variances`, coordinate-major and
-    contiguous (row slices broadcast without strided gathers); ``pa``: :func:`probe_arrays`."""
+    contiguous (row slices broadcast without strided gathers); ``pa``: :func:`probe_arrays`.
+
+    The terms that are constant per probe pair (k(i), k(j)) come as K x m tables ``T[k, j]`` =
+    value for a point of probe k against point j: a block's rows are copied out of them
+    (``np.take`` along the probe axis, a memory copy) instead of being formed per pair."""
     P = cloud.offsets_mm
     lam = pa["lambda_P"]
+    k = cloud.probe_index
+    K = len(cloud.probes)
+    first = np.array([np.flatnonzero(k == q)[0] if np.any(k == q) else 0 for q in range(K)], dtype=int)
+    same = np.arange(K)[:, None] == k[None, :]
+    sPQ2 = pa["sigma_PQ_um"] ** 2
+    s0, sp = pa["sigma_P0_um"], pa["sigma_P_um"]
+    Pk = P[first] if cloud.m else np.zeros((K, 3))
     return {"Xt": np.ascontiguousarray(cloud.X_mm.T), "Nt": np.ascontiguousarray(cloud.N.T),
             "Ut": np.ascontiguousarray(cloud.ram_mm.T),
             "Pt": np.ascontiguousarray(P.T), "p2": np.einsum("ij,ij->i", P, P),
-            "sPQ2": pa["sigma_PQ_um"] ** 2, "sP2": pa["sigma_P0_um"] ** 2 + pa["sigma_P_um"] ** 2,
-            "ilamP": 1.0 / np.where(lam > 0, lam, 1.0)}
+            "sPQ2": sPQ2, "sP2": s0 ** 2 + sp ** 2,
+            "ilamP": 1.0 / np.where(lam > 0, lam, 1.0),
+            # per probe pair (eq. 9, section 6.5, section 6.6): PQ is sigma_PQ,i^2 + sigma_PQ,j^2
+            # for different probes, p_i.p_j, and the same-probe factors of the probing covariance
+            "T_PQ": np.where(same, 0.0, sPQ2[first][:, None] + sPQ2[None, :]),
+            "T_pij": (Pk[:, 0][:, None] * P[:, 0][None, :] + Pk[:, 1][:, None] * P[:, 1][None, :]
+                      + Pk[:, 2][:, None] * P[:, 2][None, :]),
+            "T_s0": np.where(same, s0[first][:, None] * s0[None, :], 0.0),
+            "T_sp": np.where(same, sp[first][:, None] * sp[None, :], 0.0)}
 
 
-def rect_variances(cloud: PointCloud, params: Parameters, pa: dict, I: slice, J: slice):
+class PairWorkspace:
+    """Reusable float64 buffers of one thread of the all-pairs kernel (``out=`` targets), so that
+    a block allocates nothing: ``ws(name, shape)`` is a view of the buffer ``name``, grown on
+    demand."""
+
+    def __init__(self):
+        self.flat: dict[str, np.ndarray] = {}
+
+    def __call__(self, name: str, shape: tuple[int, int]) -> np.ndarray:
+        size = shape[0] * shape[1]
+        b = self.flat.get(name)
+        if b is None or b.size < size:
+            b = self.flat[name] = np.empty(max(size, 1))
+        return b[:size].reshape(shape)
+
+
+def rect_variances(cloud: PointCloud, params: Parameters, pa: dict, I: slice, J: slice,
+                   ws: PairWorkspace | None = None):
     """Distances and per-factor variances (µm²) for every (i in I, j in J), as 2-D arrays.
 
     The quadratic form of eq. (29) with g = [-n_ij; n_ij], factor by factor, written per
     coordinate so that everything is a broadcast of row slices (no gathers):
     S: n^T G(u_j - u_i) (eq. 11); ET: 2 sigma^2 (1 - rho); ER: m = n x p (section 6.5), with
     |n x p|^2 = |p|^2 - (n.p)^2 and (n x p_i).(n x p_j) = p_i.p_j - (n.p_i)(n.p_j);
-    P: o_i = n_i.n_ij, o_j = n_j.n_ij (section 6.6).  ``pa``: :func:`probe_arrays`, with
-    :func:`pair_arrays` merged in (else computed here).
+    P: o_i = n_i.n_ij, o_j = n_j.n_ij (section 6.6).  R (eq. 8) is one number for every pair
+    (a read-only broadcast); PQ, p_i.p_j and the probing factors are copied per row from the
+    per-probe-pair tables of :func:`pair_arrays`.  Every step writes into a buffer of ``ws``
+    (a :class:`PairWorkspace`; the arrays returned are views of it, valid until its next use).
+    ``pa``: :func:`probe_arrays`, with :func:`pair_arrays` merged in (else computed here).
     """
-    if "Xt" not in pa:
+    if "T_PQ" not in pa:
         pa = {**pa, **pair_arrays(cloud, pa)}
+    ws = ws if ws is not None else PairWorkspace()
     X, N, P = pa["Xt"], pa["Nt"], pa["Pt"]
+    shape = (I.stop - I.start, J.stop - J.start)
     col = lambda A, k: A[k, J][None, :]  # noqa: E731
     row = lambda A, k: A[k, I][:, None]  # noqa: E731
-    nx, ny, nz = (col(X, k) - row(X, k) for k in range(3))
-    d = nx * nx
-    d += ny * ny
-    d += nz * nz
+    mul, add, sub = np.multiply, np.add, np.subtract
+    t = ws("t", shape)
+    nx, ny, nz = (sub(col(X, k), row(X, k), out=ws("n" + "xyz"[k], shape)) for k in range(3))
+    d = mul(nx, nx, out=ws("d", shape))
+    d += mul(ny, ny, out=t)
+    d += mul(nz, nz, out=t)
     np.sqrt(d, out=d)
-    inv = 1.0 / d
+    inv = np.divide(1.0, d, out=t)
     nx *= inv
     ny *= inv
     nz *= inv
     var: dict[str, np.ndarray] = {}
-    var["R"] = np.full(d.shape, 2.0 * params.sigma_R_um**2)
-    ki = cloud.probe_index[I][:, None]
-    kj = cloud.probe_index[J][None, :]
-    same = ki == kj
-    var["PQ"] = np.where(same, 0.0, pa["sPQ2"][I][:, None] + pa["sPQ2"][J][None, :])
+    var["R"] = np.broadcast_to(np.float64(2.0 * params.sigma_R_um**2), shape)
+    kI = cloud.probe_index[I]
+    var["PQ"] = np.take(pa["T_PQ"][:, J], kI, axis=0, out=ws("PQ", shape))
     # ram differences u_j - u_i (eq. 11: G is linear in the ram position)
     U = pa["Ut"]
-    ux, uy, uz = (col(U, k) - row(U, k) for k in range(3))
+    ux, uy, uz = (sub(col(U, k), row(U, k), out=ws("u" + "xyz"[k], shape)) for k in range(3))
     c = V_S_diag_um_per_mm2(params)
-    a0 = nx * ux
-    a0 += ny * uy
-    a0 += nz * uz
-    ux2, uy2, uz2 = ux * ux, uy * uy, uz * uz
+    a0 = mul(nx, ux, out=ws("a", shape))
+    a0 += mul(ny, uy, out=t)
+    a0 += mul(nz, uz, out=t)
+    ux2, uy2, uz2 = mul(ux, ux, out=ux), mul(uy, uy, out=uy), mul(uz, uz, out=uz)
     # sum_k c_k g_k^2 with g = (n.u, nx ux, ny uy, nz uz, nx uy, nx uz, ny uz), grouped by n_a^2
-    S = c[0] * a0 * a0
-    t = c[1] * ux2 + c[4] * uy2 + c[5] * uz2
-    t *= nx * nx
+    S = mul(a0, c[0], out=ws("S", shape))
+    S *= a0
+    s2 = ws("s2", shape)
+    mul(ux2, c[1], out=t)
+    t += mul(uy2, c[4], out=s2)
+    t += mul(uz2, c[5], out=s2)
+    t *= mul(nx, nx, out=s2)
     S += t
-    t = c[2] * uy2 + c[6] * uz2
-    t *= ny * ny
+    mul(uy2, c[2], out=t)
+    t += mul(uz2, c[6], out=s2)
+    t *= mul(ny, ny, out=s2)
     S += t
-    t = nz * nz
+    mul(nz, nz, out=t)
     t *= uz2
     t *= c[3]
     S += t
@@ -435,40 +481,60 @@ def rect_variances(cloud: PointCloud, params: Parameters, pa: dict, I: slice, J:
     du2 += uy2
     du2 += uz2
     if params.sigma_ET_um > 0:
-        e = np.expm1(du2 * (-1.0 / params.lambda_ET_mm**2))
+        e = mul(du2, -1.0 / params.lambda_ET_mm**2, out=ws("ET", shape))
+        np.expm1(e, out=e)
         e *= -2.0 * params.sigma_ET_um**2
         var["ET"] = e
     else:
-        var["ET"] = np.zeros_like(d)
+        var["ET"] = np.broadcast_to(np.float64(0.0), shape)
     if params.sigma_ER_urad > 0:
-        pi = [row(P, k) for k in range(3)]
-        pj = [col(P, k) for k in range(3)]
-        ai = nx * pi[0] + ny * pi[1] + nz * pi[2]
-        aj = nx * pj[0] + ny * pj[1] + nz * pj[2]
-        pij = pi[0] * pj[0] + pi[1] * pj[1] + pi[2] * pj[2]
-        rho = np.exp(du2 * (-1.0 / params.lambda_ER_mm**2))
-        er = pa["p2"][I][:, None] + pa["p2"][J][None, :] - ai * ai - aj * aj - 2.0 * rho * (pij - ai * aj)
+        ai, aj = ws("ai", shape), ws("aj", shape)
+        for a, side in ((ai, row), (aj, col)):
+            mul(nx, side(P, 0), out=a)
+            a += mul(ny, side(P, 1), out=t)
+            a += mul(nz, side(P, 2), out=t)
+        rho = mul(du2, -1.0 / params.lambda_ER_mm**2, out=ws("rho", shape))
+        np.exp(rho, out=rho)
+        er = add(pa["p2"][I][:, None], pa["p2"][J][None, :], out=ws("ER", shape))
+        er -= mul(ai, ai, out=t)
+        er -= mul(aj, aj, out=t)
+        pij = np.take(pa["T_pij"][:, J], kI, axis=0, out=t)
+        ai *= aj
+        pij -= ai
+        rho *= 2.0
+        rho *= pij
+        er -= rho
         er *= (params.sigma_ER_urad * MILLI) ** 2
         var["ER"] = er
     else:
-        var["ER"] = np.zeros_like(d)
-    oi = nx * row(N, 0)
-    oi += ny * row(N, 1)
-    oi += nz * row(N, 2)
-    oj = nx * col(N, 0)
-    oj += ny * col(N, 1)
-    oj += nz * col(N, 2)
-    s0, sp = pa["sigma_P0_um"], pa["sigma_P_um"]
-    s0i, s0j = s0[I][:, None], s0[J][None, :]
-    spi, spj = sp[I][:, None], sp[J][None, :]
-    dn2 = sum((col(N, k) - row(N, k)) ** 2 for k in range(3))
+        var["ER"] = np.broadcast_to(np.float64(0.0), shape)
+    oi, oj = ws("oi", shape), ws("oj", shape)
+    for o, side in ((oi, row), (oj, col)):
+        mul(nx, side(N, 0), out=o)
+        o += mul(ny, side(N, 1), out=t)
+        o += mul(nz, side(N, 2), out=t)
     # exp(-|n_i - n_j|^2 / (lambda_i lambda_j)); only pairs of one probe (one lambda) use it
+    dn2 = ws("dn2", shape)
+    for k in range(3):
+        dk = sub(col(N, k), row(N, k), out=t if k else dn2)
+        dk *= dk
+        if k:
+            dn2 += dk
     dn2 *= -pa["ilamP"][I][:, None]
     dn2 *= pa["ilamP"][J][None, :]
     kern = np.exp(dn2, out=dn2)
-    cross = np.where(same, s0i * s0j + spi * spj * kern, 0.0)
-    Pv = pa["sP2"][I][:, None] * oi * oi + pa["sP2"][J][None, :] * oj * oj
-    Pv -= 2.0 * cross * oi * oj
+    kern *= np.take(pa["T_sp"][:, J], kI, axis=0, out=t)
+    cross = kern
+    cross += np.take(pa["T_s0"][:, J], kI, axis=0, out=t)
+    Pv = mul(oi, pa["sP2"][I][:, None], out=ws("P", shape))
+    Pv *= oi
+    t = mul(oj, pa["sP2"][J][None, :], out=t)
+    t *= oj
+    Pv += t
+    cross *= 2.0
+    cross *= oi
+    cross *= oj
+    Pv -= cross
     var["P"] = Pv
     return d, var
 
@@ -486,31 +552,52 @@ def row_blocks(m: int, block: int) -> list[tuple[int, int, int]]:
     return blocks
 
 
-#: pairs per block of the all-pairs kernel: the temporaries of :func:`rect_variances` (about 40
-#: arrays of the block's size) stay in the cache (measured at m = 3,000, one thread: 294 ns per
-#: pair with blocks of 262,144 pairs, 165 ns with 30,000)
-PAIR_BLOCK = 32_768
+#: pairs per block of the all-pairs kernel: the 22 buffers of a thread's :class:`PairWorkspace`
+#: (2.9 MB) stay in the cache while the Python overhead per block (about 130 numpy calls) stays
+#: small (measured at m = 3,000, one thread, CPU time per pair under load: 76 ns with blocks of
+#: 4,096 pairs, 69 ns 8,192, 62 ns 16,384, 63 ns 32,768, 69 ns 65,536; bench/results/pairs.md)
+PAIR_BLOCK = 16_384
 
 
-def _all_pairs_block(cloud, params, pa, b):
-    """Distances and per-factor variances of the pairs i < j of row block ``b`` (:func:`row_blocks`),
-    in ``all_pairs`` order."""
-    i0, rows, _pos = b
+def _all_pairs_block(cloud, params, pa, b, out, base=0, ws=None):
+    """The pairs i < j of row block ``b`` (:func:`row_blocks`) into the output arrays ``out`` of
+    :func:`distance_components` from position ``b[2] - base`` on, in ``all_pairs`` order.
+
+    The variances are clipped and summed on the block's rectangle (the numbers of
+    :func:`store_distances`: every factor clipped at 0, summed in the order of ``FACTORS``), then
+    each row's part j > i goes out through the square root, written straight into ``out``;
+    returns the number of pairs written."""
+    i0, rows, pos = b
     m = cloud.m
+    ws = ws if ws is not None else PairWorkspace()
     with np.errstate(invalid="ignore", divide="ignore"):
-        d, var = rect_variances(cloud, params, pa, slice(i0, i0 + rows), slice(i0 + 1, m))
-    if rows > 1:
-        keep = np.arange(i0 + 1, m)[None, :] > np.arange(i0, i0 + rows)[:, None]
-        d, var = d[keep], {f: v[keep] for f, v in var.items()}
-    else:
-        d, var = d.reshape(-1), {f: v.reshape(-1) for f, v in var.items()}
-    if np.any(d <= 1e-9):
-        q = int(np.flatnonzero(d <= 1e-9)[0])
-        i, j = all_pairs_index(m, i0, rows, q)
+        d, var = rect_variances(cloud, params, pa, slice(i0, i0 + rows), slice(i0 + 1, m), ws)
+        # R, PQ, S and ET are >= 0 by construction; ER and P are differences (clip rounding)
+        for f in ("ER", "P"):
+            if var[f].flags.writeable:       # a read-only broadcast 0 when the factor is off
+                np.maximum(var[f], 0.0, out=var[f])
+        total = np.add(var["R"], var["PQ"], out=ws("total", d.shape))
+        for f in FACTORS[2:]:
+            total += var[f]
+    start = pos - base
+    p = start
+    w = m - 1 - i0
+    u_R = np.sqrt(var["R"][0, 0]) if var["R"].size else 0.0
+    roots = [("u_um", total)] + [(f"u_{f}_um", var[f]) for f in FACTORS[1:]]
+    for q in range(rows):
+        e = p + w - q
+        out["d_mm"][p:e] = d[q, q:]
+        out["u_R_um"][p:e] = u_R
+        for key, a in roots:
+            np.sqrt(a[q, q:], out=out[key][p:e])
+        p = e
+    seg = out["d_mm"][start:p]
+    if np.any(seg <= 1e-9):
+        i, j = all_pairs_index(m, i0, rows, int(np.flatnonzero(seg <= 1e-9)[0]))
         raise DegenerateGeometryError(
             f"points {cloud.labels[i]} and {cloud.labels[j]} are at the same place: "
             "the distance direction n_ij of Forbes 2025 eq. (29) is undefined")
-    return d, var
+    return p - start
 
 
 def all_pairs_index(m: int, i0: int, rows: int, q: int) -> tuple[int, int]:
@@ -532,13 +619,18 @@ def iter_distance_components(cloud: PointCloud, params: Parameters, *, block: in
     pa = probe_arrays(cloud, params)
     pa.update(pair_arrays(cloud, pa))
 
+    local = threading.local()         # one PairWorkspace per thread
+
     def work(b):
-        d, var = _all_pairs_block(cloud, params, pa, b)
-        part = {"d_mm": np.empty(d.size), "u_um": np.empty(d.size)}
+        i0, rows, pos = b
+        size = rows * (cloud.m - 1 - i0) - rows * (rows - 1) // 2
+        part = {"d_mm": np.empty(size), "u_um": np.empty(size)}
         for f in FACTORS:
-            part[f"u_{f}_um"] = np.empty(d.size)
-        store_distances(part, slice(0, d.size), d, var)
-        return slice(b[2], b[2] + d.size), part
+            part[f"u_{f}_um"] = np.empty(size)
+        if not hasattr(local, "ws"):
+            local.ws = PairWorkspace()
+        _all_pairs_block(cloud, params, pa, b, part, base=pos, ws=local.ws)
+        return slice(pos, pos + size), part
 
     yield from _ordered_blocks(work, row_blocks(cloud.m, block), workers)
 
@@ -583,10 +675,12 @@ def distance_components(cloud: PointCloud, params: Parameters, pairs: np.ndarray
             out[f"u_{f}_um"] = np.empty(total)
         pa.update(pair_arrays(cloud, pa))
 
+        local = threading.local()         # one PairWorkspace per thread
+
         def work(b):                      # each block writes its own rows of the outputs
-            d, var = _all_pairs_block(cloud, params, pa, b)
-            store_distances(out, slice(b[2], b[2] + d.size), d, var)
-            return d.size
+            if not hasattr(local, "ws"):
+                local.ws = PairWorkspace()
+            return _all_pairs_block(cloud, params, pa, b, out, ws=local.ws)
 
         done = 0
         for size in _ordered_blocks(work, row_blocks(m, block), None):
