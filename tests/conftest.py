@@ -40,6 +40,7 @@ NUMERIC_MODULES = {
     "test_diagnose_structured_lengths", "test_rank_refusal", "test_all_pairs_stream",
     "test_calibrate_core", "test_calibrate_loop",
     "test_conformity_core", "test_statement_core", "test_dof_core", "test_decision_workbook", "test_provenance",
+    "test_characteristic_decisions",
 }
 
 
