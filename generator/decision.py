@@ -26,7 +26,7 @@ from openpyxl.chart import Reference
 from xlfuncs import conformity as cf
 from xlfuncs import dof
 from xlfuncs.errors import ModelError
-from xlfuncs.statement import statement
+from xlfuncs.statement import decimals_for, statement
 
 from .errors import InputError
 from .taskfile import check_keys
@@ -472,14 +472,15 @@ def write_sheet(book: Book, kind: str, spec: DecisionSpec, results: dict, decisi
         rr = row.index + 2
         results_sheet = quote_sheet(row.sheet)
         rcols = sheet_cols[row.sheet]
+        fmt_mm = mm_format(d["U_um"])
         at = lambda name: cell(r, c[name], absolute=False)  # noqa: E731
         ws.cell(r, c["item"]).value = i + 1
         book.text(ws, r, c["characteristic"], t.label)
         if t.measured_mm is not None:
-            book.input(ws, r, c["value_mm"], f"{t.name_prefix}_measured_mm", t.measured_mm, fmt=FMT_MM,
+            book.input(ws, r, c["value_mm"], f"{t.name_prefix}_measured_mm", t.measured_mm, fmt=fmt_mm,
                        note="measured value (input)")
         else:
-            book.formula(ws, r, c["value_mm"], f"={results_sheet}!{cell(rr, rcols[row.value_col])}", fmt=FMT_MM,
+            book.formula(ws, r, c["value_mm"], f"={results_sheet}!{cell(rr, rcols[row.value_col])}", fmt=fmt_mm,
                          note="the task's value (Results); give [[decision.tolerances]] measured_mm for a measured one")
             cache[at("value_mm")] = d["value_mm"]
         u_ref = f"{results_sheet}!{cell(rr, rcols[row.u_col])}"
@@ -526,12 +527,12 @@ def write_sheet(book: Book, kind: str, spec: DecisionSpec, results: dict, decisi
                 ccols = sheet_cols.get("Characteristics") or _results_cols(book, "Characteristics")
                 expr = t.limit_cells[key].format(**{name: f"{quote_sheet('Characteristics')}!{cell(rr, j)}"
                                                     for name, j in ccols.items() if name.isidentifier()})
-                book.formula(ws, r, c[key], f"={expr}", fmt=FMT_MM,
+                book.formula(ws, r, c[key], f"={expr}", fmt=fmt_mm,
                              note=("the tolerance typed on 'Characteristics'" if expr != "0" else
                                    "a margin (zone - value) conforms when >= 0"))
                 cache[at(key)] = tol[key]
             else:
-                book.input(ws, r, c[key], f"{t.name_prefix}_{key}", tol[key], fmt=FMT_MM,
+                book.input(ws, r, c[key], f"{t.name_prefix}_{key}", tol[key], fmt=fmt_mm,
                            note=("lower" if key == "lsl_mm" else "upper") + " specification limit (mm)")
         y, u, U = at("value_mm"), at("u_um"), at("U_um")
         lsl = at("lsl_mm") if tol["lsl_mm"] is not None else None
@@ -549,15 +550,15 @@ def write_sheet(book: Book, kind: str, spec: DecisionSpec, results: dict, decisi
                 book.text(ws, r, c[a_name], "—")
                 book.text(ws, r, c[r_name], "—")
                 continue
-            book.formula(ws, r, c[a_name], f"={lim}{sign}{wc}/1000", fmt=FMT_MM)
+            book.formula(ws, r, c[a_name], f"={lim}{sign}{wc}/1000", fmt=fmt_mm)
             cache[at(a_name)] = d["acceptance_limits_mm"][j]
             acc[j] = at(a_name)
             other = "-" if sign == "+" else "+"
             if rule.kind == "iso14253":
-                book.formula(ws, r, c[r_name], f"={lim}{other}{U}/1000", fmt=FMT_MM)
+                book.formula(ws, r, c[r_name], f"={lim}{other}{U}/1000", fmt=fmt_mm)
                 cache[at(r_name)] = (d["lsl_mm"] - d["U_um"] / 1000) if j == 0 else (d["usl_mm"] + d["U_um"] / 1000)
             else:
-                book.formula(ws, r, c[r_name], f"={at(a_name)}", fmt=FMT_MM)
+                book.formula(ws, r, c[r_name], f"={at(a_name)}", fmt=fmt_mm)
                 cache[at(r_name)] = d["acceptance_limits_mm"][j]
         terms = []
         if usl is not None:
@@ -630,6 +631,16 @@ def write_sheet(book: Book, kind: str, spec: DecisionSpec, results: dict, decisi
         ws.column_dimensions[col(c[name])].width = width
     book.print_setup(ws, landscape=True, title_rows=h, area=f"A1:{col(c['zone'])}{last + 26}")
     return {SHEET: cache}
+
+
+def mm_format(U_um: float) -> str:
+    """The number format of a row's values and limits in mm: 0.1 µm (FMT_MM), or finer so that
+    U below 1 µm still shows its two significant digits (GUM 7.2.6): U = 0.64 µm -> 0.00001 mm."""
+    try:
+        dec = decimals_for(U_um) + 3
+    except ModelError:
+        return FMT_MM
+    return FMT_MM if dec <= 4 else "0." + "0" * min(dec, 9)
 
 
 def _inside(y: str, lo: str | None, hi: str | None) -> str:

@@ -180,7 +180,12 @@ def write_sheet(book: Book, kind: str, results: dict, *, decision_rows: dict[str
         lines.append(("note", note))
     rule = results.get("decision_rule")
     if rule:
-        lines.append(("decision rule", rule["text"]))
+        lines.append(("decision rule", rule["text"] + (f"; U = {rule['k']:g}u" if "k" in rule else "")))
+    if rule and kind == "characteristic":
+        lines.append(("tolerances", "the drawing's, on 'Characteristics': size and distance two-sided (lsl, usl); "
+                                    "form, orientation, position one-sided (value <= tolerance_mm); a position at "
+                                    "MMC/LMC on its margin = tolerance + bonus - value >= 0 (u with the size's); "
+                                    "angles not decided yet"))
     for label, text in lines:
         book.text(ws, r, 1, label, font=HEADER_FONT)
         for part in textwrap.wrap(str(text), TEXT_WIDTH) or [""]:
@@ -280,6 +285,8 @@ def summary_lines(results: dict, most: int = 4) -> list[str]:
         for d in results.get("decisions", []):
             out.append(f"  {d['statement']}: {d['outcome']} ({d['zone']}, "
                        f"p_c = {d['p_c']:.4f})")
+        for d in results.get("not_decided", []):
+            out.append(f"  {d['characteristic']}: not decided ({d['reason']})")
         return out
     items = summary_items(results["kind"], results)
     for it in items[:most]:
