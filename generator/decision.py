@@ -140,7 +140,7 @@ def read_spec(path: Path, doc: dict, kind: str) -> DecisionSpec | None:
         raise InputError(f"max_pfa applies to rule 'specific_risk' only, not to {rule_kind!r}",
                          file=path, where=f"[{SECTION}] max_pfa")
     if k is not None and kind not in K_KINDS:
-        raise InputError("k is for feature and characteristic tasks (whose results have no U); a "
+        raise InputError("k is for feature tasks and characteristic tasks (whose results have no U); a "
                          f"{kind} task's U uses its own coverage factor", file=path, where=f"[{SECTION}] k")
     if k is not None and not (0 < k <= 10):
         raise InputError(f"must be a coverage factor in (0, 10], got {k!r}", file=path, where=f"[{SECTION}] k")
