@@ -663,6 +663,11 @@ def read_back(cells, rt) -> None:
     from openpyxl.utils import get_column_letter
 
     tbl = rt.doc.get(SECTION)
+    # a characteristic task decided without [decision] (the default rule): a k typed in the sheet
+    # makes the table
+    created = tbl is None and "decision_k" in cells.wb.defined_names
+    if created:
+        tbl = {}
     if not isinstance(tbl, dict):
         return
 
@@ -679,6 +684,8 @@ def read_back(cells, rt) -> None:
         if key in tbl or built is None or x != built:
             tbl[key] = x
         rt.sources[f"[{SECTION}] {key}"] = where
+    if created and tbl:
+        rt.doc[SECTION] = tbl
     entries = tbl.get("tolerances")
     if not isinstance(entries, list):
         return

@@ -153,3 +153,22 @@ def test_bad_decision_input_names_the_key(tmp_path, table, where, message):
     with pytest.raises(InputError, match=message) as err:
         build(tmp_path, PLATE, edit)
     assert where in str(err.value) and "characteristic_plate.toml" in str(err.value)
+
+
+def test_a_k_typed_in_the_decision_sheet_goes_back_to_the_task_file(plate, tmp_path):
+    """The plate has no [decision]: cmmwb read of its book with k = 3 typed on 'Decision' writes
+    [decision] k = 3; an untouched book writes no [decision]."""
+    import tomllib
+
+    from generator.read_cli import read_to_files
+
+    _, book = plate
+    same = read_to_files(book, tmp_path / "same" / "task.toml")
+    assert "decision" not in tomllib.loads(same[0].read_text(encoding="utf-8"))
+    wb = openpyxl.load_workbook(book)
+    ws, coord = next(iter(wb.defined_names["decision_k"].destinations))
+    wb[ws][coord.replace("$", "")].value = 3.0
+    edited = tmp_path / "edited.xlsx"
+    wb.save(edited)
+    files = read_to_files(edited, tmp_path / "back" / "task.toml")
+    assert tomllib.loads(files[0].read_text(encoding="utf-8"))["decision"] == {"k": 3.0}
