@@ -304,8 +304,8 @@ features = ["B"]
 frame = "AB"
 tolerance_mm = 0.02
 
-# Every characteristic with a tolerance gets a conformity decision (sheet 'Decision'); without a
-# [decision] table the rule is ISO 14253-1 with U = 2u. Uncomment to choose (docs/conformity.md):
+# Every characteristic with a tolerance gets a conformity decision (sheet 'Decision'), by default
+# under ISO 14253-1 with U = 2u. Uncomment the table below to choose (docs/conformity.md):
 # [decision]
 # rule = "iso14253"      # simple | iso14253 | guarded_acceptance | guarded_rejection | specific_risk
 # k = 2.0                # U = k·u
