@@ -355,13 +355,18 @@ def decide_all(path: Path, kind: str, spec: DecisionSpec, results: dict) -> list
             raise InputError(f"no characteristic {t.label!r} in the results (there are: {have})"
                              + (" ; only length parameters (_mm) take a tolerance" if kind == "feature" else ""),
                              file=path, where=_where(t.n, key))
-        tol = t.tolerance(row.value_mm)
+        try:
+            tol = t.tolerance(row.value_mm)
+        except ModelError as e:          # lsl >= usl on a characteristic (the others: read_spec)
+            raise InputError(str(e), file=path, where=f"[[characteristics]] {t.label}") from None
         value = row.value_mm if t.measured_mm is None else t.measured_mm
         unc = combined(row, t, spec)
         try:
             d = cf.decide(value, unc["u_um"], tol, spec.rule, unc["k"])
         except ModelError as e:
-            raise InputError(str(e), file=path, where=_where(t.n)) from None
+            where = (f"[[characteristics]] {t.ident['characteristic']}" if kind in OWN_TOLERANCES
+                     else _where(t.n))
+            raise InputError(str(e), file=path, where=where) from None
         entry = {"characteristic": t.label, **{k_: v for k_, v in t.ident.items()},
                  **({"quantity": "margin_mm" if row.value_col == "margin_mm" else "value"}
                     if kind in OWN_TOLERANCES else {}),

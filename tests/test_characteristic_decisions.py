@@ -172,3 +172,12 @@ def test_a_k_typed_in_the_decision_sheet_goes_back_to_the_task_file(plate, tmp_p
     wb.save(edited)
     files = read_to_files(edited, tmp_path / "back" / "task.toml")
     assert tomllib.loads(files[0].read_text(encoding="utf-8"))["decision"] == {"k": 3.0}
+
+
+def test_crossed_size_limits_name_the_characteristic(tmp_path):
+    def edit(doc):
+        c = next(c for c in doc["characteristics"] if c["name"] == "dia_H2")
+        c["lsl"], c["usl"] = 10.05, 10.0
+    with pytest.raises(InputError, match="must be below") as err:
+        build(tmp_path, PLATE, edit)
+    assert "[[characteristics]] dia_H2" in str(err.value)
