@@ -189,8 +189,8 @@ def _decisions(nist, rule):
     from generator import decision
     from xlfuncs import conformity as cf
 
-    u, res, _ = qs.uncertainties(nist)
-    _, _, _, _, specs, names, _ = qs.simulate(nist)
+    u, _, _ = qs.uncertainties(nist)
+    _, _, _, _, specs, names, _ = qs.simulate(nist)           # the same seed: the same stand-in part
     spec_of = {s.name: s for s in specs}
     item_of = {i.name: i.id for i in nist.items}
     out = []
