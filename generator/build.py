@@ -282,12 +282,12 @@ def sheet_writers(kind: str, spec, results: dict, cache: dict) -> list:
             cache.setdefault(sheet, {}).update(vals)
 
     def summary_sheet(book):
-        got = report.write_sheet(book, kind, results, decision_rows=rows,
+        got = report.write_sheet(book, kind, results, decision_rows=rows or None,
                                  k_feature=spec.k if spec is not None and spec.k is not None else 2.0)
         for sheet, vals in got.items():
             cache.setdefault(sheet, {}).update(vals)
 
-    return ([decision_sheet] if spec is not None else []) + [summary_sheet]
+    return ([decision_sheet] if spec is not None and spec.tolerances else []) + [summary_sheet]
 
 
 def build_task(task_path: Path, out_dir: Path, *, plots: bool = True, force: bool = False,

@@ -26,7 +26,7 @@ from openpyxl.chart import Reference
 from xlfuncs import conformity as cf
 from xlfuncs import dof
 from xlfuncs.errors import ModelError
-from xlfuncs.statement import statement
+from xlfuncs.statement import decimals_for, statement
 
 from .errors import InputError
 from .taskfile import check_keys
@@ -38,7 +38,12 @@ SECTION = "decision"
 TOL_SECTION = "[[decision.tolerances]]"
 RULE_KEYS = {"rule", "r", "max_pfa", "k", "k_from_dof", "tolerances"}
 #: the key(s) that name the characteristic of a tolerance, per task kind
-IDENT_KEYS = {"budget": ("characteristic",), "pointcloud": ("from", "to"), "feature": ("parameter",)}
+IDENT_KEYS = {"budget": ("characteristic",), "pointcloud": ("from", "to"), "feature": ("parameter",),
+              "characteristic": ("characteristic",)}
+#: kinds whose results have u but no U: U = k·u with the ``[decision] k`` (default 2)
+K_KINDS = ("feature", "characteristic")
+#: kinds whose tolerances are fields of their own characteristics, not ``[[decision.tolerances]]``
+OWN_TOLERANCES = ("characteristic",)
 LIMIT_KEYS = {"nominal_mm", "tol_mm", "lsl_mm", "usl_mm", "measured_mm", "s_um", "n_repeats"}
 FMT_P = "0.000000"
 HEADER_ROW = 7
@@ -71,6 +76,8 @@ class ToleranceSpec:
     measured_mm: float | None = None
     s_um: float | None = None        #: standard deviation of n repeated measurements (type A)
     n_repeats: float | None = None   #: the number of repeated measurements whose mean is the value
+    #: limits that are cells of the kind's own sheets ({"lsl_mm": formula text}), not inputs here
+    limit_cells: dict[str, str] = field(default_factory=dict)
 
     @property
     def type_a(self) -> bool:
@@ -112,6 +119,8 @@ def read_spec(path: Path, doc: dict, kind: str) -> DecisionSpec | None:
     """The task's ``[decision]`` table, validated (None when the task has none).  Every problem is
     an :class:`InputError` naming the key."""
     tbl = doc.get(SECTION)
+    if tbl is None and kind in OWN_TOLERANCES and _has_own_tolerances(doc):
+        tbl = {}            # tolerances on the characteristics, no [decision]: the default rule
     if tbl is None:
         return None
     if not isinstance(tbl, dict):
@@ -130,8 +139,8 @@ def read_spec(path: Path, doc: dict, kind: str) -> DecisionSpec | None:
     if pfa is not None and rule_kind != "specific_risk":
         raise InputError(f"max_pfa applies to rule 'specific_risk' only, not to {rule_kind!r}",
                          file=path, where=f"[{SECTION}] max_pfa")
-    if k is not None and kind != "feature":
-        raise InputError("k is for feature tasks (whose results have no U); a "
+    if k is not None and kind not in K_KINDS:
+        raise InputError("k is for feature tasks and characteristic tasks (whose results have no U); a "
                          f"{kind} task's U uses its own coverage factor", file=path, where=f"[{SECTION}] k")
     if k is not None and not (0 < k <= 10):
         raise InputError(f"must be a coverage factor in (0, 10], got {k!r}", file=path, where=f"[{SECTION}] k")
@@ -143,7 +152,16 @@ def read_spec(path: Path, doc: dict, kind: str) -> DecisionSpec | None:
     kfd = tbl.get("k_from_dof", False)
     if not isinstance(kfd, bool):
         raise InputError(f"must be true or false, got {kfd!r}", file=path, where=f"[{SECTION}] k_from_dof")
-    spec = DecisionSpec(rule, (2.0 if k is None else k) if kind == "feature" else None, kfd)
+    spec = DecisionSpec(rule, (2.0 if k is None else k) if kind in K_KINDS else None, kfd)
+    if kind in OWN_TOLERANCES:
+        if "tolerances" in tbl:
+            raise InputError(f"a {kind} task's tolerances are the lsl/usl/nominal/tolerance_mm of its "
+                             "[[characteristics]]: leave [[decision.tolerances]] out", file=path,
+                             where=f"[{SECTION}] tolerances")
+        if kfd:
+            raise InputError(f"k_from_dof needs type A repeatabilities, which a {kind} task does not take",
+                             file=path, where=f"[{SECTION}] k_from_dof")
+        return spec         # the tolerances: characteristic_tolerances() from the results
     raw = tbl.get("tolerances")
     if not isinstance(raw, list) or not raw:
         raise InputError("no tolerances: add [[decision.tolerances]] tables (the characteristic and its "
@@ -195,6 +213,12 @@ def read_spec(path: Path, doc: dict, kind: str) -> DecisionSpec | None:
     return spec
 
 
+def _has_own_tolerances(doc: dict) -> bool:
+    chars = doc.get("characteristics")
+    return isinstance(chars, list) and any(isinstance(c, dict) and any(
+        k_ in c for k_ in ("lsl", "usl", "tolerance_mm")) for c in chars)
+
+
 _IDENT_HELP = {"budget": "characteristic = the name of a [[characteristics]] entry",
                "pointcloud": "from and to = the point ids of a distance",
                "feature": "parameter = a length parameter of the fit, e.g. \"r0_mm\""}
@@ -216,6 +240,7 @@ class Row:
     U_col: str | None
     u_scale: float           #: µm per unit of the u column (1, or 1000 for a feature's mm)
     k: float
+    sheet: str = "Results"   #: the sheet of the value and u columns (header in row 1, same rows)
 
 
 def rows_of(kind: str, results: dict, spec: DecisionSpec) -> dict[str, Row]:
@@ -235,11 +260,91 @@ def rows_of(kind: str, results: dict, spec: DecisionSpec) -> dict[str, Row]:
             if n.endswith("_mm"):
                 out[n] = Row(n, i, fe["parameters"][n], fe["u"][n] * 1000.0, None, "value", "u", None, 1000.0,
                              float(spec.k))
+    elif kind == "characteristic":
+        for i, c in enumerate(results["characteristics"]):
+            if c["unit"] != "mm":
+                continue          # angles (deg): not decided (docs/conformity.md)
+            out[c["name"]] = Row(c["name"], i, c["value"], c["u"], None, "value", "u", None, 1.0, float(spec.k))
+            if c["margin_mm"] is not None and c["material_condition"] in BONUS_CONDITIONS:
+                label = margin_label(c["name"])
+                out[label] = Row(label, i, c["margin_mm"], c["u_margin_um"], None, "margin_mm", "u_margin_um",
+                                 None, 1.0, float(spec.k), sheet="Characteristics")
     return out
 
 
+# -- the characteristic kind: tolerances from the characteristics' own fields -------------------------
+
+#: material conditions with a bonus tolerance: decided on the margin (zone - value >= 0)
+BONUS_CONDITIONS = ("MMC", "LMC")
+#: characteristic types with a two-sided tolerance interval (lsl/usl or nominal ± tolerance_mm)
+TWO_SIDED_TYPES = ("diameter", "width", "distance", "cone_angle", "angle")
+
+
+def margin_label(name: str) -> str:
+    """The decided quantity of a position at MMC/LMC: its margin (Characteristics, 'margin_mm')."""
+    return f"{name} margin"
+
+
+def characteristic_tolerances(results: dict) -> tuple[list[ToleranceSpec], list[dict]]:
+    """The tolerances of a ``characteristic`` task, from the fields of its characteristics, and
+    the characteristics with a tolerance that are not decided (name, reason).
+
+    * size, distance (two-sided): ``lsl``/``usl`` (one of them: a one-sided interval), or
+      ``nominal`` ± ``tolerance_mm``;
+    * form, orientation, position RFS (a zone whose value is >= 0): one-sided, value <= USL =
+      ``tolerance_mm`` (ISO 1101: the feature lies in a zone of that width);
+    * position at MMC/LMC: the margin m = tolerance + bonus - value >= 0, a one-sided lower
+      limit 0 on m, whose u (``u_margin_um``) includes the bonus's uncertainty through the
+      measured size and its correlation with the position (both from one V_X);
+    * angles (deg): not decided yet (the decision's fields are mm and µm).
+
+    ``limit_cells``: the limits as formulas of the 'Characteristics' cells (column names of its
+    header), so that a tolerance typed there changes the decision."""
+    out: list[ToleranceSpec] = []
+    skipped: list[dict] = []
+    for c in results["characteristics"]:
+        name, typ = c["name"], c["type"]
+        lsl, usl, tol, nominal = c["lsl"], c["usl"], c["tolerance_mm"], c["nominal"]
+        if lsl is None and usl is None and tol is None:
+            continue
+        n = len(out) + 1
+        ident = {"characteristic": name}
+        if c["unit"] != "mm":
+            skipped.append({"characteristic": name, "reason": f"an angle tolerance ({c['unit']}) is not decided "
+                            "yet: the decision works in mm and µm"})
+            continue
+        if typ in TWO_SIDED_TYPES:
+            if lsl is not None or usl is not None:
+                cells = {k_: f"{{{k_[:3]}}}" for k_, v in (("lsl_mm", lsl), ("usl_mm", usl)) if v is not None}
+                out.append(ToleranceSpec(n, ident, name, lsl_mm=lsl, usl_mm=usl, limit_cells=cells))
+            elif nominal is not None:
+                out.append(ToleranceSpec(n, ident, name, lsl_mm=nominal - tol, usl_mm=nominal + tol,
+                                         limit_cells={"lsl_mm": "{nominal}-{tolerance_mm}",
+                                                      "usl_mm": "{nominal}+{tolerance_mm}"}))
+            else:
+                skipped.append({"characteristic": name, "reason": "tolerance_mm of a size or distance needs "
+                                "its nominal (nominal ± tolerance_mm), or give lsl/usl"})
+            continue
+        if tol is None:
+            skipped.append({"characteristic": name, "reason": f"a {typ} takes tolerance_mm (a zone width), "
+                            "not lsl/usl"})
+            continue
+        if typ == "position" and c["material_condition"] in BONUS_CONDITIONS:
+            out.append(ToleranceSpec(n, {"characteristic": margin_label(name)}, margin_label(name), lsl_mm=0.0,
+                                     limit_cells={"lsl_mm": "0"}))
+        else:
+            out.append(ToleranceSpec(n, ident, name, usl_mm=tol, limit_cells={"usl_mm": "{tolerance_mm}"}))
+    return out, skipped
+
+
 def decide_all(path: Path, kind: str, spec: DecisionSpec, results: dict) -> list[dict]:
-    """The decisions (JSON entries) of every tolerance, in the order of the task file."""
+    """The decisions (JSON entries) of every tolerance, in the order of the task file (for the
+    characteristic kind: of every characteristic with a tolerance, :func:`characteristic_tolerances`,
+    which fills ``spec.tolerances``)."""
+    if kind in OWN_TOLERANCES:
+        spec.tolerances, skipped = characteristic_tolerances(results)
+        if skipped:
+            results["not_decided"] = skipped
     rows = rows_of(kind, results, spec)
     out = []
     for t in spec.tolerances:
@@ -250,14 +355,21 @@ def decide_all(path: Path, kind: str, spec: DecisionSpec, results: dict) -> list
             raise InputError(f"no characteristic {t.label!r} in the results (there are: {have})"
                              + (" ; only length parameters (_mm) take a tolerance" if kind == "feature" else ""),
                              file=path, where=_where(t.n, key))
-        tol = t.tolerance(row.value_mm)
+        try:
+            tol = t.tolerance(row.value_mm)
+        except ModelError as e:          # lsl >= usl on a characteristic (the others: read_spec)
+            raise InputError(str(e), file=path, where=f"[[characteristics]] {t.label}") from None
         value = row.value_mm if t.measured_mm is None else t.measured_mm
         unc = combined(row, t, spec)
         try:
             d = cf.decide(value, unc["u_um"], tol, spec.rule, unc["k"])
         except ModelError as e:
-            raise InputError(str(e), file=path, where=_where(t.n)) from None
+            where = (f"[[characteristics]] {t.ident['characteristic']}" if kind in OWN_TOLERANCES
+                     else _where(t.n))
+            raise InputError(str(e), file=path, where=where) from None
         entry = {"characteristic": t.label, **{k_: v for k_, v in t.ident.items()},
+                 **({"quantity": "margin_mm" if row.value_col == "margin_mm" else "value"}
+                    if kind in OWN_TOLERANCES else {}),
                  "value_source": "measured_mm" if t.measured_mm is not None else "task", **d.as_dict(),
                  **{k_: v for k_, v in unc.items() if k_ not in ("u_um", "k")},
                  "statement": statement(symbol(kind, t.label), value, "mm", d.U_um, "µm", d.k)}
@@ -306,8 +418,9 @@ def rule_json(spec: DecisionSpec) -> dict:
 
 # -- the Decision sheet -----------------------------------------------------------------------------
 
-def _results_cols(book: Book) -> dict[str, int]:
-    ws = book.wb["Results"]
+def _results_cols(book: Book, sheet: str = "Results") -> dict[str, int]:
+    """Column (1-based) of each header name in row 1 of ``sheet``."""
+    ws = book.wb[sheet]
     return {str(c.value): c.column for c in ws[1] if c.value is not None}
 
 
@@ -316,7 +429,7 @@ def write_sheet(book: Book, kind: str, spec: DecisionSpec, results: dict, decisi
     """The ``Decision`` sheet; returns the values to cache in its formula cells
     ({sheet: {coordinate: value}}, from the core's ``decisions``)."""
     rows = rows_of(kind, results, spec)
-    rcols = _results_cols(book)
+    sheet_cols = {name: _results_cols(book, name) for name in {row.sheet for row in rows.values()}}
     ws = book.sheet(SHEET)
     cache: dict[str, Any] = {}
     rule = spec.rule
@@ -358,19 +471,21 @@ def write_sheet(book: Book, kind: str, spec: DecisionSpec, results: dict, decisi
         "the decision", "the zone of the measured value"] + [f"chart: {c} from the tolerance midpoint "
                                                               "(one-sided: from the limit)" for c in CHART_COLUMNS])
     c = {name: j + 1 for j, name in enumerate(COLUMNS + CHART_COLUMNS)}
-    results_sheet = quote_sheet("Results")
     for i, (t, d) in enumerate(zip(spec.tolerances, decisions)):
         r = h + 1 + i
         row = rows[t.label]
         rr = row.index + 2
+        results_sheet = quote_sheet(row.sheet)
+        rcols = sheet_cols[row.sheet]
+        fmt_mm = mm_format(d["U_um"])
         at = lambda name: cell(r, c[name], absolute=False)  # noqa: E731
         ws.cell(r, c["item"]).value = i + 1
         book.text(ws, r, c["characteristic"], t.label)
         if t.measured_mm is not None:
-            book.input(ws, r, c["value_mm"], f"{t.name_prefix}_measured_mm", t.measured_mm, fmt=FMT_MM,
+            book.input(ws, r, c["value_mm"], f"{t.name_prefix}_measured_mm", t.measured_mm, fmt=fmt_mm,
                        note="measured value (input)")
         else:
-            book.formula(ws, r, c["value_mm"], f"={results_sheet}!{cell(rr, rcols[row.value_col])}", fmt=FMT_MM,
+            book.formula(ws, r, c["value_mm"], f"={results_sheet}!{cell(rr, rcols[row.value_col])}", fmt=fmt_mm,
                          note="the task's value (Results); give [[decision.tolerances]] measured_mm for a measured one")
             cache[at("value_mm")] = d["value_mm"]
         u_ref = f"{results_sheet}!{cell(rr, rcols[row.u_col])}"
@@ -413,8 +528,16 @@ def write_sheet(book: Book, kind: str, spec: DecisionSpec, results: dict, decisi
         for key in ("lsl_mm", "usl_mm"):
             if tol[key] is None:
                 book.text(ws, r, c[key], "—")
+            elif key in t.limit_cells:      # the kind's own tolerance cell (Characteristics)
+                ccols = sheet_cols.get("Characteristics") or _results_cols(book, "Characteristics")
+                expr = t.limit_cells[key].format(**{name: f"{quote_sheet('Characteristics')}!{cell(rr, j)}"
+                                                    for name, j in ccols.items() if name.isidentifier()})
+                book.formula(ws, r, c[key], f"={expr}", fmt=fmt_mm,
+                             note=("the tolerance typed on 'Characteristics'" if expr != "0" else
+                                   "a margin (zone - value) conforms when >= 0"))
+                cache[at(key)] = tol[key]
             else:
-                book.input(ws, r, c[key], f"{t.name_prefix}_{key}", tol[key], fmt=FMT_MM,
+                book.input(ws, r, c[key], f"{t.name_prefix}_{key}", tol[key], fmt=fmt_mm,
                            note=("lower" if key == "lsl_mm" else "upper") + " specification limit (mm)")
         y, u, U = at("value_mm"), at("u_um"), at("U_um")
         lsl = at("lsl_mm") if tol["lsl_mm"] is not None else None
@@ -432,15 +555,15 @@ def write_sheet(book: Book, kind: str, spec: DecisionSpec, results: dict, decisi
                 book.text(ws, r, c[a_name], "—")
                 book.text(ws, r, c[r_name], "—")
                 continue
-            book.formula(ws, r, c[a_name], f"={lim}{sign}{wc}/1000", fmt=FMT_MM)
+            book.formula(ws, r, c[a_name], f"={lim}{sign}{wc}/1000", fmt=fmt_mm)
             cache[at(a_name)] = d["acceptance_limits_mm"][j]
             acc[j] = at(a_name)
             other = "-" if sign == "+" else "+"
             if rule.kind == "iso14253":
-                book.formula(ws, r, c[r_name], f"={lim}{other}{U}/1000", fmt=FMT_MM)
+                book.formula(ws, r, c[r_name], f"={lim}{other}{U}/1000", fmt=fmt_mm)
                 cache[at(r_name)] = (d["lsl_mm"] - d["U_um"] / 1000) if j == 0 else (d["usl_mm"] + d["U_um"] / 1000)
             else:
-                book.formula(ws, r, c[r_name], f"={at(a_name)}", fmt=FMT_MM)
+                book.formula(ws, r, c[r_name], f"={at(a_name)}", fmt=fmt_mm)
                 cache[at(r_name)] = d["acceptance_limits_mm"][j]
         terms = []
         if usl is not None:
@@ -511,6 +634,16 @@ def write_sheet(book: Book, kind: str, spec: DecisionSpec, results: dict, decisi
     return {SHEET: cache}
 
 
+def mm_format(U_um: float) -> str:
+    """The number format of a row's values and limits in mm: 0.1 µm (FMT_MM), or finer so that
+    U below 1 µm still shows its two significant digits (GUM 7.2.6): U = 0.64 µm -> 0.00001 mm."""
+    try:
+        dec = decimals_for(U_um) + 3
+    except ModelError:
+        return FMT_MM
+    return FMT_MM if dec <= 4 else "0." + "0" * min(dec, 9)
+
+
 def _inside(y: str, lo: str | None, hi: str | None) -> str:
     parts = ([f"{y}>={lo}"] if lo else []) + ([f"{y}<={hi}"] if hi else [])
     return parts[0] if len(parts) == 1 else f"AND({','.join(parts)})"
@@ -531,6 +664,11 @@ def read_back(cells, rt) -> None:
     from openpyxl.utils import get_column_letter
 
     tbl = rt.doc.get(SECTION)
+    # a characteristic task decided without [decision] (the default rule): a k typed in the sheet
+    # makes the table
+    created = tbl is None and "decision_k" in cells.wb.defined_names
+    if created:
+        tbl = {}
     if not isinstance(tbl, dict):
         return
 
@@ -547,6 +685,8 @@ def read_back(cells, rt) -> None:
         if key in tbl or built is None or x != built:
             tbl[key] = x
         rt.sources[f"[{SECTION}] {key}"] = where
+    if created and tbl:
+        rt.doc[SECTION] = tbl
     entries = tbl.get("tolerances")
     if not isinstance(entries, list):
         return

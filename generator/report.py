@@ -25,7 +25,7 @@ from typing import Any
 from xlfuncs.statement import coverage_text, statement
 
 from . import __version__
-from .decision import column, symbol
+from .decision import BONUS_CONDITIONS, column, margin_label, symbol
 from .errors import InputError
 from .taskfile import check_keys
 from .workbook.book import HEADER_FONT, TITLE_FONT, Book
@@ -134,6 +134,19 @@ def summary_items(kind: str, results: dict, k_feature: float = 2.0) -> list[dict
             items.append(dict(label=n, value=fe["parameters"][n], unit=unit, U=k_feature * fe["u"][n] * scale,
                               U_unit="µm" if unit == "mm" else "rad", ratio=scale, k=k_feature, row=i + 2,
                               value_col="value", U_col=None, u_col="u"))
+    elif kind == "characteristic":
+        # lengths: u in µm, U = k·u µm; angles: value in deg, u in µrad, U stated in deg
+        for i, c in enumerate(results["characteristics"]):
+            deg = c["unit"] == "deg"
+            u_factor = 180 / math.pi * 1e-6 if deg else 1.0       # deg per µrad, or µm per µm
+            items.append(dict(label=c["name"], value=c["value"], unit=c["unit"], U=k_feature * c["u"] * u_factor,
+                              U_unit="deg" if deg else "µm", ratio=1.0 if deg else 1000.0, u_factor=u_factor,
+                              k=k_feature, row=i + 2, value_col="value", U_col=None, u_col="u"))
+            if c["margin_mm"] is not None and c["material_condition"] in BONUS_CONDITIONS:
+                items.append(dict(label=margin_label(c["name"]), value=c["margin_mm"], unit="mm",
+                                  U=k_feature * c["u_margin_um"], U_unit="µm", ratio=1000.0, u_factor=1.0,
+                                  k=k_feature, row=i + 2, value_col="margin_mm", U_col=None, u_col="u_margin_um",
+                                  sheet="Characteristics"))
     # a quantity with U = 0 (a parameter the fit holds fixed) has no statement to round
     return [it for it in items if it["U"] > 0 and math.isfinite(it["U"])]
 
@@ -167,7 +180,12 @@ def write_sheet(book: Book, kind: str, results: dict, *, decision_rows: dict[str
         lines.append(("note", note))
     rule = results.get("decision_rule")
     if rule:
-        lines.append(("decision rule", rule["text"]))
+        lines.append(("decision rule", rule["text"] + (f"; U = {rule['k']:g}u" if "k" in rule else "")))
+    if rule and kind == "characteristic":
+        lines.append(("tolerances", "the drawing's, on 'Characteristics': size and distance two-sided (lsl, usl); "
+                                    "form, orientation, position one-sided (value <= tolerance_mm); a position at "
+                                    "MMC/LMC on its margin = tolerance + bonus - value >= 0 (u with the size's); "
+                                    "angles not decided yet"))
     for label, text in lines:
         book.text(ws, r, 1, label, font=HEADER_FONT)
         for part in textwrap.wrap(str(text), TEXT_WIDTH) or [""]:
@@ -187,12 +205,17 @@ def write_sheet(book: Book, kind: str, results: dict, *, decision_rows: dict[str
         chosen += [it for it in items if it["label"] not in decision_rows]
     else:
         chosen = list(items)
+    if kind == "characteristic":      # the drawing's order: a position beside its margin
+        chosen = list(items)
     shown = chosen[:MAX_ROWS]
-    res = quote_sheet("Results")
     from openpyxl.utils import get_column_letter
 
-    rcols = {str(c.value): get_column_letter(c.column) for c in book.wb["Results"][1] if c.value is not None}
+    cols = {name: {str(c.value): get_column_letter(c.column) for c in book.wb[name][1] if c.value is not None}
+            for name in {it.get("sheet", "Results") for it in shown}}
+    not_decided = {d["characteristic"]: d["reason"] for d in results.get("not_decided", [])}
     for j, it in enumerate(shown):
+        sheet = it.get("sheet", "Results")
+        res, rcols = quote_sheet(sheet), cols[sheet]
         rr = head + 1 + j
         book.text(ws, rr, 1, it["label"])
         dec = decisions.get(it["label"])
@@ -211,7 +234,9 @@ def write_sheet(book: Book, kind: str, results: dict, *, decision_rows: dict[str
             if it["U_col"] is not None:
                 U = f"{res}!${rcols[it['U_col']]}${it['row']}"
             else:
-                U = f"{it['k']:g}*{res}!${rcols[it['u_col']]}${it['row']}*{it['ratio']:g}"
+                f = it.get("u_factor", it["ratio"])
+                U = f"{it['k']:g}*{res}!${rcols[it['u_col']]}${it['row']}" + ("" if f == 1 else
+                                                                              f"*{f:g}" if f == round(f) else f"*{f!r}")
             value, Uv = it["value"], it["U"]
         shift = {1000.0: 3, 1.0: 0}[it["ratio"]]
         # U to two significant digits: ROUND(U, 1-INT(LOG10(U))); its decimals again after rounding
@@ -229,6 +254,13 @@ def write_sheet(book: Book, kind: str, results: dict, *, decision_rows: dict[str
             book.formula(ws, rr, 4, f"={cell(drow, column('p_c'), 'Decision')}", fmt="0.0000")
             cache[cell(rr, 3, absolute=False)] = dec["outcome"]
             cache[cell(rr, 4, absolute=False)] = dec["p_c"]
+        elif it["label"] in not_decided:
+            book.text(ws, rr, 3, "not decided (angle)")
+            book.note(ws.cell(row=rr, column=3), not_decided[it["label"]])
+        elif margin_label(it["label"]) in (decision_rows or {}):
+            book.text(ws, rr, 3, "on its margin")
+            book.note(ws.cell(row=rr, column=3), "a position at MMC/LMC is decided on its margin "
+                      "(tolerance + bonus - value >= 0): the row of that name")
         else:
             book.text(ws, rr, 3, "no tolerance given")
     r = head + 1 + len(shown)
@@ -253,6 +285,8 @@ def summary_lines(results: dict, most: int = 4) -> list[str]:
         for d in results.get("decisions", []):
             out.append(f"  {d['statement']}: {d['outcome']} ({d['zone']}, "
                        f"p_c = {d['p_c']:.4f})")
+        for d in results.get("not_decided", []):
+            out.append(f"  {d['characteristic']}: not decided ({d['reason']})")
         return out
     items = summary_items(results["kind"], results)
     for it in items[:most]:

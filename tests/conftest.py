@@ -42,6 +42,7 @@ NUMERIC_MODULES = {
     "test_conformity_core", "test_statement_core", "test_dof_core", "test_decision_workbook", "test_provenance",
     "test_readable",
     "test_all_pairs_probe_tables",
+    "test_characteristic_decisions",
 }
 
 

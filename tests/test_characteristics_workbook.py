@@ -88,7 +88,7 @@ def test_the_json_carries_tolerances_for_the_decision_rules(built):
 
 
 @pytest.mark.parametrize("edit, message", [
-    (('features = ["H1"]\ntolerance_mm = 0.01', 'features = ["H9"]\ntolerance_mm = 0.01'),
+    (('features = ["H1"]\ntolerance_mm = 0.009', 'features = ["H9"]\ntolerance_mm = 0.009'),
      "unknown feature 'H9'"),
     (('type = "flatness"', 'type = "wobble"'), "unknown type 'wobble'"),
     (('id_prefix = "A."', 'id_prefix = "Q."'), "no point id starts with 'Q.'"),

@@ -106,8 +106,9 @@ class CharacteristicSpec:
     coordinates, diametral zone; ``material_condition`` MMC/LMC with the bonus from the size
     characteristic ``size``; ``internal`` for a hole).
     ``direction``: straightness only, the zone direction (the surface's nominal normal).
-    Tolerances are carried, not decided: ``lsl``/``usl`` (size, distance, angle) or
-    ``tolerance_mm`` (zone width of form, orientation, position).
+    Tolerances are carried here, not decided (the build decides them: generator.decision):
+    ``lsl``/``usl`` (size, distance, angle) or ``tolerance_mm`` (zone width of form,
+    orientation, position).
     """
 
     name: str

@@ -87,7 +87,7 @@ def _instructions(book: Book, task, jf, res) -> None:
     book.para("How to read it", bold=True)
     book.para(
         "1. 'Characteristics' lists each characteristic: value, u (µm for lengths, µrad for "
-        "angles), the tolerance carried from the task (no conformity decision is taken here), "
+        "angles), the tolerance carried from the task (decided on the 'Decision' sheet), "
         "for a position at MMC/LMC the bonus from the measured size (ASME Y14.5-2018 5.8.1), the "
         "zone (tolerance + bonus), the margin (zone - value) and its u, which includes the "
         "correlation of size and position through V_X.",

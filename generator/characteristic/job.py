@@ -14,7 +14,12 @@ Task file::
                         nominal_position_mm, zone (planar | diametral), material_condition
                         (RFS | MMC | LMC), size, internal, direction, lsl, usl, tolerance_mm
 
-Tolerances are carried into the JSON and the Results sheet; no conformity decision is taken.
+    [decision]          rule, r, max_pfa, k   (optional; ISO 14253-1 and k = 2 when absent)
+    [report]            lab, operator, cmm, artefact, job_id, notes
+
+Every characteristic with a tolerance is decided by the build (generator.decision: the
+characteristic kind's tolerances, docs/conformity.md): 'Decision' and 'Summary' sheets, the JSON
+``decisions``; angles (deg) are not decided yet (JSON ``not_decided``).
 """
 
 from __future__ import annotations
@@ -32,7 +37,7 @@ from xlfuncs.errors import ModelError
 
 from .. import __version__
 from ..errors import InputError
-from ..taskfile import (check_keys, number, read_point_cloud, string, table, task_kind_and_name,
+from ..taskfile import (COMMON_TABLES, check_keys, number, read_point_cloud, string, table, task_kind_and_name,
                         text_list, vector3)
 
 KIND = "characteristic"
@@ -85,7 +90,7 @@ def load(path: Path, doc: dict) -> Task:
     _, name = task_kind_and_name(path, doc)
     notes = text_list(path, table(path, doc, "task"), "task", "notes")
     check_keys(path, doc, "file", {"task", "points", "parameters", "probes", "features", "frames",
-                                   "characteristics"})
+                                   "characteristics"} | COMMON_TABLES)
     cloud, params, tbl = read_point_cloud(path, doc)
     labels = list(cloud.labels)
     index = {lab: i for i, lab in enumerate(labels)}
@@ -298,6 +303,16 @@ type = "perpendicularity"
 features = ["B"]
 frame = "AB"
 tolerance_mm = 0.02
+
+# Every characteristic with a tolerance gets a conformity decision (sheet 'Decision'), by default
+# under ISO 14253-1 with U = 2u. Uncomment the table below to choose (docs/conformity.md):
+# [decision]
+# rule = "iso14253"      # simple | iso14253 | guarded_acceptance | guarded_rejection | specific_risk
+# k = 2.0                # U = k·u
+#
+# [report]               # shown on the 'Summary' sheet and in the JSON
+# lab = "..."
+# operator = "..."
 '''
 
 NEW_TASK_FILES = {"points.csv": '''# A face A (z = 0, outward normal -z) and a side face B (x = 0, outward -x), mm
