@@ -4,7 +4,8 @@
 * :func:`nu_eff`: ν_eff = u_c⁴ / Σ (c_i u_i)⁴ / ν_i (GUM G.4.1, eq. (G.2b)); ν_i = inf for inputs
   known exactly enough (type B inputs, GUM G.4.3) contribute nothing to the sum.
 * :func:`t_cdf`, :func:`t_quantile`: Student's t by the regularized incomplete beta function
-  (continued fraction) and its inverse (bisection refined by Newton steps).
+  (``xlfuncs.locator.stats.betainc``, the one behind the locator's F tails) and its inverse
+  (bisection refined by Newton steps).
 * :func:`coverage_factor`: k_p = t_p(ν_eff) with ν_eff truncated to the next lower integer
   (GUM G.6.4), p = 0.9545 by default (k = 2 for ν = ∞, GUM G.1.3, G.6.6).
 """
@@ -14,6 +15,7 @@ from __future__ import annotations
 import math
 
 from .errors import ModelError
+from .locator.stats import betainc
 
 P_K2 = 0.9545          #: the coverage probability of k = 2 for a normal distribution (GUM G.1.3)
 
@@ -35,52 +37,13 @@ def nu_eff(u_contributions, nus) -> float:
     return uc2 * uc2 / den
 
 
-def _betacf(a: float, b: float, x: float) -> float:
-    """Continued fraction of the incomplete beta function (modified Lentz)."""
-    tiny = 1e-300
-    qab, qap, qam = a + b, a + 1.0, a - 1.0
-    c, d = 1.0, 1.0 - qab * x / qap
-    d = 1.0 / (d if abs(d) > tiny else tiny)
-    h = d
-    for m in range(1, 400):
-        m2 = 2 * m
-        aa = m * (b - m) * x / ((qam + m2) * (a + m2))
-        d = 1.0 + aa * d
-        d = 1.0 / (d if abs(d) > tiny else tiny)
-        c = 1.0 + aa / c
-        c = c if abs(c) > tiny else tiny
-        h *= d * c
-        aa = -(a + m) * (qab + m) * x / ((a + m2) * (qap + m2))
-        d = 1.0 + aa * d
-        d = 1.0 / (d if abs(d) > tiny else tiny)
-        c = 1.0 + aa / c
-        c = c if abs(c) > tiny else tiny
-        de = d * c
-        h *= de
-        if abs(de - 1.0) < 1e-16:
-            break
-    return h
-
-
-def _betainc(a: float, b: float, x: float) -> float:
-    """The regularized incomplete beta function I_x(a, b)."""
-    if x <= 0.0:
-        return 0.0
-    if x >= 1.0:
-        return 1.0
-    lbt = math.lgamma(a + b) - math.lgamma(a) - math.lgamma(b) + a * math.log(x) + b * math.log1p(-x)
-    if x < (a + 1.0) / (a + b + 2.0):
-        return math.exp(lbt) * _betacf(a, b, x) / a
-    return 1.0 - math.exp(lbt) * _betacf(b, a, 1.0 - x) / b
-
-
 def t_cdf(t: float, nu: float) -> float:
     """Pr(T <= t) for Student's t with ν degrees of freedom."""
     if not nu > 0:
         raise ModelError(f"degrees of freedom must be positive, got {nu!r}")
     if math.isinf(nu):
         return 0.5 * math.erfc(-t / math.sqrt(2.0))
-    tail = 0.5 * _betainc(nu / 2.0, 0.5, nu / (nu + t * t))
+    tail = 0.5 * betainc(nu / 2.0, 0.5, nu / (nu + t * t))
     return 1.0 - tail if t > 0 else tail
 
 

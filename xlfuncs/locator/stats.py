@@ -106,6 +106,12 @@ def _log_betainc(a: float, b: float, x: float) -> float:
     return math.log1p(-v) if v < 1.0 else -math.inf
 
 
+def betainc(a: float, b: float, x: float) -> float:
+    """I_x(a, b), the regularized incomplete beta function (also behind Student's t in
+    :mod:`xlfuncs.dof`)."""
+    return math.exp(_log_betainc(a, b, x))
+
+
 def f_logcdf(F: float, d1: float, d2: float) -> float:
     """Natural log of P(X <= F), X ~ F(d1, d2)."""
     if d1 <= 0 or d2 <= 0:
