@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import csv
 import errno
-import hashlib
 import json
 import math
 import os
@@ -193,8 +192,8 @@ class Staging:
         stale = [n for n in tasks.get(self.task, []) if n not in new_names and (self.out_dir / n).is_file()] \
             if self.task is not None else []
         edited = [f.name for f in files if (self.out_dir / f.name).exists()
-                  and manifest.get(f.name) != self._sha256(self.out_dir / f.name)]
-        edited_stale = [n for n in stale if manifest.get(n) != self._sha256(self.out_dir / n)]
+                  and manifest.get(f.name) != report.sha256(self.out_dir / f.name)]
+        edited_stale = [n for n in stale if manifest.get(n) != report.sha256(self.out_dir / n)]
         if (edited or edited_stale) and not self.force:
             raise InputError("changed since cmmwb wrote it, or not written by cmmwb: not overwritten (use "
                              "--force to replace it and keep a backup, or another --out)",
@@ -207,7 +206,7 @@ class Staging:
                 self.removed.append(self.out_dir / name)
             manifest.pop(name, None)
         for f in files:
-            manifest[f.name] = self._sha256(f)
+            manifest[f.name] = report.sha256(f)
             os.replace(f, self.out_dir / f.name)
         if self.task is not None:
             tasks[self.task] = sorted(new_names)
@@ -227,14 +226,6 @@ class Staging:
         tasks = {str(k): [str(n) for n in v if isinstance(n, str) and "/" not in n and n not in (".", "..")]
                  for k, v in tasks.items() if isinstance(v, list)}
         return files, tasks
-
-    @staticmethod
-    def _sha256(path: Path) -> str:
-        h = hashlib.sha256()
-        with open(path, "rb") as fh:
-            for chunk in iter(lambda: fh.read(1 << 20), b""):
-                h.update(chunk)
-        return h.hexdigest()
 
     @staticmethod
     def _backup(path: Path) -> Path:
