@@ -26,7 +26,7 @@ from xlfuncs import dof
 
 from ..workbook.book import FMT_SCI, HEADER_FONT, Book, Formula
 from ..workbook.xlref import block, cell
-from .task import MODEL_TEXT, distance_name
+from .task import MODEL_TEXT, TYPE_A_INPUT, distance_name
 
 # columns of a budget block (paper layout) and of its intermediate quantities
 C_INPUT, C_X, C_S, C_U, C_C = 1, 2, 3, 4, 5
@@ -344,8 +344,6 @@ def _type_a_row(book: Book, ws, r: int, a: dict) -> dict:
     (the Decision sheet's named inputs tol<n>_s_um, tol<n>_n_repeats), sensitivity 1, normal,
     ν = n - 1 (GUM 4.2.3, G.3.3).  Not in u_c (eq. (6), the MPE inputs, as the Results sheet
     reports it); combined in u_with_A."""
-    from .job import TYPE_A_INPUT
-
     n = a["tolerance"]
     book.text(ws, r, C_INPUT, TYPE_A_INPUT)
     book.text(ws, r, C_X, "—").alignment = Alignment(horizontal="right")
@@ -740,6 +738,10 @@ def _instructions(book: Book, task) -> None:
         "The sensitivities dl/dx_i are the closed-form derivatives of the cross/dot-product models "
         "(eqs. 1-4, 7-21, 27-35), written as cell formulas next to each budget (columns G-K: "
         "normal vectors, signed distance t, its sign s, and the gradient g = dl/dn).",
+        "Columns L-M: each input's distribution (from b) and degrees of freedom nu (MPE inputs: type B, "
+        "nu = ∞, GUM G.4.2), and nu_eff of u_c by Welch-Satterthwaite (GUM G.4.1). A type A repeatability "
+        "given in [[decision.tolerances]] (s_um, n_repeats) is a row of its budget (normal, nu = n - 1), "
+        "combined beside u_c as u_with_A_um with its nu_eff, k and U_with_A_um (docs/errata.md).",
         "No macros, no pasted numbers: click any cell and follow it back to the inputs.")
     book.gap()
     book.para("How to use it", bold=True)

@@ -25,7 +25,7 @@ from .. import __version__
 from ..errors import InputError
 from ..taskfile import COMMON_TABLES, check_keys, number, table, task_kind_and_name, text_list
 from ..workbook.xlref import check_name
-from .task import MODEL_KEYS, Characteristic, Task, distance_name
+from .task import MODEL_KEYS, TYPE_A_INPUT, Characteristic, Task, distance_name
 
 KIND = "budget"
 EXAMPLES = ["knuckle.toml"]
@@ -270,7 +270,6 @@ def _distance_entry(name: str, model: str, d: bd.DistanceBudget, b: float) -> di
 #: the distribution of a position's inputs l_1, l_2: each is the combination of its distance
 #: budget's inputs (GUM G.2: close to normal), with that budget's ν_eff
 POSITION_INPUT_DISTRIBUTION = "normal"
-TYPE_A_INPUT = "repeatability s/√n (type A)"
 
 
 def type_a(results: dict) -> dict[str, dict]:
