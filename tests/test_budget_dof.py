@@ -78,9 +78,9 @@ def pairs(results: dict, layout: dict) -> list[tuple[str, str, str, object]]:
     def distance(cc, entry, where):
         for v in entry["variants"]:
             bc = cc.variants[v["variant"]]
-            chosen = v["variant"] == entry["variant"]
-            block(bc.sheet, f"{where} [{v['variant']}]", bc.rows, v["rows"], bc.nu_eff,
-                  entry["nu_eff"] if chosen else v["nu_eff"])
+            if v["variant"] == entry["variant"]:
+                assert v["nu_eff"] == entry["nu_eff"], where
+            block(bc.sheet, f"{where} [{v['variant']}]", bc.rows, v["rows"], bc.nu_eff, v["nu_eff"])
 
     for ch in results["characteristics"]:
         cc = layout[ch["name"]]

@@ -738,10 +738,6 @@ def _instructions(book: Book, task) -> None:
         "The sensitivities dl/dx_i are the closed-form derivatives of the cross/dot-product models "
         "(eqs. 1-4, 7-21, 27-35), written as cell formulas next to each budget (columns G-K: "
         "normal vectors, signed distance t, its sign s, and the gradient g = dl/dn).",
-        "Columns L-M: each input's distribution (from b) and degrees of freedom nu (MPE inputs: type B, "
-        "nu = ∞, GUM G.4.2), and nu_eff of u_c by Welch-Satterthwaite (GUM G.4.1). A type A repeatability "
-        "given in [[decision.tolerances]] (s_um, n_repeats) is a row of its budget (normal, nu = n - 1), "
-        "combined beside u_c as u_with_A_um with its nu_eff, k and U_with_A_um (docs/errata.md).",
         "No macros, no pasted numbers: click any cell and follow it back to the inputs.")
     book.gap()
     book.para("How to use it", bold=True)

@@ -292,8 +292,9 @@ def add_type_a(results: dict) -> None:
     ``u_with_type_a_um``, ``k`` (t_95.45(⌊ν_eff⌋) with ``[decision] k_from_dof``, GUM G.6.4,
     else the task's k) and ``U_with_type_a_um``.  Existing fields do not change."""
     k_task = float(results["mpe"]["k"])
+    given = type_a(results)
     for ch in results["characteristics"]:
-        a = type_a(results).get(ch["name"])
+        a = given.get(ch["name"])
         if a is None:
             continue
         contributions = [ch["u_um"], a["u_um"]]
@@ -304,6 +305,9 @@ def add_type_a(results: dict) -> None:
                         "distribution": "normal", "nu": a["nu"], "u_with_type_a_um": u, "k": k,
                         "U_with_type_a_um": k * u}
         ch["nu_eff"] = nu
+        for v in ch.get("variants", []):
+            if v["variant"] == ch["variant"]:      # the chosen budget carries the type A row
+                v["nu_eff"] = nu
 
 
 def compute(task: Task) -> dict:
