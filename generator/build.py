@@ -308,6 +308,8 @@ def build_task(task_path: Path, out_dir: Path, *, plots: bool = True, force: boo
     if spec is not None:
         results["decision_rule"] = decisions.rule_json(spec)
         results["decisions"] = decisions.decide_all(task_path, kind, spec, results)
+        if hasattr(mod, "add_type_a"):         # a kind's budgets show the type A inputs (budget)
+            mod.add_type_a(results)
     results["provenance"] = report.provenance(task_path, doc, built_utc)
     if rep is not None:
         results["report"] = rep

@@ -43,6 +43,7 @@ NUMERIC_MODULES = {
     "test_readable",
     "test_all_pairs_probe_tables",
     "test_characteristic_decisions",
+    "test_budget_dof",
 }
 
 

@@ -311,7 +311,8 @@ def test_cli_build_writes_workbook_json_and_plot(tmp_path):
     assert (tmp_path / "knuckle_contributions.png").exists()
     ch = results["characteristics"][0]
     assert set(ch) >= {"name", "model", "variant", "value_mm", "u_um", "U_um", "rows"}
-    assert set(ch["rows"][0]) == {"input", "value_mm", "sensitivity", "u_um", "contribution_um"}
+    assert set(ch["rows"][0]) == {"input", "value_mm", "sensitivity", "u_um", "contribution_um",
+                                  "distribution", "nu"}
     assert_printed(ch["u_um"], "5.82")
     assert budget_job.summary(results)
 

@@ -82,3 +82,25 @@ def coverage_factor(nu: float, p: float = P_K2) -> float:
     if n < 1:
         raise ModelError(f"an effective degrees of freedom below 1 ({nu!r}) gives no coverage factor")
     return t_quantile(0.5 + p / 2.0, n)
+
+
+#: b of u = b·E_L,MPE that names a distribution: 1/√3 (rectangular, GUM 4.3.7) and 1/√6
+#: (triangular, GUM 4.3.9), matched to ``B_TOLERANCE`` so that the printed 0.577 and 0.408 count
+B_RECTANGULAR = 1.0 / math.sqrt(3.0)
+B_TRIANGULAR = 1.0 / math.sqrt(6.0)
+B_TOLERANCE = 5e-4
+#: the distribution of an input whose b names none of the above (b = 1/2, 1/3, ...: the task's
+#: own coverage convention, taken as the standard deviation of a normal distribution)
+B_OTHER = "normal (b given)"
+
+
+def distribution_of_b(b: float) -> str:
+    """The distribution that u = b·E_L,MPE implies for an MPE-derived (type B) input
+    (Wojtyła/Płowucha 2023 eq. (5); GUM 4.3.7, 4.3.9): b = 1/√3 (0.577) "rectangular", b = 1/√6
+    (0.408) "triangular", any other b "normal (b given)" (docs/errata.md)."""
+    b = float(b)
+    if abs(b - B_RECTANGULAR) <= B_TOLERANCE:
+        return "rectangular"
+    if abs(b - B_TRIANGULAR) <= B_TOLERANCE:
+        return "triangular"
+    return B_OTHER

@@ -22,14 +22,18 @@ from pathlib import Path
 from openpyxl.styles import Alignment
 
 from xlfuncs import budget as bd
+from xlfuncs import dof
 
 from ..workbook.book import FMT_SCI, HEADER_FONT, Book, Formula
 from ..workbook.xlref import block, cell
-from .task import MODEL_TEXT, distance_name
+from .task import MODEL_TEXT, TYPE_A_INPUT, distance_name
 
 # columns of a budget block (paper layout) and of its intermediate quantities
 C_INPUT, C_X, C_S, C_U, C_C = 1, 2, 3, 4, 5
 C_QTY, C_VX, C_VY, C_VZ, C_MEAN = 7, 8, 9, 10, 11
+# degrees of freedom, after every existing column (GUM G.4): distribution and ν of each input,
+# and to their right, below, ν_eff of u_c (and the type A combination)
+C_DIST, C_NU = 12, 13
 
 FMT_X = "0.00##"          # mm, as entered
 FMT_S = "0.0000"          # sensitivities, 4 decimals
@@ -47,6 +51,18 @@ BUDGET_NOTES = [
     "difference.",
     "Contribution dl/dx_i * u_i (µm); u_c = sqrt(sum of squares), eq. (6).",
 ]
+DOF_HEADER = ["distribution", "nu"]
+DOF_NOTES = [
+    "Distribution of the input: u = b * E_L,MPE with b = 1/sqrt(3) (0.577) is the standard deviation of a "
+    "rectangular distribution, b = 1/sqrt(6) (0.408) of a triangular one (GUM 4.3.7, 4.3.9); any other b is "
+    "read as the standard deviation of a normal distribution (docs/errata.md). A live formula of b.",
+    "Degrees of freedom nu_i: an input from an MPE statement is type B, known without uncertainty of its "
+    "own: nu = infinity, shown as the text \"∞\" (GUM G.4.2, G.4.3); a type A repeatability has nu = n - 1 "
+    "(GUM G.3.3). Type a number to give a type B input finite nu (GUM eq. (G.3)).",
+]
+NU_INF = "∞"
+NU_EFF_NOTE = ("nu_eff by Welch-Satterthwaite, GUM G.4.1 eq. (G.2b): u^4 / sum((c_i u_i)^4 / nu_i) over "
+               "the rows whose nu is a number; \"∞\" when every input has nu = ∞ (all type B)")
 
 KIND_TEXT = {
     "point_point": "l = |p|, eq. (1)",
@@ -74,10 +90,12 @@ class BudgetCells:
 
     sheet: str
     label: str
-    rows: list[dict]             # {"input", "value", "sensitivity", "u", "contribution"}
+    rows: list[dict]             # {"input", "value", "sensitivity", "u", "contribution", "distribution", "nu"}
     value: str
     u: str
     U: str
+    nu_eff: str = ""             #: ν_eff of u_c (or of u_with_A when type_a)
+    type_a: dict | None = None   #: {"u", "nu", "u_with", "k", "U_with"} cells of the type A row
 
 
 @dataclass
@@ -90,6 +108,8 @@ class CharCells:
     u: str
     U: str
     rows: list[dict] = field(default_factory=list)
+    nu_eff: str = ""
+    type_a: dict | None = None
     chosen: BudgetCells | None = None
     variants: dict[str, BudgetCells] = field(default_factory=dict)
     distances: list["CharCells"] = field(default_factory=list)
@@ -150,10 +170,51 @@ def _point_refs(vec: bd.Vec) -> list[str]:
     return [f"{vec.head}_{ax}_mm-{vec.tail}_{ax}_mm" for ax in bd.AXES]
 
 
+def _distribution_formula() -> str:
+    """The distribution that b implies, live (:func:`xlfuncs.dof.distribution_of_b`)."""
+    t = f"{dof.B_TOLERANCE:g}"
+    return (f'=IF(ABS(b-1/SQRT(3))<={t},"rectangular",IF(ABS(b-1/SQRT(6))<={t},"triangular",'
+            f'"{dof.B_OTHER}"))')
+
+
+def _nu_eff_formula(u: str, rows: list[int], c_contribution: int, c_nu: int) -> str:
+    """ν_eff = u^4 / Σ c_i^4/ν_i (GUM eq. (G.2b)) over the rows whose ν cell is a number; the
+    text "∞" when none is (all inputs type B)."""
+    terms = "+".join(f"IF(ISNUMBER({cell(r, c_nu)}),{cell(r, c_contribution)}^4/{cell(r, c_nu)},0)"
+                     for r in rows)
+    return f'=IF(({terms})=0,"{NU_INF}",{u}^4/({terms}))'
+
+
+def _type_a_cells(book: Book, ws, r: int, c_label: int, c_value: int, u: str, contrib: str,
+                  a: dict, nu_rows: list[int], c_contribution: int, c_nu: int) -> tuple[dict, str]:
+    """u_with_A = sqrt(u^2 + u_A^2), ν_eff, k and U_with_A as label/value cells from row ``r``
+    down (GUM 4.2.3, G.4.1, G.6.4); returns the cells and ν_eff's."""
+    labels = ["u_with_A_um", "nu_eff", "k", "U_with_A_um"]
+    for j, lab in enumerate(labels):
+        book.text(ws, r + j, c_label, lab)
+    uw = cell(r, c_value)
+    book.formula(ws, r, c_value, f"=SQRT({u}^2+{contrib}^2)", fmt=FMT_U,
+                 note="u with the type A repeatability: sqrt(u_c^2 + u_A^2) (GUM 5.1.2); "
+                      "what the Decision sheet decides with")
+    book.formula(ws, r + 1, c_value, _nu_eff_formula(uw, nu_rows, c_contribution, c_nu), fmt="0.00",
+                 note=NU_EFF_NOTE)
+    if a["k_from_dof"]:
+        book.formula(ws, r + 2, c_value, f"=_xlfn.T.INV.2T(1-{dof.P_K2},INT({cell(r + 1, c_value)}))",
+                     fmt="0.000", note="k = t_95.45(nu) for nu = floor(nu_eff), [decision] k_from_dof "
+                                       "(GUM G.6.4)")
+    else:
+        book.formula(ws, r + 2, c_value, "=k", fmt="0.000",
+                     note="the task's k; [decision] k_from_dof = true takes k from the t-distribution")
+    book.formula(ws, r + 3, c_value, f"={cell(r + 2, c_value)}*{uw}", fmt=FMT_U, note="U = k u_with_A")
+    got = {"u_with": uw, "k": cell(r + 2, c_value), "U_with": cell(r + 3, c_value)}
+    return {k: _coord(v) for k, v in got.items()}, _coord(cell(r + 1, c_value))
+
+
 def write_variant(book: Book, ws, r0: int, title: str, vb: bd.VariantBudget, *,
-                  notes: bool) -> tuple[BudgetCells, int]:
+                  notes: bool, type_a: dict | None = None) -> tuple[BudgetCells, int]:
     """Write one variant's budget with its top-left at row ``r0``; return its cells and the
-    first free row below it."""
+    first free row below it.  ``type_a`` (:func:`generator.budget.job.type_a`): a type A
+    repeatability given in ``[[decision.tolerances]]``, written as a row below the inputs."""
     spec = vb.spec
     w = _BlockWriter(book, ws, r0)
     book.text(ws, r0, C_INPUT, title, font=HEADER_FONT)
@@ -163,6 +224,7 @@ def write_variant(book: Book, ws, r0: int, title: str, vb: bd.VariantBudget, *,
     book.header(ws, r0 + 1, C_QTY, ["intermediate", "x", "y", "z", "meaning"],
                 [None, "x component (unit: mm for coordinate vectors, mm² for cross products, mm/mm "
                  "for gradients)", "y component", "z component", None] if notes else None)
+    book.header(ws, r0 + 1, C_DIST, DOF_HEADER, DOF_NOTES if notes else None)
 
     # input quantities: x_i = coordinate differences of named points
     vecs: dict[str, list[str]] = {}
@@ -175,10 +237,13 @@ def write_variant(book: Book, ws, r0: int, title: str, vb: bd.VariantBudget, *,
             book.formula(ws, r, C_X, f"={f}", fmt=FMT_X)
             book.formula(ws, r, C_U, f"=b*(A_um+ABS({cell(r, C_X)})/B_mm)", fmt=FMT_U)
             book.formula(ws, r, C_C, f"={cell(r, C_S)}*{cell(r, C_U)}", fmt=FMT_U)
+            book.formula(ws, r, C_DIST, _distribution_formula(), fmt=None)
+            book.text(ws, r, C_NU, NU_INF).alignment = Alignment(horizontal="right")
             refs.append(cell(r, C_X))
             rows.append({"input": name, "value": _coord(cell(r, C_X)),
                          "sensitivity": _coord(cell(r, C_S)), "u": _coord(cell(r, C_U)),
-                         "contribution": _coord(cell(r, C_C))})
+                         "contribution": _coord(cell(r, C_C)), "distribution": _coord(cell(r, C_DIST)),
+                         "nu": _coord(cell(r, C_NU))})
             r += 1
         vecs[v.role] = refs
     lab = {v.role: v.label for v in spec.vectors}
@@ -241,6 +306,12 @@ def write_variant(book: Book, ws, r0: int, title: str, vb: bd.VariantBudget, *,
             book.formula(ws, r, C_S, f"={f}", fmt=FMT_S)
             r += 1
     last_input = r - 1
+    nu_rows = list(range(r0 + 2, r))
+    a_cells = None
+    if type_a is not None:
+        a_cells = _type_a_row(book, ws, r, type_a)
+        nu_rows.append(r)
+        r += 1
     value_cell = (r, C_C)
     book.text(ws, r, C_U, "l_mm")
     book.formula(ws, r, C_C, f"={value}", fmt="0.0000",
@@ -251,10 +322,40 @@ def write_variant(book: Book, ws, r0: int, title: str, vb: bd.VariantBudget, *,
     book.text(ws, r + 2, C_U, "U_um")
     book.formula(ws, r + 2, C_C, f"=k*{cell(r + 1, C_C)}", fmt=FMT_U,
                  note="U = k u_c" if notes else None)
-    bottom = max(r + 3, w.qrow)
+    if a_cells is None:
+        book.text(ws, r + 1, C_DIST, "nu_eff")
+        book.formula(ws, r + 1, C_NU, _nu_eff_formula(cell(r + 1, C_C), nu_rows, C_C, C_NU), fmt="0.00",
+                     note=NU_EFF_NOTE).alignment = Alignment(horizontal="right")
+        nu_eff = _coord(cell(r + 1, C_NU))
+        bottom = max(r + 3, w.qrow)
+    else:
+        got, nu_eff = _type_a_cells(book, ws, r, C_DIST, C_NU, cell(r + 1, C_C), a_cells["contribution"],
+                                    type_a, nu_rows, C_C, C_NU)
+        a_cells.update(got)
+        bottom = max(r + 4, w.qrow)
     cells = BudgetCells(ws.title, spec.label, rows, _coord(cell(*value_cell)),
-                        _coord(cell(r + 1, C_C)), _coord(cell(r + 2, C_C)))
+                        _coord(cell(r + 1, C_C)), _coord(cell(r + 2, C_C)), nu_eff,
+                        {k: _coord(v) for k, v in a_cells.items()} if a_cells else None)
     return cells, bottom + 1
+
+
+def _type_a_row(book: Book, ws, r: int, a: dict) -> dict:
+    """The type A repeatability of ``[[decision.tolerances]]`` #n as a budget row: u_A = s/√n
+    (the Decision sheet's named inputs tol<n>_s_um, tol<n>_n_repeats), sensitivity 1, normal,
+    ν = n - 1 (GUM 4.2.3, G.3.3).  Not in u_c (eq. (6), the MPE inputs, as the Results sheet
+    reports it); combined in u_with_A."""
+    n = a["tolerance"]
+    book.text(ws, r, C_INPUT, TYPE_A_INPUT)
+    book.text(ws, r, C_X, "—").alignment = Alignment(horizontal="right")
+    book.formula(ws, r, C_S, "=1", fmt="0")
+    book.formula(ws, r, C_U, f"=tol{n}_s_um/SQRT(tol{n}_n_repeats)", fmt=FMT_U,
+                 note=f"u_A = s/sqrt(n): the repeatability of [[decision.tolerances]] #{n} (its s_um, "
+                      "n_repeats are input cells on the Decision sheet), GUM 4.2.3. Not part of u_c "
+                      "(eq. (6)); combined in u_with_A_um")
+    book.formula(ws, r, C_C, f"={cell(r, C_S)}*{cell(r, C_U)}", fmt=FMT_U)
+    book.text(ws, r, C_DIST, "normal")
+    book.formula(ws, r, C_NU, f"=tol{n}_n_repeats-1", fmt="0", note="nu = n - 1 (GUM G.3.3)")
+    return {"u": cell(r, C_U), "contribution": cell(r, C_C), "nu": cell(r, C_NU)}
 
 
 def _variant_table(book: Book, ws, r0: int, title: str, d: bd.DistanceBudget,
@@ -343,32 +444,32 @@ def _split(coord: str) -> tuple[int, int]:
     return row, column_index_from_string(letters)
 
 
-def _distance_section(book: Book, ws, r0: int, heading: str, d: bd.DistanceBudget
-                      ) -> tuple[CharCells, int, list]:
+def _distance_section(book: Book, ws, r0: int, heading: str, d: bd.DistanceBudget,
+                      type_a: dict | None = None) -> tuple[CharCells, int, list]:
     """The chosen variant's budget of one distance; returns its cells, the next row and the
     pending (other) variants to write further down."""
     ch = d.chosen
     title = f"{heading} — variant {ch.label}, {ch.spec.equation}"
-    bc, r = write_variant(book, ws, r0, title, ch, notes=True)
+    bc, r = write_variant(book, ws, r0, title, ch, notes=True, type_a=type_a)
     cc = CharCells(ws.title, bc.value, bc.u, bc.U, rows=bc.rows, chosen=bc,
-                   variants={ch.label: bc})
+                   variants={ch.label: bc}, nu_eff=bc.nu_eff, type_a=bc.type_a)
     return cc, r, [v for v in d.variants if v is not ch]
 
 
 def _set_widths(ws) -> None:
     for col, width in (("A", 30), ("B", 14), ("C", 14), ("D", 14), ("E", 16), ("F", 9),
-                       ("G", 14), ("H", 13), ("I", 13), ("J", 13), ("K", 48)):
+                       ("G", 14), ("H", 13), ("I", 13), ("J", 13), ("K", 48), ("L", 18), ("M", 10)):
         ws.column_dimensions[col].width = width
 
 
 # -- sheets ---------------------------------------------------------------------------------------
 
-def _write_distance_sheet(book: Book, task, c, d: bd.DistanceBudget) -> CharCells:
+def _write_distance_sheet(book: Book, task, c, d: bd.DistanceBudget, type_a: dict | None = None) -> CharCells:
     ws = book.sheet(c.name)
     _set_widths(ws)
     book.text(ws, 1, 1, f"{c.name}: {MODEL_TEXT[c.model]}", font=HEADER_FONT)
     book.text(ws, 2, 1, _points_text(c) + f"; variant requested: {c.variant}")
-    cc, r, others = _distance_section(book, ws, 4, f"Budget of {c.name}", d)
+    cc, r, others = _distance_section(book, ws, 4, f"Budget of {c.name}", d, type_a)
     keep = [(1, r - 1)]
     pareto = [(inp, 1.0, row["contribution"], float(x))
               for inp, row, x in zip(d.chosen.inputs, cc.rows, d.chosen.contributions_um)]
@@ -395,7 +496,7 @@ def _others_and_table(book: Book, ws, r: int, sections, *, keep: list[tuple[int,
     pareto_rows = _pareto(book, ws, r_pareto, pareto, pareto_u, what)
     keep.append((r_pareto, r_pareto + pareto_rows - 1))
     r_blocks = r_pareto + pareto_rows + 1
-    book.print_setup(ws, landscape=True, title_rows=None, area=f"A1:K{r_pareto + pareto_rows - 1}",
+    book.print_setup(ws, landscape=True, title_rows=None, area=f"A1:M{r_pareto + pareto_rows - 1}",
                      row_breaks=_page_breaks(keep),
                      caption=f"{ws.title}: chosen budget, variants, contributions (the budgets of the "
                              "other variants are in the workbook below, not printed)")
@@ -412,7 +513,7 @@ def _others_and_table(book: Book, ws, r: int, sections, *, keep: list[tuple[int,
     return r_blocks
 
 
-def _write_position_sheet(book: Book, task, c, pb: bd.PositionBudget) -> CharCells:
+def _write_position_sheet(book: Book, task, c, pb: bd.PositionBudget, type_a: dict | None = None) -> CharCells:
     ws = book.sheet(c.name)
     _set_widths(ws)
     book.text(ws, 1, 1, f"{c.name}: position deviation of the axis point {pb.point}, cylindrical "
@@ -420,6 +521,9 @@ def _write_position_sheet(book: Book, task, c, pb: bd.PositionBudget) -> CharCel
     book.text(ws, 2, 1, "POS = 2 sqrt((l1 - l1_TED)^2 + (l2 - l2_TED)^2); u_POS = 2 sqrt(u_l1^2 + "
               "u_l2^2) (Table 9 convention: the RMS of POS at the exact location, docs/errata.md)")
     book.text(ws, 4, 1, f"Budget of {c.name} (Table 9)", font=HEADER_FONT)
+    book.header(ws, 5, 8, DOF_HEADER,
+                ["l_i combines the inputs of its distance budget below: close to normal (GUM G.2)",
+                 "nu of l_i: the nu_eff of its distance budget below (GUM G.4.1)"])
     book.header(ws, 5, 1, ["input", "value_mm", "sensitivity_mm/mm", "u_um", "contribution_um",
                            "TED_mm", "datum"],
                 ["the distances of the axis point from the two datums", "l_i (mm), from the "
@@ -456,9 +560,13 @@ def _write_position_sheet(book: Book, task, c, pb: bd.PositionBudget) -> CharCel
         book.formula(ws, rr, 5, f"={cell(rr, 3)}*{cell(rr, 4)}", fmt=FMT_U)
         book.formula(ws, rr, 6, f"={c.name}_ted{i + 1}_mm", fmt="0.00##")
         book.text(ws, rr, 7, pb.datums[i])
+        book.text(ws, rr, 8, "normal")
+        book.formula(ws, rr, 9, f"={_ref(ws.title, cc.nu_eff, ws.title)}", fmt="0.00",
+                     note=NU_EFF_NOTE).alignment = Alignment(horizontal="right")
         rows.append({"input": pb.inputs[i], "value": _coord(cell(rr, 2)),
                      "sensitivity": _coord(cell(rr, 3)), "u": _coord(cell(rr, 4)),
-                     "contribution": _coord(cell(rr, 5))})
+                     "contribution": _coord(cell(rr, 5)), "distribution": _coord(cell(rr, 8)),
+                     "nu": _coord(cell(rr, 9))})
     book.text(ws, 8, 4, "POS_mm")
     book.formula(ws, 8, 5, f"=2*SQRT(({cell(6, 2)}-{cell(6, 6)})^2+({cell(7, 2)}-{cell(7, 6)})^2)",
                  fmt="0.0000", note="POS = 2 sqrt((l1 - l1_TED)^2 + (l2 - l2_TED)^2), eq. (22)")
@@ -471,8 +579,33 @@ def _write_position_sheet(book: Book, task, c, pb: bd.PositionBudget) -> CharCel
     book.formula(ws, 11, 5, f"=2*MAX({block(6, 4, 2, 1)})", fmt=FMT_U,
                  note="for comparison only: the paper's eq. (26) with u_l = max(u_l1, u_l2); "
                       "Table 9 does not follow it")
+    # degrees of freedom of u_POS (and of a type A repeatability) in columns J-K, rows 6-11
+    if type_a is None:
+        book.text(ws, 9, 10, "nu_eff")
+        book.formula(ws, 9, 11, _nu_eff_formula("E9", [6, 7], 5, 9), fmt="0.00",
+                     note=NU_EFF_NOTE).alignment = Alignment(horizontal="left")
+        nu_eff, a_cells = "K9", None
+    else:
+        n = type_a["tolerance"]
+        book.text(ws, 6, 10, "u_A_um")
+        book.formula(ws, 6, 11, f"=tol{n}_s_um/SQRT(tol{n}_n_repeats)", fmt=FMT_U,
+                     note=f"type A, normal: u_A = s/sqrt(n) of [[decision.tolerances]] #{n} (its s_um, "
+                          "n_repeats are input cells on the Decision sheet), GUM 4.2.3; sensitivity 1 on POS")
+        book.text(ws, 7, 10, "nu_A")
+        book.formula(ws, 7, 11, f"=tol{n}_n_repeats-1", fmt="0", note="nu = n - 1 (GUM G.3.3)")
+        # ν_eff over the rows 6-7 (contribution E, ν I) and the type A (u_A K6, ν_A K7)
+        got, _ = _type_a_cells(book, ws, 8, 10, 11, "E9", "K6", type_a, [6, 7], 5, 9)
+        terms = f"{cell(6, 11)}^4/{cell(7, 11)}"
+        uw = cell(8, 11)
+        two = "+".join(f"IF(ISNUMBER({cell(r, 9)}),{cell(r, 5)}^4/{cell(r, 9)},0)" for r in (6, 7))
+        book.formula(ws, 9, 11, f"={uw}^4/({two}+{terms})", fmt="0.00", note=NU_EFF_NOTE)
+        for rr in range(6, 12):
+            ws.cell(rr, 11).alignment = Alignment(horizontal="left")
+        nu_eff = "K9"
+        a_cells = {"u": "K6", "contribution": "K6", "nu": "K7", **got}
     ws.freeze_panes = "B1"
-    return CharCells(ws.title, "E8", "E9", "E10", rows=rows, distances=dist_cells)
+    return CharCells(ws.title, "E8", "E9", "E10", rows=rows, distances=dist_cells, nu_eff=nu_eff,
+                     type_a=a_cells)
 
 
 def _points_text(c) -> str:
@@ -634,17 +767,20 @@ def _instructions(book: Book, task) -> None:
         *task.notes)
 
 
-def write(task, evaluated: list, path: Path) -> dict[str, CharCells]:
-    """Write the workbook to ``path``; return where each characteristic's cells are."""
+def write(task, evaluated: list, path: Path, type_a: dict[str, dict] | None = None) -> dict[str, CharCells]:
+    """Write the workbook to ``path``; return where each characteristic's cells are.  ``type_a``:
+    the type A repeatabilities of ``[[decision.tolerances]]`` per characteristic
+    (:func:`generator.budget.job.type_a`)."""
+    type_a = type_a or {}
     book = Book("budget", task.name, f"Sensitivity-analysis uncertainty budgets — {task.name}")
     _instructions(book, task)
     _write_inputs(book, task)
     layout: dict[str, CharCells] = {}
     for c, r in zip(task.characteristics, evaluated):
         if c.model == "position":
-            layout[c.name] = _write_position_sheet(book, task, c, r)
+            layout[c.name] = _write_position_sheet(book, task, c, r, type_a.get(c.name))
         else:
-            layout[c.name] = _write_distance_sheet(book, task, c, r)
+            layout[c.name] = _write_distance_sheet(book, task, c, r, type_a.get(c.name))
     rows = []
     for k, (c, r) in enumerate(zip(task.characteristics, evaluated)):
         cc = layout[c.name]

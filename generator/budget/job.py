@@ -17,6 +17,7 @@ import re
 from pathlib import Path
 
 from xlfuncs import budget as bd
+from xlfuncs import dof
 from xlfuncs.errors import ModelError
 from xlfuncs.limits import coordinate_problem
 
@@ -24,7 +25,7 @@ from .. import __version__
 from ..errors import InputError
 from ..taskfile import COMMON_TABLES, check_keys, number, table, task_kind_and_name, text_list
 from ..workbook.xlref import check_name
-from .task import MODEL_KEYS, Characteristic, Task, distance_name
+from .task import MODEL_KEYS, TYPE_A_INPUT, Characteristic, Task, distance_name
 
 KIND = "budget"
 EXAMPLES = ["knuckle.toml"]
@@ -247,14 +248,66 @@ def evaluate(task: Task) -> list:
     return [_evaluate(task, c) for c in task.characteristics]
 
 
-def _distance_entry(name: str, model: str, d: bd.DistanceBudget, k: float) -> dict:
+def _mpe_rows(v: bd.VariantBudget, b: float) -> list[dict]:
+    """A variant's budget rows with the distribution b implies and ν = ∞ (JSON null): type B
+    inputs from an MPE statement (GUM G.4.2, G.4.3; docs/cli.md)."""
+    dist = dof.distribution_of_b(b)
+    return [dict(row, distribution=dist, nu=None) for row in v.rows()]
+
+
+def _distance_entry(name: str, model: str, d: bd.DistanceBudget, b: float) -> dict:
     ch = d.chosen
     return {
         "name": name, "model": model, "variant": ch.label, "equation": ch.spec.equation,
-        "value_mm": ch.value_mm, "u_um": ch.u_c_um, "U_um": ch.U_um, "rows": ch.rows(),
+        "value_mm": ch.value_mm, "u_um": ch.u_c_um, "U_um": ch.U_um, "rows": _mpe_rows(ch, b),
         "variants": [{"variant": v.label, "equation": v.spec.equation, "value_mm": v.value_mm,
-                      "u_um": v.u_c_um, "U_um": v.U_um, "rows": v.rows()} for v in d.variants],
+                      "u_um": v.u_c_um, "U_um": v.U_um, "rows": _mpe_rows(v, b), "nu_eff": None}
+                     for v in d.variants],
+        "nu_eff": None,
     }
+
+
+#: the distribution of a position's inputs l_1, l_2: each is the combination of its distance
+#: budget's inputs (GUM G.2: close to normal), with that budget's ν_eff
+POSITION_INPUT_DISTRIBUTION = "normal"
+
+
+def type_a(results: dict) -> dict[str, dict]:
+    """The type A repeatabilities the ``[[decision.tolerances]]`` give, per characteristic name:
+    {"tolerance": its 1-based number, "u_um": u_A, "nu": ν_A, "k_from_dof": bool} (the first
+    tolerance with s_um of a characteristic; GUM 4.2.3, G.3.3)."""
+    out: dict[str, dict] = {}
+    kfd = bool(results.get("decision_rule", {}).get("k_from_dof", False))
+    for n, d in enumerate(results.get("decisions", []), start=1):
+        if d.get("u_A_um") is not None and d["characteristic"] not in out:
+            out[d["characteristic"]] = {"tolerance": n, "u_um": d["u_A_um"], "nu": d["nu_A"],
+                                        "k_from_dof": kfd}
+    return out
+
+
+def add_type_a(results: dict) -> None:
+    """After the decisions: a characteristic with a type A repeatability gets ``type_a`` (the row
+    of its budget: input, u_um, distribution "normal", nu = n - 1) and its ``nu_eff`` by
+    Welch–Satterthwaite over its contributions (GUM G.4.1; the MPE inputs ν = ∞), the combined
+    ``u_with_type_a_um``, ``k`` (t_95.45(⌊ν_eff⌋) with ``[decision] k_from_dof``, GUM G.6.4,
+    else the task's k) and ``U_with_type_a_um``.  Existing fields do not change."""
+    k_task = float(results["mpe"]["k"])
+    given = type_a(results)
+    for ch in results["characteristics"]:
+        a = given.get(ch["name"])
+        if a is None:
+            continue
+        contributions = [ch["u_um"], a["u_um"]]
+        u = math.hypot(*contributions)
+        nu = dof.nu_eff(contributions, [math.inf, a["nu"]])
+        k = dof.coverage_factor(nu) if a["k_from_dof"] else k_task
+        ch["type_a"] = {"input": TYPE_A_INPUT, "tolerance": a["tolerance"], "u_um": a["u_um"],
+                        "distribution": "normal", "nu": a["nu"], "u_with_type_a_um": u, "k": k,
+                        "U_with_type_a_um": k * u}
+        ch["nu_eff"] = nu
+        for v in ch.get("variants", []):
+            if v["variant"] == ch["variant"]:      # the chosen budget carries the type A row
+                v["nu_eff"] = nu
 
 
 def compute(task: Task) -> dict:
@@ -268,14 +321,16 @@ def compute(task: Task) -> dict:
             entry = {
                 "name": c.name, "model": c.model, "variant": r.variant, "point": r.point,
                 "datums": list(r.datums), "ted_mm": list(r.ted_mm),
-                "value_mm": r.value_mm, "u_um": r.u_um, "U_um": r.U_um, "rows": r.rows(),
+                "value_mm": r.value_mm, "u_um": r.u_um, "U_um": r.U_um,
+                "rows": [dict(row, distribution=POSITION_INPUT_DISTRIBUTION, nu=None) for row in r.rows()],
                 "u_eq26_um": r.u_eq26_um,
                 "distances": [dict(_distance_entry(distance_name(c, i), "datum_distance", d,
-                                                   task.mpe.k), datum=r.datums[i])
+                                                   task.mpe.b), datum=r.datums[i])
                               for i, d in enumerate(r.distances)],
+                "nu_eff": None,
             }
         else:
-            entry = _distance_entry(c.name, c.model, r, task.mpe.k)
+            entry = _distance_entry(c.name, c.model, r, task.mpe.b)
             entry.update({k: (list(v) if isinstance(v, tuple) else v) for k, v in c.points.items()})
             if c.datum:
                 entry["datum"] = c.datum
@@ -375,7 +430,7 @@ def read_book(path: Path) -> dict:
 def write_book(task: Task, results: dict, path: Path) -> None:
     from .book import write
 
-    write(task, evaluate(task), path)
+    write(task, evaluate(task), path, type_a=type_a(results))
 
 
 def write_plots(task: Task, results: dict, out_dir: Path) -> list[Path]:

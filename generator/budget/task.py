@@ -61,3 +61,7 @@ class Task:
 def distance_name(c: Characteristic, i: int) -> str:
     """Name of the i-th (0, 1) datum distance of a position: the paper's l_S4,1, l_S4,2."""
     return f"l_{c.points['point']},{i + 1}"
+
+
+#: the label of a type A repeatability ([[decision.tolerances]] s_um, n_repeats) in a budget
+TYPE_A_INPUT = "repeatability s/√n (type A)"
