@@ -25,6 +25,7 @@ import zipfile
 from pathlib import Path
 
 from .jobs import available, job
+from .workbook.tasksheet import TASK_SHEET
 from .workbook.atomic import replacing
 
 TEMPLATE_DIR = Path(__file__).resolve().parents[1] / "workbook_templates"
@@ -143,6 +144,8 @@ def content(path: Path) -> dict:
                     values[c.coordinate] = float(c.value)
                 elif c.value is not None:
                     values[c.coordinate] = c.value
+        if ws.title == TASK_SHEET:
+            _join_task_json(cells, numbers, values)
         out[ws.title] = {
             "cells": cells, "numbers": numbers, "cached": values,
             "state": ws.sheet_state, "merged": sorted(str(r) for r in ws.merged_cells.ranges),
@@ -156,6 +159,26 @@ def content(path: Path) -> dict:
                                                             for c in r if c.comment is not None),
         }
     return out
+
+
+def _join_task_json(cells: dict, numbers: dict, values: dict) -> None:
+    """The hidden ``_task`` sheet holds one JSON text cut into cells A2, A3 ... at fixed lengths.
+    Its input snapshot carries numbers a kernel may change in the last bits (a tolerance limit
+    around a fitted value, say), and a number with one digit more moves every cut after it: the
+    chunks are joined into one text (pseudo-cell ``A2:JSON``) whose numbers are compared like a
+    formula's literals, to the relative tolerance :data:`REL`, and the rest exactly."""
+    chunks = sorted((int(k[1:]), k) for k, v in cells.items()
+                    if k.startswith("A") and k[1:].isdigit() and int(k[1:]) >= 2 and v[0] == "v"
+                    and isinstance(v[1], str))
+    if not chunks:
+        return
+    text = "".join(cells[k][1] for _, k in chunks)
+    style = cells[chunks[0][1]][2]
+    for _, k in chunks:
+        cells.pop(k)
+        values.pop(k, None)
+    cells["A2:JSON"] = ("v", _NUMBER.sub("#", text), style)
+    numbers["A2:JSON"] = [float(n) for n in _NUMBER.findall(text)]
 
 
 def _numbers_agree(a: float, b: float, scale: float) -> bool:

@@ -380,12 +380,18 @@ def frame_from_axis(axis, ref_dir=None) -> np.ndarray:
     v = _unit(axis, "axis")
     if ref_dir is None:
         c = v[2]
-        if c > -1.0 + 1e-12:
+        s2 = v[0] * v[0] + v[1] * v[1]
+        if s2 > 0.0:
             k = np.array([-v[1], v[0], 0.0])  # e_z x v
             K = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
-            R = np.eye(3) + K + K @ K / (1.0 + c)
+            # Rodrigues: R = I + K + K^2 / (1 + c).  For an axis near -e_z, 1 + c cancels (a
+            # plane's normal 1e-5 rad from -z has 1 + c = 7e-11 with a relative error of 1e-6,
+            # enough to tilt R e_z by 4e-11 rad, differently on every BLAS kernel); there the
+            # identity 1 + c = (v_x^2 + v_y^2) / (1 - c) of a unit vector is exact to rounding
+            inv = 1.0 / (1.0 + c) if c >= 0.0 else (1.0 - c) / s2
+            R = np.eye(3) + K + (K @ K) * inv
         else:
-            R = np.diag([1.0, -1.0, -1.0])  # rotation by pi about x
+            R = np.eye(3) if c > 0.0 else np.diag([1.0, -1.0, -1.0])  # rotation by pi about x
         # re-orthonormalise against rounding
         u, _, vt = np.linalg.svd(R)
         return u @ vt
