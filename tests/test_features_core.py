@@ -422,3 +422,31 @@ def test_bad_inputs_are_named():
                                               n_theta=4, n_phi=2).X_mm)
     with pytest.raises(ModelError, match=r"V_X component ET: expected a 24 x 24"):
         features.propagate(f, {"ET": np.eye(12)})
+
+
+@pytest.mark.parametrize("tilt", [1e-5, 1e-7, 1e-13])
+def test_the_frame_of_an_axis_near_minus_z_carries_the_axis_to_rounding(tilt):
+    """A datum plane measured from above has its normal near -z.  The smallest rotation taking
+    e_z to it (Rodrigues, 1 + c in the denominator) must still have R e_z = axis to rounding: a
+    cancelled 1 + c tilted the frame by 4e-11 rad at a tilt of 1e-5 (differently on every BLAS
+    kernel), and axes within 1e-12 of -z were taken as -z itself (an error up to 1.4e-6 rad)."""
+    v = np.array([tilt, -0.013 * tilt, -1.0])
+    v /= np.linalg.norm(v)
+    R = partial.frame_from_axis(v)
+    assert np.max(np.abs(R[:, 2] - v)) <= 1e-15
+    assert np.max(np.abs(R.T @ R - np.eye(3))) <= 1e-15
+    assert np.linalg.det(R) == pytest.approx(1.0, abs=1e-15)
+
+
+def test_a_plane_fit_with_its_normal_near_minus_z_is_the_svd_plane():
+    """The least-squares plane of points whose normal is 1.1e-5 rad from -z, with 4 µm of form:
+    the fitted normal equals the singular vector of the centred points to 1e-15 (the frame of
+    the fit no longer moves it)."""
+    rng = np.random.default_rng(7)
+    xy = rng.uniform(0.0, 100.0, (20, 2))
+    z = 1.1e-5 * xy[:, 0] + rng.normal(0.0, 0.004, 20)
+    X = np.column_stack([xy, z])
+    N = np.tile([0.0, 0.0, -1.0], (20, 1))
+    fit = features.fit("plane", X, normals=N)
+    _, _, vt = np.linalg.svd(X - X.mean(axis=0))
+    assert np.linalg.norm(np.cross(fit.R[:, 2], vt[2])) <= 1e-15
