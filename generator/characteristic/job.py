@@ -28,7 +28,6 @@ import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import numpy as np
 
 from xlfuncs import characteristics as ch
 from xlfuncs import features as ft
@@ -218,28 +217,15 @@ def write_book(task: Task, results: dict, path: Path) -> None:
 
 
 def write_plots(task: Task, results: dict, out_dir: Path) -> list[Path]:
-    from ..workbook.plots import pyplot
+    from ..workbook.plots import factor_share_plot
 
-    plt = pyplot()
     rows = results["characteristics"]
-    fig, ax = plt.subplots(figsize=(7.5, 0.38 * len(rows) + 1.6), dpi=110)
-    names = [r["name"] for r in rows]
-    left = np.zeros(len(rows))
-    for fac in pc.FACTORS:
-        share = np.array([(r["components"].get(fac, 0.0) / r["u"]) ** 2 if r["u"] > 0 else 0.0
-                          for r in rows])
-        ax.barh(names, share, left=left, label=fac)
-        left += share
-    ax.set_xlim(0, 1)
-    ax.invert_yaxis()
-    ax.set_xlabel("share of u^2 per influence factor")
-    ax.set_title(f"{results['name']}: {len(rows)} characteristics")
-    ax.legend(fontsize=8, ncol=6, loc="lower center", bbox_to_anchor=(0.5, 1.06))
-    fig.tight_layout()
-    p = out_dir / f"{task.name}_factors.png"
-    fig.savefig(p)
-    plt.close(fig)
-    return [p]
+    shares = {fac: [(r["components"].get(fac, 0.0) / r["u"]) ** 2 if r["u"] > 0 else 0.0 for r in rows]
+              for fac in pc.FACTORS}
+    return [factor_share_plot([r["name"] for r in rows], shares,
+                              f"{results['name']}: {len(rows)} characteristics",
+                              out_dir / f"{task.name}_factors.png", width=7.5, row_height=0.38,
+                              top_down=True, legend_y=1.06)]
 
 
 def summary(results: dict) -> list[str]:

@@ -490,29 +490,15 @@ def write_book(task: Task, results: dict, path: Path) -> None:
 
 
 def write_plots(task: Task, results: dict, out_dir: Path) -> list[Path]:
-    from ..workbook.plots import log_scale, pyplot
+    from ..workbook.plots import factor_share_plot, log_scale, pyplot
 
     plt = pyplot()
-    files = []
     fe = results["feature"]
-    names = fe["parameter_names"]
-    live = [n for n in names if fe["u"][n] > 0]
-    fig, ax = plt.subplots(figsize=(7, 0.45 * len(live) + 1.6), dpi=110)
-    left = np.zeros(len(live))
-    for fac in pc.FACTORS:
-        # share of the variance u_f^2 / u^2 of each parameter (Forbes 2025 section 5.6)
-        share = np.array([(fe["components"][fac][n] / fe["u"][n]) ** 2 for n in live])
-        ax.barh(live, share, left=left, label=fac)
-        left += share
-    ax.set_xlim(0, 1)
-    ax.set_xlabel("share of u^2 per influence factor")
-    ax.set_title(f"{results['name']}: {fe['type']} fitted to {fe['fit']['m']} points")
-    ax.legend(fontsize=8, ncol=6, loc="lower center", bbox_to_anchor=(0.5, 1.08))
-    fig.tight_layout()
-    p = out_dir / f"{task.name}_factors.png"
-    fig.savefig(p)
-    plt.close(fig)
-    files.append(p)
+    live = [n for n in fe["parameter_names"] if fe["u"][n] > 0]
+    # share of the variance u_f^2 / u^2 of each parameter (Forbes 2025 section 5.6)
+    shares = {fac: [(fe["components"][fac][n] / fe["u"][n]) ** 2 for n in live] for fac in pc.FACTORS}
+    files = [factor_share_plot(live, shares, f"{results['name']}: {fe['type']} fitted to {fe['fit']['m']} points",
+                               out_dir / f"{task.name}_factors.png")]
     if "planning" in results and results["planning"]["sweep"]:
         pl = results["planning"]
         fig, ax = plt.subplots(figsize=(7, 4.2), dpi=110)

@@ -114,3 +114,27 @@ def mpe_plot(d, mpe, comp: dict, K: float, path: Path, title: str) -> Path:
     fig.savefig(path)
     plt.close(fig)
     return Path(path)
+
+
+def factor_share_plot(labels, shares: dict, title: str, path: Path, *, width: float = 7.0,
+                      row_height: float = 0.45, top_down: bool = False, legend_y: float = 1.08) -> Path:
+    """One horizontal bar per label, stacked by influence factor: the share u_f^2 / u^2 of each
+    factor in the variance (Forbes 2025 section 5.6).  ``shares``: factor -> one share per label,
+    in the order the factors are stacked; ``top_down``: the first label at the top."""
+    plt = _plt()
+    fig, ax = plt.subplots(figsize=(width, row_height * len(labels) + 1.6), dpi=110)
+    left = np.zeros(len(labels))
+    for fac, share in shares.items():
+        share = np.asarray(share, float)
+        ax.barh(labels, share, left=left, label=fac)
+        left += share
+    ax.set_xlim(0, 1)
+    if top_down:
+        ax.invert_yaxis()
+    ax.set_xlabel("share of u^2 per influence factor")
+    ax.set_title(title)
+    ax.legend(fontsize=8, ncol=6, loc="lower center", bbox_to_anchor=(0.5, legend_y))
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+    return Path(path)
