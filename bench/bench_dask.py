@@ -3,7 +3,7 @@ with 2 worker processes (1 thread each), reached through its scheduler address a
 cluster would be, against the single-process path, in one process (one BLAS thread everywhere).
 
 * ``diagnose``  length records (ISO 10360-2 style, planted squareness_xy and ECZ; the passes of
-                the structured length covariance, xlfuncs.structured_lengths, as Dask tasks);
+                the structured length covariance, xlfuncs.locator.structured_lengths, as Dask tasks);
 * ``va``        per-factor V_A of a sphere fitted to m points, low-rank GP factors (the Nyström
                 projections of xlfuncs.lowrank as Dask tasks) and exact blocked sums.
 
@@ -36,10 +36,10 @@ def main(argv: list[str]) -> int:
     import distributed
 
     from xlfuncs import blocked as bl
-    from xlfuncs import diagnose as dg
+    from xlfuncs.locator import diagnose as dg
     from xlfuncs import features as ft
     from xlfuncs import pointcloud as pc
-    from xlfuncs import simulate as sm
+    from xlfuncs.locator import simulate as sm
     from xlfuncs.distributed import DaskBackend
 
     n, m = 20_000, 100_000

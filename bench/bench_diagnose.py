@@ -29,10 +29,10 @@ sys.path.insert(0, str(ROOT))
 
 import numpy as np  # noqa: E402
 
-from xlfuncs import diagnose as dg  # noqa: E402
+from xlfuncs.locator import diagnose as dg  # noqa: E402
 from xlfuncs import pointcloud as pc  # noqa: E402
-from xlfuncs import simulate as sm  # noqa: E402
-from xlfuncs.recordings import read_recordings, write_recordings  # noqa: E402
+from xlfuncs.locator import simulate as sm  # noqa: E402
+from xlfuncs.locator.recordings import read_recordings, write_recordings  # noqa: E402
 
 MPE1 = pc.Parameters(sigma_R_um=0.20, sigma_S_ppm=0.7, sigma_Sa_ppm=0.7, sigma_Q_ppm=0.7, sigma_PQ_um=0.20,
                      sigma_ET_um=0.2, lambda_ET_mm=200.0, sigma_ER_urad=4.0, lambda_ER_mm=400.0,

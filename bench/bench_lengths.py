@@ -1,5 +1,5 @@
 """diagnose on length records at scale (issue 26): the structured record covariance
-(:mod:`xlfuncs.structured_lengths`, C = D + U U^T, never n x n) against the dense one.
+(:mod:`xlfuncs.locator.structured_lengths`, C = D + U U^T, never n x n) against the dense one.
 
 Usage: ``python bench/bench_lengths.py [equal] [scale] [--records 20000,200000]``.
 
@@ -30,7 +30,8 @@ ROOT = Path(__file__).resolve().parents[1]
 SETUP = """
 import time, resource, json, math
 import numpy as np
-from xlfuncs import diagnose as dg, pointcloud as pc, simulate as sm
+from xlfuncs import pointcloud as pc
+from xlfuncs.locator import diagnose as dg, simulate as sm
 MPE1 = pc.Parameters(sigma_R_um=0.20, sigma_S_ppm=0.7, sigma_Sa_ppm=0.7, sigma_Q_ppm=0.7, sigma_PQ_um=0.20,
                      sigma_ET_um=0.2, lambda_ET_mm=200.0, sigma_ER_urad=4.0, lambda_ER_mm=400.0,
                      sigma_P0_um=0.10, sigma_P_um=0.10, lambda_P=0.5)

@@ -10,7 +10,7 @@ Parts (default: all):
              max |V_low - V_exact| / max |V_exact| and the stated bound;
 * ``diagnose`` the mismatch locator on point records of a dense scan (four spheres, planted scale
              and probe-radius errors): dense path where it fits (memory need printed first), the
-             structured path (:mod:`xlfuncs.structured`) up to 200,000 records;
+             structured path (:mod:`xlfuncs.locator.structured`) up to 200,000 records;
 * ``pairs``  all-pairs distance uncertainties (eqs. 29-30) up to the m where the output itself
              (8 arrays of m(m-1)/2 doubles) is the limit: the memory need is printed before each
              run, and a run that would not fit in LIMIT_GB is skipped with the largest m that would.
@@ -222,7 +222,8 @@ def part_pairs(res: dict, lines: list) -> None:
 DIAG = """
 import time, resource, json, sys
 import numpy as np
-from xlfuncs import diagnose as dg, simulate as sm, pointcloud as pc
+from xlfuncs import pointcloud as pc
+from xlfuncs.locator import diagnose as dg, simulate as sm
 MPE1 = pc.Parameters(sigma_R_um=0.20, sigma_S_ppm=0.7, sigma_Sa_ppm=0.7, sigma_Q_ppm=0.7, sigma_PQ_um=0.20,
                      sigma_ET_um=0.2, lambda_ET_mm=200.0, sigma_ER_urad=4.0, lambda_ER_mm=400.0,
                      sigma_P0_um=0.10, sigma_P_um=0.10, lambda_P=0.5)
@@ -243,7 +244,8 @@ if {structured}:
 EQUAL = """
 import time, resource, json
 import numpy as np
-from xlfuncs import diagnose as dg, simulate as sm, pointcloud as pc
+from xlfuncs import pointcloud as pc
+from xlfuncs.locator import diagnose as dg, simulate as sm
 MPE1 = pc.Parameters(sigma_R_um=0.20, sigma_S_ppm=0.7, sigma_Sa_ppm=0.7, sigma_Q_ppm=0.7, sigma_PQ_um=0.20,
                      sigma_ET_um=0.2, lambda_ET_mm=200.0, sigma_ER_urad=4.0, lambda_ER_mm=400.0,
                      sigma_P0_um=0.10, sigma_P_um=0.10, lambda_P=0.5)

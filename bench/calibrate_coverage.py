@@ -1,6 +1,6 @@
 """Coverage of the hyper-parameter fit of ``cmmwb calibrate`` (xlfuncs/calibrate.py).
 
-Recordings simulated (``xlfuncs.simulate``, the generative model behind Forbes 2025 eq. 28) from
+Recordings simulated (``xlfuncs.locator.simulate``, the generative model behind Forbes 2025 eq. 28) from
 known hyper-parameters (Forbes 2025 Table 3, MPE1) on the layouts below; every set is fitted by
 REML from the task's values, and for every hyper-parameter the bench counts how often it is
 estimated, how often the estimate lies within 2 u of the truth (in log: |log est - log true| <=
@@ -30,7 +30,7 @@ sys.path.insert(0, str(ROOT))
 
 from xlfuncs import calibrate as cb  # noqa: E402
 from xlfuncs import pointcloud as pc  # noqa: E402
-from xlfuncs import simulate as sm  # noqa: E402
+from xlfuncs.locator import simulate as sm  # noqa: E402
 from xlfuncs.locator.model import Model, prepare  # noqa: E402
 
 MPE1 = pc.Parameters(sigma_R_um=0.20, sigma_S_ppm=0.7, sigma_Sa_ppm=0.7, sigma_Q_ppm=0.7, sigma_PQ_um=0.20,

@@ -1,7 +1,7 @@
 """Rate benchmark of the mismatch locator (``cmmwb diagnose``): does it find concealed effects,
 estimate them right, and stay quiet on records that agree with the simulation?
 
-Every data set is simulated by :mod:`xlfuncs.simulate` (a CMM drawn from the Forbes 2025 model
+Every data set is simulated by :mod:`xlfuncs.locator.simulate` (a CMM drawn from the Forbes 2025 model
 with the Table 3 MPE1 parameters, plus planted effects) and diagnosed with the same MPE1 model.
 Nothing is tuned per effect: the selection threshold is alpha = 0.01 with the Bonferroni factor
 of docs/recordings.md section 3.3, and every planted effect gets its size from one rule:
@@ -52,10 +52,10 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from xlfuncs import diagnose as dg  # noqa: E402
-from xlfuncs import effects as fx  # noqa: E402
+from xlfuncs.locator import diagnose as dg  # noqa: E402
+from xlfuncs.locator import effects as fx  # noqa: E402
 from xlfuncs import pointcloud as pc  # noqa: E402
-from xlfuncs import simulate as sm  # noqa: E402
+from xlfuncs.locator import simulate as sm  # noqa: E402
 
 MPE1 = pc.Parameters(sigma_R_um=0.20, sigma_S_ppm=0.7, sigma_Sa_ppm=0.7, sigma_Q_ppm=0.7, sigma_PQ_um=0.20,
                      sigma_ET_um=0.2, lambda_ET_mm=200.0, sigma_ER_urad=4.0, lambda_ER_mm=400.0,

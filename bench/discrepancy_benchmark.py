@@ -34,9 +34,9 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from xlfuncs import diagnose as dg  # noqa: E402
-from xlfuncs import effects as fx  # noqa: E402
-from xlfuncs import simulate as sm  # noqa: E402
+from xlfuncs.locator import diagnose as dg  # noqa: E402
+from xlfuncs.locator import effects as fx  # noqa: E402
+from xlfuncs.locator import simulate as sm  # noqa: E402
 
 sys.path.insert(0, str(ROOT / "bench"))
 from diagnose_benchmark import MPE1, ONE, ALPHA  # noqa: E402

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from xlfuncs import blocked as bl
-from xlfuncs import diagnose as dg
+from xlfuncs.locator import diagnose as dg
 from xlfuncs import features as ft
 from xlfuncs import pointcloud as pc
 from xlfuncs.errors import DegenerateGeometryError, ModelError

@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 
 from xlfuncs import calibrate as cb
-from xlfuncs import diagnose as dg
+from xlfuncs.locator import diagnose as dg
 from xlfuncs import pointcloud as pc
-from xlfuncs import simulate as sm
+from xlfuncs.locator import simulate as sm
 from xlfuncs.locator.model import length_covariance
 
 MPE1 = pc.Parameters(sigma_R_um=0.20, sigma_S_ppm=0.7, sigma_Sa_ppm=0.7, sigma_Q_ppm=0.7, sigma_PQ_um=0.20,

@@ -11,8 +11,8 @@ from generator.cli import build_task
 from generator.diagnosis.cli import load_model
 from generator.workbook.recalc import results_rows
 from xlfuncs import pointcloud as pc
-from xlfuncs import simulate as sm
-from xlfuncs.recordings import write_recordings
+from xlfuncs.locator import simulate as sm
+from xlfuncs.locator.recordings import write_recordings
 
 TASK = """[task]
 kind = "pointcloud"

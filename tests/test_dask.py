@@ -77,10 +77,10 @@ def test_the_environment_chooses_the_backend(monkeypatch, cluster):
 
 
 def test_diagnose_of_length_records_on_a_dask_cluster_equals_the_local_path(cluster):
-    """The passes of the structured length covariance (xlfuncs.structured_lengths) as Dask tasks
+    """The passes of the structured length covariance (xlfuncs.locator.structured_lengths) as Dask tasks
     on two worker processes: chi-square, candidates, estimates and u as on one process."""
-    from xlfuncs import diagnose as dg
-    from xlfuncs import simulate as sm
+    from xlfuncs.locator import diagnose as dg
+    from xlfuncs.locator import simulate as sm
     from test_diagnose_core import MPE1, PAIR
 
     rec = sm.simulate(sm.iso10360(PAIR, repeats=2), MPE1, {"scale": 3.0}, seed=3)

@@ -10,11 +10,11 @@ from conftest import ENGINES, close, recalc
 from generator.diagnosis import book as diagnose_book
 from generator.diagnosis.cli import run_diagnose
 from generator.workbook.recalc import results_rows
-from xlfuncs import diagnose as dg
-from xlfuncs import effects as fx
+from xlfuncs.locator import diagnose as dg
+from xlfuncs.locator import effects as fx
 from xlfuncs import pointcloud as pc
-from xlfuncs import simulate as sm
-from xlfuncs.recordings import write_recordings
+from xlfuncs.locator import simulate as sm
+from xlfuncs.locator.recordings import write_recordings
 
 MPE1 = pc.Parameters(sigma_R_um=0.20, sigma_S_ppm=0.7, sigma_Sa_ppm=0.7, sigma_Q_ppm=0.7, sigma_PQ_um=0.20,
                      sigma_ET_um=0.2, lambda_ET_mm=200.0, sigma_ER_urad=4.0, lambda_ER_mm=400.0,

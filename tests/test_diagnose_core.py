@@ -7,10 +7,10 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from xlfuncs import diagnose as dg
-from xlfuncs import effects as fx
+from xlfuncs.locator import diagnose as dg
+from xlfuncs.locator import effects as fx
 from xlfuncs import pointcloud as pc
-from xlfuncs import simulate as sm
+from xlfuncs.locator import simulate as sm
 
 MPE1 = pc.Parameters(sigma_R_um=0.20, sigma_S_ppm=0.7, sigma_Sa_ppm=0.7, sigma_Q_ppm=0.7, sigma_PQ_um=0.20,
                      sigma_ET_um=0.2, lambda_ET_mm=200.0, sigma_ER_urad=4.0, lambda_ER_mm=400.0,
@@ -200,7 +200,7 @@ def test_two_dimensional_point_records_use_x_and_y_and_three_alignment_parameter
 
 def test_records_that_repeat_a_combination_of_others_give_a_rank_deficient_covariance():
     """Every distance among five points: 10 lengths but only 3*5 - 6 = 9 independent ones."""
-    from xlfuncs.recordings import LengthRecords
+    from xlfuncs.locator.recordings import LengthRecords
 
     rng = np.random.default_rng(0)
     P = rng.uniform(0, 500, (5, 3))

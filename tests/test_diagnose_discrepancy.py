@@ -5,8 +5,8 @@ import dataclasses
 
 import numpy as np
 
-from xlfuncs import diagnose as dg
-from xlfuncs import simulate as sm
+from xlfuncs.locator import diagnose as dg
+from xlfuncs.locator import simulate as sm
 
 from test_diagnose_core import MPE1
 from test_diagnose_second import ONE, iso, u_effect

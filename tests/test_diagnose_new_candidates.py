@@ -7,9 +7,9 @@ the locator's sensitivities (xlfuncs/effects.py) must agree with it and find the
 import numpy as np
 import pytest
 
-from xlfuncs import diagnose as dg
-from xlfuncs import effects as fx
-from xlfuncs import simulate as sm
+from xlfuncs.locator import diagnose as dg
+from xlfuncs.locator import effects as fx
+from xlfuncs.locator import simulate as sm
 
 from test_diagnose_book import MPE1, ONE, PAIR
 

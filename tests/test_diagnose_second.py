@@ -8,9 +8,9 @@ import math
 import numpy as np
 import pytest
 
-from xlfuncs import diagnose as dg
+from xlfuncs.locator import diagnose as dg
 from xlfuncs import pointcloud as pc
-from xlfuncs import simulate as sm
+from xlfuncs.locator import simulate as sm
 
 from test_diagnose_core import MPE1, PAIR
 

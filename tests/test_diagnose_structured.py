@@ -1,5 +1,5 @@
 """The mismatch locator on point records with the structured covariance C = D + U U^T
-(xlfuncs.structured: never n x n, GP factors by controlled low-rank factors) gives the dense
+(xlfuncs.locator.structured: never n x n, GP factors by controlled low-rank factors) gives the dense
 path's chi-square, p-values, choices, estimates and uncertainties to relative 1e-8."""
 
 import json
@@ -7,10 +7,10 @@ import json
 import numpy as np
 import pytest
 
-from xlfuncs import diagnose as dg
+from xlfuncs.locator import diagnose as dg
 from xlfuncs.locator import model as locator_model
 from xlfuncs import pointcloud as pc
-from xlfuncs import simulate as sm
+from xlfuncs.locator import simulate as sm
 
 from conftest import ENGINES
 from test_diagnose_core import MPE1, PAIR
@@ -106,7 +106,7 @@ def test_the_workbook_of_a_structured_diagnosis_agrees_with_its_json(tmp_path, m
     from generator.diagnosis.cli import run_diagnose
     from generator.workbook.recalc import results_rows
     from test_diagnose_book import expected_rows
-    from xlfuncs.recordings import write_recordings
+    from xlfuncs.locator.recordings import write_recordings
 
     monkeypatch.setattr(locator_model, "STRUCTURED_MIN_OBS", 0)
     monkeypatch.setattr(diagnose_book, "NATIVE_MAX_OBS", 20)

@@ -1,14 +1,14 @@
 """The mismatch locator on length records with the structured covariance C = D + U U^T
-(xlfuncs.structured_lengths: never n x n, the same GP factors as point records) gives the dense
+(xlfuncs.locator.structured_lengths: never n x n, the same GP factors as point records) gives the dense
 path's chi-square, p-values, choices, estimates and uncertainties to relative 1e-8; the operator
 itself (C v, C^-1 v, log det C) equals the dense G V_X G^T."""
 
 import numpy as np
 import pytest
 
-from xlfuncs import diagnose as dg
-from xlfuncs import simulate as sm
-from xlfuncs import structured_lengths as sl
+from xlfuncs.locator import diagnose as dg
+from xlfuncs.locator import simulate as sm
+from xlfuncs.locator import structured_lengths as sl
 from xlfuncs.errors import ModelError
 from xlfuncs.locator import model as locator_model
 

@@ -10,10 +10,10 @@ import pytest
 
 from generator.feature import job as feature_job
 from generator.cli import build_task, main
-from xlfuncs import diagnose as dg
+from xlfuncs.locator import diagnose as dg
 from xlfuncs.locator import model as locator_model
-from xlfuncs import simulate as sm
-from xlfuncs.recordings import write_recordings
+from xlfuncs.locator import simulate as sm
+from xlfuncs.locator.recordings import write_recordings
 
 from test_diagnose_core import MPE1, PAIR
 from test_large_feature_workbook import write_bore_task

@@ -14,9 +14,9 @@ import pytest
 
 from generator.cli import main
 from xlfuncs.csvtable import TableError, read_table
-from xlfuncs.recordings import parse_recordings, write_recordings
+from xlfuncs.locator.recordings import parse_recordings, write_recordings
 from xlfuncs import pointcloud as pc
-from xlfuncs import simulate as sm
+from xlfuncs.locator import simulate as sm
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE / "bad_files"))

@@ -301,7 +301,7 @@ def test_the_memory_estimate_for_200000_length_records_is_refused_on_this_machin
 
 
 def test_200000_point_records_fit_on_the_structured_path_but_not_dense():
-    """Large point scans take the structured covariance (xlfuncs.structured), linear in n: the
+    """Large point scans take the structured covariance (xlfuncs.locator.structured), linear in n: the
     guard estimates that path (bench/results/million_diagnose.md measured 1.6 GB), not 3n x 3n."""
     from xlfuncs.memory import ResourceError, check_diagnose_fits, diagnose_bytes
 

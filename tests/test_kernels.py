@@ -15,13 +15,14 @@ import sys
 import numpy as np
 import pytest
 
-from xlfuncs import simulate as sm
+from xlfuncs.locator import simulate as sm
 
 SCRIPT = r"""
 import json, sys
 import numpy as np
 import threadpoolctl
-from xlfuncs import diagnose as dg, pointcloud as pc, simulate as sm
+from xlfuncs import pointcloud as pc
+from xlfuncs.locator import diagnose as dg, simulate as sm
 MPE1 = pc.Parameters(sigma_R_um=0.20, sigma_S_ppm=0.7, sigma_Sa_ppm=0.7, sigma_Q_ppm=0.7, sigma_PQ_um=0.20,
                      sigma_ET_um=0.2, lambda_ET_mm=200.0, sigma_ER_urad=4.0, lambda_ER_mm=400.0,
                      sigma_P0_um=0.10, sigma_P_um=0.10, lambda_P=0.5)

@@ -40,7 +40,7 @@ def test_a_table_scanned_with_a_short_correlation_length_is_refused_with_what_fi
 
 def test_the_structured_diagnosis_refuses_the_same_way(monkeypatch):
     cloud = plane(8_000, 800.0, 600.0)
-    from xlfuncs.structured import StructuredCovariance
+    from xlfuncs.locator.structured import StructuredCovariance
 
     with pytest.raises(lr.RankError, match=r"^ET: .* What fits: a section of about"):
         StructuredCovariance(cloud, PARAMS, 3)

@@ -216,8 +216,8 @@ def test_without_an_excess_the_summary_gives_the_delta_chi2_of_the_targeted_test
     is worth more than the whole excess, which '100 % of the excess' (or 33 % each of three)
     misrepresented."""
     from test_diagnose_second import MPE1, iso, u_effect
-    from xlfuncs import diagnose as dg
-    from xlfuncs import simulate as sm
+    from xlfuncs.locator import diagnose as dg
+    from xlfuncs.locator import simulate as sm
 
     L, model = iso()
     rec = sm.simulate(L, MPE1, {"squareness_xy": 5.5 * u_effect(L, model, "squareness_xy")}, seed=7)
@@ -232,8 +232,8 @@ def test_without_an_excess_the_summary_gives_the_delta_chi2_of_the_targeted_test
 
 def test_with_an_excess_the_summary_gives_the_share_it_explains():
     from test_diagnose_second import MPE1, iso, u_effect
-    from xlfuncs import diagnose as dg
-    from xlfuncs import simulate as sm
+    from xlfuncs.locator import diagnose as dg
+    from xlfuncs.locator import simulate as sm
 
     L, model = iso()
     rec = sm.simulate(L, MPE1, {"squareness_xy": 5.5 * u_effect(L, model, "squareness_xy")}, seed=10)

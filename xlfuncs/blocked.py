@@ -545,7 +545,7 @@ def record_covariance(cloud: pc.PointCloud, params: pc.Parameters, I, J, *, comp
     """Covariance (µm²) of the lengths d_a = ||x_J[a] - x_I[a]||: C = G V_X G^T with
     g_a = -n_a at point I[a] and +n_a at J[a] (eq. 29), per factor if ``components``.
 
-    The same numbers as :func:`xlfuncs.diagnose.length_covariance`, but every entry is built
+    The same numbers as :func:`xlfuncs.locator.diagnose.length_covariance`, but every entry is built
     from the kernel at the records' four end-point combinations in row blocks of records, so
     no m x m kernel of the unique points is formed: memory O(n^2) for n records, whatever m.
     """

@@ -7,7 +7,7 @@ The recordings (``docs/recordings.md``: lengths or points) are the linear model 
     r = X beta + e,   e ~ N(0, C(theta)),
 
 with X the fixed effects -- the rigid alignment of point records and the systematic effects the
-locator names (:mod:`xlfuncs.effects` columns), profiled out by REML -- and C(theta) the SAME
+locator names (:mod:`xlfuncs.locator.effects` columns), profiled out by REML -- and C(theta) the SAME
 record covariance ``diagnose`` uses (:func:`xlfuncs.locator.model.length_covariance` for lengths,
 :func:`xlfuncs.pointcloud.V_X_components` for points), a sum over the factors
 

@@ -1,11 +1,11 @@
 """Memory needs estimated before large allocations, refused with a message saying what fits.
 
-The dense parts of the mismatch locator (:mod:`xlfuncs.diagnose`) hold the covariance of the
+The dense parts of the mismatch locator (:mod:`xlfuncs.locator.diagnose`) hold the covariance of the
 records as n x n matrices: for length records C = G V_X G^T per factor (R, PQ, S, ET, ER, P),
 their sum and its Cholesky factor; for point records V_X of the measured points (3n x 3n, Forbes
 2025 eq. 28) and C restricted to the compared coordinates.  :func:`diagnose_bytes` is the
 estimate of that peak; large point records use the structured operator of
-:mod:`xlfuncs.structured` instead (C = D + U U^T never formed), whose peak grows linearly in n
+:mod:`xlfuncs.locator.structured` instead (C = D + U U^T never formed), whose peak grows linearly in n
 (measured in bench/results/million_diagnose.md: 386 MB at 1,000 records, 1,602 MB at 200,000,
 about 6 KB per record); when the algorithm changes, change this function with it, and the guard
 in the CLI follows.
@@ -36,9 +36,9 @@ class ResourceError(ModelError):
 
 
 def diagnose_bytes(kind: str, n_records: int, dims: int = 3, structured: bool = False) -> int:
-    """Estimated peak memory (bytes) of :func:`xlfuncs.diagnose.diagnose` on ``n_records``
+    """Estimated peak memory (bytes) of :func:`xlfuncs.locator.diagnose.diagnose` on ``n_records``
     (``structured``: the structured operator of point or length records
-    (:mod:`xlfuncs.structured_lengths`), linear in n)."""
+    (:mod:`xlfuncs.locator.structured_lengths`), linear in n)."""
     n = int(n_records)
     if structured:
         return STRUCTURED_BASE_BYTES + STRUCTURED_BYTES_PER_RECORD * n

@@ -23,12 +23,12 @@ import numpy as np
 
 from xlfuncs import calibrate as cb
 from xlfuncs import compensation as cp
-from xlfuncs import diagnose as dg
-from xlfuncs import effects as fx
+from xlfuncs.locator import diagnose as dg
+from xlfuncs.locator import effects as fx
 from xlfuncs import pointcloud as pc
 from xlfuncs.errors import ModelError
 from xlfuncs.locator.report import effect_estimates
-from xlfuncs.recordings import RecordingsError, parse_recordings, write_recordings
+from xlfuncs.locator.recordings import RecordingsError, parse_recordings, write_recordings
 
 from .. import __version__
 from ..errors import InputError

@@ -20,8 +20,8 @@ from pathlib import Path
 
 import numpy as np
 
-from xlfuncs import effects as fx
-from xlfuncs.diagnose import Diagnosis, effect_estimates
+from xlfuncs.locator import effects as fx
+from xlfuncs.locator.diagnose import Diagnosis, effect_estimates
 from xlfuncs.pointcloud import Parameters
 
 from ..workbook.book import FMT_SCI, FMT_UM, Book, ChartSeries, Formula
@@ -650,7 +650,7 @@ def _gls(book: Book, diag: Diagnosis, obs: dict, native: bool) -> dict:
     else:
         ww = book.sheet("Whitened")
         yw = diag.whitener(prep.r_um)
-        # the structured covariance (xlfuncs.structured) gives coordinates with the same inner
+        # the structured covariance (xlfuncs.locator.structured) gives coordinates with the same inner
         # products a' C^-1 b, fewer than n of them: the rank of C is then a cell of its own
         k = diag.whitener.rank if diag.whitener.mode != "structured" else len(yw)
         book.text(ww, 1, 1, f"W r and W X with W C W' = I ({diag.whitener.mode}; computed by the core, "
@@ -1038,7 +1038,7 @@ def revealing_quantities(diag: Diagnosis) -> list[tuple[str, np.ndarray, bool]]:
     out = []
     if D.kind == "length":
         out.append(("length d / mm", rec.reference_mm, False))
-        from xlfuncs.diagnose import direction_label
+        from xlfuncs.locator.diagnose import direction_label
         out.append(("direction", np.array([direction_label(v) for v in D.na]), True))
         if D.N1 is not None:
             o = np.einsum("ij,ij->i", D.na, D.N1) * np.einsum("ij,ij->i", D.na, D.N2)

@@ -19,13 +19,13 @@ import time
 from pathlib import Path
 
 
-from xlfuncs import diagnose as dg
+from xlfuncs.locator import diagnose as dg
 from xlfuncs import pointcloud as pc
-from xlfuncs import simulate as sm
+from xlfuncs.locator import simulate as sm
 from xlfuncs.errors import ModelError
 from xlfuncs.distributed import get_backend
 from xlfuncs.memory import ResourceError, check_diagnose_fits
-from xlfuncs.recordings import RecordingsError, parse_recordings, write_recordings
+from xlfuncs.locator.recordings import RecordingsError, parse_recordings, write_recordings
 
 from .. import __version__
 from ..errors import InputError

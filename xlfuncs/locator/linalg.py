@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .. import effects as fx
+from . import effects as fx
 from ..errors import ModelError
 from .model import Prepared, group_labels
 
@@ -91,7 +91,7 @@ def psd_chi2(e: np.ndarray, C: np.ndarray) -> tuple[float, int]:
 
 
 def structured_whitener(prep: Prepared, names=None):
-    """The Gram whitener of :mod:`xlfuncs.structured` on the residual, the alignment and the
+    """The Gram whitener of :mod:`xlfuncs.locator.structured` on the residual, the alignment and the
     columns of every applicable candidate (or of ``names``), with the group Grams."""
     parts, where = [prep.r_um[:, None], prep.A], {}
     pos = 1 + prep.A.shape[1]

@@ -2,7 +2,7 @@
 probes resolved, point records aligned (Kabsch), the design of the candidate effects, and the
 record covariance C from the Forbes 2025 point-cloud model -- length records C = G V_X G^T in
 kernel form (eqs. 28-29), point records V_X itself (dense, or the structured operator of
-:mod:`xlfuncs.structured`); and the groups of records (section 3.2)."""
+:mod:`xlfuncs.locator.structured`); and the groups of records (section 3.2)."""
 
 from __future__ import annotations
 
@@ -11,11 +11,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .. import effects as fx
+from . import effects as fx
 from .. import pointcloud as pc
-from .. import structured_lengths as sl
+from . import structured_lengths as sl
 from ..errors import ModelError
-from ..recordings import LengthRecords, PointRecords, RecordingsError
+from .recordings import LengthRecords, PointRecords, RecordingsError
 
 
 # ---------------------------------------------------------------------------------------------
@@ -167,14 +167,14 @@ def kabsch(X_nom: np.ndarray, X: np.ndarray, planar: bool) -> tuple[np.ndarray, 
 
 
 #: point records with more observations than this use the structured covariance
-#: (:mod:`xlfuncs.structured`, C = D + U U^T never formed) unless asked otherwise
+#: (:mod:`xlfuncs.locator.structured`, C = D + U U^T never formed) unless asked otherwise
 STRUCTURED_MIN_OBS = 6000
 
 
 def uses_structured(rec: LengthRecords | PointRecords, model: Model, structured: bool | None = None) -> bool:
     """Whether :func:`prepare` takes the structured covariance for these records (length
     records: unless their probings do not allow it, see
-    :func:`xlfuncs.structured_lengths.structure_check`, then dense)."""
+    :func:`xlfuncs.locator.structured_lengths.structure_check`, then dense)."""
     if structured is not None:
         return bool(structured)
     dims = 1 if isinstance(rec, LengthRecords) else 2 if rec.planar else 3
@@ -183,7 +183,7 @@ def uses_structured(rec: LengthRecords | PointRecords, model: Model, structured:
 
 def prepare(rec: LengthRecords | PointRecords, model: Model, structured: bool | None = None) -> Prepared:
     """The linear model of the records.  ``structured``: the covariance as the operator of
-    :mod:`xlfuncs.structured` (point records) or :mod:`xlfuncs.structured_lengths` (length
+    :mod:`xlfuncs.locator.structured` (point records) or :mod:`xlfuncs.locator.structured_lengths` (length
     records) (True), dense (False), or dense up to ``STRUCTURED_MIN_OBS`` observations (None)."""
     ids_per_end, probe_ids, probes, offsets_given = resolve_probes(rec, model)
     index = {p: k for k, p in enumerate(probe_ids)}
@@ -226,7 +226,7 @@ def prepare(rec: LengthRecords | PointRecords, model: Model, structured: bool | 
                        extent_mm=float(np.max(np.linalg.norm(Y - c, axis=1))) or 1.0)
     cloud = pc.PointCloud(rec.X_mm, N, k, probes, tuple(rec.ids))
     if uses_structured(rec, model, structured):
-        from ..structured import StructuredCovariance
+        from .structured import StructuredCovariance
 
         C = StructuredCovariance(cloud, model.params, dims)
     else:

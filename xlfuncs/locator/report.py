@@ -9,7 +9,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .. import effects as fx
+from . import effects as fx
 from .linalg import Whitener, gls, psd_chi2
 from .model import Prepared, group_labels, is_structured
 from .search import Candidate, Search, record_obs, refit

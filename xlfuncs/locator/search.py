@@ -10,7 +10,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .. import effects as fx
+from . import effects as fx
 from .linalg import Whitener, cancorr, gls, orth, project_out
 from .model import Prepared, is_structured
 from .stats import chi2_logsf, f_logsf
@@ -155,7 +155,7 @@ def _period_dchi(Z: np.ndarray, resid: np.ndarray) -> np.ndarray:
 
 def scan_period(prep, W, Q0, Q, resid, white, c: Candidate) -> None:
     """The period of a ``periodic_*`` candidate given what is fitted already (Q, resid): the
-    largest drop of chi-square over the grid of :func:`xlfuncs.effects.period_grid` (the longest
+    largest drop of chi-square over the grid of :func:`xlfuncs.locator.effects.period_grid` (the longest
     of equally good alias periods), refined by golden section between the grid's neighbours.
     Sets the candidate's columns, its whitened columns in ``white``, the kept columns (against
     the baseline Q0, as for every candidate) and the look-elsewhere term log M."""
@@ -343,7 +343,7 @@ def _still_mismatch(W, S: Search, best: dict, alpha: float, scaled: bool) -> boo
 def refit(prep, W, keptA, S: Search):
     """GLS with the alignment, the chosen effects and the outliers' mean-shift columns:
     (chi2, dof, log p, beta, cov, X_sel, labels).  A chosen ``periodic_*`` adds its period's
-    column (:func:`xlfuncs.effects.period_column`, label "period_mm") linearized at the fit
+    column (:func:`xlfuncs.locator.effects.period_column`, label "period_mm") linearized at the fit
     with the period fixed (``Candidate.lin_ab``): the period is a fitted parameter too."""
     with_period = [n for n in S.chosen if n in fx.PERIODIC and len(S.cands[n].kept) == 2]
     if with_period:

@@ -17,7 +17,7 @@ Then (docs/recordings.md section 3):
    ``mismatch = p < alpha``;
 2. standardized residuals of the records; chi-square of groups of records (``group``, probe,
    uni/bidirectional probing, direction, temperature and time bands);
-3. forward selection over the candidate effects of :mod:`xlfuncs.effects` by generalized least
+3. forward selection over the candidate effects of :mod:`xlfuncs.locator.effects` by generalized least
    squares: the likelihood-ratio statistic of adding a candidate is the drop of chi-square
    (Δχ², C known), its p-value the chi-square tail with df = parameters added; the best candidate
    is added while its Bonferroni-adjusted p-value (times the number of candidates tested in that
@@ -46,16 +46,16 @@ import math
 import numpy as np
 
 from . import effects as fx
-from .errors import ModelError
-from .locator.linalg import Whitener, cancorr, gls, orth, project_out, structured_whitener
-from .locator.model import (STRUCTURED_MIN_OBS, Model, Prepared, direction_label, is_structured,
+from ..errors import ModelError
+from .linalg import Whitener, cancorr, gls, orth, project_out, structured_whitener
+from .model import (STRUCTURED_MIN_OBS, Model, Prepared, direction_label, is_structured,
                             kabsch, length_covariance, length_covariance_dense, prepare, resolve_probes,
                             uses_structured)
-from .locator.report import (Diagnosis, diagnosis_json, effect_estimates, groups_of, indicated_report,
+from .report import (Diagnosis, diagnosis_json, effect_estimates, groups_of, indicated_report,
                              locate_groups, locate_records, outlier_report, summary_text, unexplained_rest)
-from .locator.search import (EXACT_ALIAS, GATE_SHARE, Candidate, Search, alias_reason, candidate_rows,
+from .search import (EXACT_ALIAS, GATE_SHARE, Candidate, Search, alias_reason, candidate_rows,
                              copy_candidate, labels_coef, outliers_searchable, refit, search, why_zero)
-from .locator.stats import chi2_logsf, chi2_sf, f_logcdf, f_logsf
+from .stats import chi2_logsf, chi2_sf, f_logcdf, f_logsf
 from .recordings import LengthRecords, PointRecords
 
 __all__ = ["diagnose", "diagnose_prepared", "effect_covariance", "check_alphas", "NAME_SHARE",
@@ -252,7 +252,7 @@ def diagnose_prepared(prep: Prepared, alpha: float = 0.01, alpha_name: float | N
                                     z=diag.z_after) if mismatch and not diag.explained else [])
     diag.located = locate_records(diag)
     if mismatch and not diag.explained:
-        from .locator import discrepancy as disc   # section 7: the discrepancy, last, only when not explained
+        from . import discrepancy as disc   # section 7: the discrepancy, last, only when not explained
         diag.discrepancy = disc.fit(prep, W, X_sel, beta, alpha, chi2_after, dof_after, chi2_logsf, gls,
                                     f_logsf if noise is not None else None)
         if noise is not None and diag.discrepancy and diag.discrepancy["chosen"]:

@@ -13,7 +13,7 @@ each other):
 * P   per probe: radius error e_P0 + process over the normals, along n          eqs. (26)-(27)
 
 The planted effects follow the definitions of ``docs/recordings.md`` section 4, written
-here independently of :mod:`xlfuncs.effects` (the angular motions with exact rotation matrices,
+here independently of :mod:`xlfuncs.locator.effects` (the angular motions with exact rotation matrices,
 lengths recomputed from the disturbed points).
 
 Layouts (machine coordinates in mm, working volume from machine zero):
@@ -39,8 +39,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import pointcloud as pc
-from .errors import ModelError
+from .. import pointcloud as pc
+from ..errors import ModelError
 from .recordings import LengthRecords, PointRecords
 
 LAYOUTS = ("iso10360", "stepgauge", "ballplate", "holeplate", "spheres", "scan")
@@ -292,7 +292,7 @@ def _gp(points: np.ndarray, sigma: float, lam: float, rng, size: int = 1) -> np.
         return np.zeros((m, size))
     z = rng.standard_normal((m, size))
     if m > GP_DENSE_MAX:   # a draw from the Nystrom factor K ~ L L^T of xlfuncs.lowrank
-        from . import lowrank as lr
+        from .. import lowrank as lr
 
         fac, _trace = lr.controlled_factor(points, 1.0 / lam**2)
         blocks = range(0, m, 8192)
@@ -349,7 +349,7 @@ def model_errors(X: np.ndarray, N: np.ndarray | None, k: np.ndarray, probes, par
 
 
 # ---------------------------------------------------------------------------------------------
-# planted effects (docs/recordings.md section 4), written independently of xlfuncs.effects
+# planted effects (docs/recordings.md section 4), written independently of xlfuncs.locator.effects
 # ---------------------------------------------------------------------------------------------
 
 def _rot(axis: int, angle_rad: float) -> np.ndarray:

@@ -25,9 +25,9 @@ from typing import Sequence
 
 import numpy as np
 
-from .csvtable import Table, TableError, read_table
-from .errors import ModelError
-from .limits import coordinate_problem
+from ..csvtable import Table, TableError, read_table
+from ..errors import ModelError
+from ..limits import coordinate_problem
 
 NORMAL_TOL = 1e-3           # spec section 1: a normal must be unit length within 1e-3
 OFFSET_TOL_MM = 1e-6        # one probe id, one offset (within 1 nm)

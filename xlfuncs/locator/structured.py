@@ -1,6 +1,6 @@
 """The covariance of point records as a structured operator, C = D + U U^T, never n x n.
 
-For point records the mismatch locator (:mod:`xlfuncs.diagnose`) needs C = V_X of the measured
+For point records the mismatch locator (:mod:`xlfuncs.locator.diagnose`) needs C = V_X of the measured
 points (Forbes 2025 eq. 28, restricted to x, y for 2-D data).  Its factors are
 
 ====  ===================================================================  =====================
@@ -34,10 +34,10 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.linalg import cho_factor, cho_solve
 
-from . import lowrank as lr
-from . import pointcloud as pc
-from .blocked import G_S, skew
-from .errors import ModelError
+from .. import lowrank as lr
+from .. import pointcloud as pc
+from ..blocked import G_S, skew
+from ..errors import ModelError
 
 #: points per block of the passes over U
 BLOCK_POINTS = 4096
@@ -361,7 +361,7 @@ class GramWhitener:
     (:meth:`StructuredCovariance.whitener`): coordinates Lambda^-1/2 V^T S P^T M, with
     S Gamma S = V Lambda V^T (S: column scaling), P = C^-1 B.  ``d``: the diagonal part D of
     C = D + U U^T, a number (point records) or one value per observation (length records,
-    :mod:`xlfuncs.structured_lengths`)."""
+    :mod:`xlfuncs.locator.structured_lengths`)."""
 
     mode = "structured"
     L = None

@@ -17,7 +17,7 @@ P          per probe: sigma_P0 o (1 column), sigma_P l(N) o (r_P), o = n_a.N   e
 =========  ===============================================================  ====================
 
 with l the rows of the controlled Nyström factors of :mod:`xlfuncs.lowrank` (the same factors
-as the point records of :mod:`xlfuncs.structured`).  D > 0 needs every record to have at least
+as the point records of :mod:`xlfuncs.locator.structured`).  D > 0 needs every record to have at least
 one probing of its own; records whose two probings are both shared are refused (dense path).
 
 Error bound.  The neglected kernel part R_K of a GP factor is positive semidefinite with
@@ -43,11 +43,11 @@ import numpy as np
 from scipy.linalg import cho_factor, cho_solve, solve_triangular
 from scipy.linalg.blas import dsyrk
 
-from . import lowrank as lr
-from . import pointcloud as pc
-from .errors import ModelError
-from .execution import ThreadBackend
-from .memory import ResourceError, available_bytes
+from .. import lowrank as lr
+from .. import pointcloud as pc
+from ..errors import ModelError
+from ..execution import ThreadBackend
+from ..memory import ResourceError, available_bytes
 from .structured import GramWhitener
 
 #: records per block of the passes over U
@@ -294,7 +294,7 @@ class LengthCovariance:
     # -- what the diagnosis needs ------------------------------------------------------------
     def whitener(self, B: np.ndarray, group_rows: dict | None = None, *, backend=None) -> GramWhitener:
         """The whitener on the span of the columns of B (n x c) (see
-        :meth:`xlfuncs.structured.StructuredCovariance.whitener`); ``group_rows``: {key: record
+        :meth:`xlfuncs.locator.structured.StructuredCovariance.whitener`); ``group_rows``: {key: record
         indices} whose Woodbury Grams are accumulated in the same pass, by cells (records with
         the same label in every grouping) summed into groups.  ``backend``: where the passes
         over U run (:mod:`xlfuncs.execution`, :mod:`xlfuncs.distributed`; default
