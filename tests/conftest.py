@@ -29,6 +29,7 @@ REL = 1e-9
 NUMERIC_MODULES = {
     "test_pointcloud_tables", "test_pointcloud_closed_forms", "test_pointcloud_workbook",
     "test_budget_core", "test_budget_workbook",
+    "test_jcgm106_examples",
     "test_features_core", "test_features_workbook", "test_partial_tables", "test_montecarlo",
     "test_blocked", "test_large_workbook", "test_large_feature_workbook", "test_udf", "test_dask",
     "test_diagnose_core", "test_diagnose_book", "test_diagnose_rates",

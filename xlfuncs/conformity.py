@@ -281,3 +281,183 @@ def measurement_capability_index(tolerance: Tolerance, u_um: float) -> float:
     if not tolerance.two_sided:
         raise ModelError("the measurement capability index needs a two-sided tolerance interval")
     return (tolerance.usl_mm - tolerance.lsl_mm) * UM_PER_MM / (4.0 * float(u_um))
+
+
+# -- specific risk and acceptance limits from a required probability of conformance -------------
+
+def specific_consumer_risk(value_mm, u_um, tolerance: Tolerance):
+    """R_C* = 1 - p_c, the probability that an item accepted with measured value y does not
+    conform (JCGM 106:2012, 9.3: the specific consumer's risk of an accepted item)."""
+    return 1.0 - probability_of_conformance(value_mm, u_um, tolerance)
+
+
+def acceptance_limits_for_p_c(tolerance: Tolerance, u_um: float, p_min: float) -> tuple[float | None, float | None]:
+    """The acceptance limits [A_L, A_U] (mm) at which an accepted item has exactly p_c = p_min.
+
+    One-sided interval: A_U = T_U - z·u, A_L = T_L + z·u with z = Φ⁻¹(p_min) (JCGM 106:2012, 7.3
+    Table 1, 8.3.2).  Two-sided interval: the far limit adds to 1 - p_c, so the exact limit is the
+    root of Φ((T_U - A)/u) - Φ((T_L - A)/u) = p_min (JCGM 106:2012, 7.4 eq. (12)) on the side of
+    each limit, found by bisection (p_c is monotone in A between the midpoint and the limit);
+    ``(None, None)``-free: when even the midpoint has p_c < p_min the interval is empty and the
+    limits are returned crossed (A_L > A_U), as :func:`empty` reports."""
+    u_mm = float(u_um) / UM_PER_MM
+    if not (math.isfinite(u_mm) and u_mm > 0):
+        raise ModelError(f"u = {u_um!r} µm must be a positive number")
+    if not 0.0 < p_min < 1.0:
+        raise ModelError(f"p_min = {p_min!r} must lie strictly between 0 and 1")
+    z = norm_ppf(p_min)
+    if not tolerance.two_sided:
+        return acceptance_limits(tolerance, z * float(u_um))
+    mid = tolerance.mid_mm
+    if probability_of_conformance(mid, u_um, tolerance) < p_min:
+        return acceptance_limits(tolerance, 0.5 * (tolerance.usl_mm - tolerance.lsl_mm) * UM_PER_MM * (1 + 1e-9))
+    lo, hi = mid, tolerance.usl_mm          # p_c(lo) >= p_min > p_c(hi): bisect on the upper side
+    for _ in range(200):
+        m = 0.5 * (lo + hi)
+        if probability_of_conformance(m, u_um, tolerance) >= p_min:
+            lo = m
+        else:
+            hi = m
+        if hi - lo <= 4e-16 * max(1.0, abs(hi)):
+            break
+    a_u = lo
+    return 2.0 * mid - a_u, a_u              # symmetric: p_c(mid - d) = p_c(mid + d)
+
+
+# -- global risks with a prior PDF of the production process (JCGM 106:2012, 9.5) ----------------
+
+@dataclass(frozen=True)
+class Prior:
+    """The prior PDF g₀(η) of the property η of items from a production process (JCGM 106:2012,
+    9.1, 9.5.1): ``pdf`` (vectorised callable) on the support [lo, hi] (finite bounds that hold
+    all but a negligible part of the probability).  Any one unit (that of the tolerance limits and
+    of u_m)."""
+
+    pdf: object
+    lo: float
+    hi: float
+    text: str = ""
+
+
+def normal_prior(mean: float, sd: float) -> Prior:
+    """g₀ = N(y₀, u₀²) (JCGM 106:2012, 9.5.2, normal process PDF), cut at ± 40 u₀ (the
+    mass beyond is below 1e-300)."""
+    if not (math.isfinite(mean) and math.isfinite(sd) and sd > 0):
+        raise ModelError(f"a normal prior needs a finite mean and sd > 0 (got {mean!r}, {sd!r})")
+    c = 1.0 / (sd * math.sqrt(2 * math.pi))
+    return Prior(lambda x: c * np.exp(-0.5 * ((np.asarray(x, float) - mean) / sd) ** 2),
+                 mean - 40 * sd, mean + 40 * sd, f"N({mean:g}, {sd:g}²)")
+
+
+def gamma_prior(shape: float, rate: float) -> Prior:
+    """g₀(η) = β^α η^(α-1) e^(-βη) / Γ(α) on η >= 0 (shape α, rate β): a quantity bounded below
+    by zero, such as the radial error motion of a bearing (JCGM 106:2012, 9.5.4).  Cut above at
+    the mean + 60 standard deviations."""
+    if not (math.isfinite(shape) and math.isfinite(rate) and shape >= 1 and rate > 0):
+        raise ModelError(f"a gamma prior needs shape >= 1 and rate > 0 (got {shape!r}, {rate!r})")
+    log_c = shape * math.log(rate) - math.lgamma(shape)
+
+    def pdf(x):
+        x = np.asarray(x, float)
+        with np.errstate(divide="ignore"):
+            out = np.exp(log_c + (shape - 1) * np.log(np.where(x > 0, x, 1.0)) - rate * x)
+        return np.where(x > 0, out, 0.0 if shape > 1 else math.exp(log_c))
+
+    return Prior(pdf, 0.0, shape / rate + 60 * math.sqrt(shape) / rate, f"Gamma(α = {shape:g}, β = {rate:g})")
+
+
+_GL_X, _GL_W = np.polynomial.legendre.leggauss(20)
+
+
+def _integrate(f, a: float, b: float, step: float) -> float:
+    """∫_a^b f by composite 20-point Gauss-Legendre on panels no wider than ``step``."""
+    if not b > a:
+        return 0.0
+    n = max(1, min(20000, int(math.ceil((b - a) / step))))
+    edges = np.linspace(a, b, n + 1)
+    half = 0.5 * np.diff(edges)
+    mid = 0.5 * (edges[:-1] + edges[1:])
+    x = (mid[:, None] + half[:, None] * _GL_X[None, :]).ravel()
+    return float(np.sum(f(x).reshape(n, -1) * _GL_W[None, :] * half[:, None]))
+
+
+def _p_accept(eta, u_m: float, acceptance):
+    """Pr(η_m ∈ A | η) for η_m ~ N(η, u_m²) (JCGM 106:2012, 9.5.1: the measuring system's PDF)."""
+    lo, hi = acceptance
+    p = norm_cdf((hi - np.asarray(eta, float)) / u_m) if hi is not None else np.ones(np.shape(eta))
+    if lo is not None:
+        p = p - norm_cdf((lo - np.asarray(eta, float)) / u_m)
+    return np.asarray(p, float)
+
+
+def _pieces(prior: Prior, tolerance_limits):
+    """The support of the prior cut at the tolerance limits: [(a, b, conforming?)]."""
+    t_lo, t_hi = tolerance_limits
+    cuts = sorted({prior.lo, prior.hi, *(t for t in (t_lo, t_hi) if t is not None and prior.lo < t < prior.hi)})
+    out = []
+    for a, b in zip(cuts[:-1], cuts[1:]):
+        m = 0.5 * (a + b)
+        ok = (t_lo is None or m >= t_lo) and (t_hi is None or m <= t_hi)
+        out.append((a, b, ok))
+    return out
+
+
+@dataclass(frozen=True)
+class GlobalRisks:
+    """Global risks of a conformity assessment of items of one production process."""
+
+    consumer: float            #: R_C: an item chosen at random is accepted and does not conform
+    producer: float            #: R_P: an item chosen at random is rejected and conforms
+    nonconforming: float       #: the prior probability that an item does not conform (no inspection)
+
+
+def global_risks(prior: Prior, u_m: float, tolerance_limits, acceptance_limits_) -> GlobalRisks:
+    """R_C and R_P (JCGM 106:2012, 9.5.1-9.5.2):
+
+        R_C = ∫_{η ∉ C} g₀(η) ∫_{η_m ∈ A} h(η_m | η) dη_m dη,
+        R_P = ∫_{η ∈ C} g₀(η) ∫_{η_m ∉ A} h(η_m | η) dη_m dη,
+
+    with h(η_m | η) = N(η, u_m²) the measuring system's PDF, C = [T_L, T_U] the tolerance
+    interval and A = [A_L, A_U] the acceptance interval (``None`` = no such limit; any one unit).
+    The inner integrals are normal distribution functions; the outer one is composite Gauss-Legendre
+    quadrature split at the tolerance limits, with panels no wider than min(u_m, prior spread)/8."""
+    if not (math.isfinite(u_m) and u_m > 0):
+        raise ModelError(f"u_m = {u_m!r} must be a positive number")
+    step = min(u_m, (prior.hi - prior.lo) / 80.0) / 8.0
+    r_c = r_p = bad = 0.0
+    for a, b, ok in _pieces(prior, tolerance_limits):
+        if ok:
+            r_p += _integrate(lambda x: prior.pdf(x) * (1.0 - _p_accept(x, u_m, acceptance_limits_)), a, b, step)
+        else:
+            r_c += _integrate(lambda x: prior.pdf(x) * _p_accept(x, u_m, acceptance_limits_), a, b, step)
+            bad += _integrate(prior.pdf, a, b, step)
+    return GlobalRisks(consumer=r_c, producer=r_p, nonconforming=bad)
+
+
+def guard_band_for_global_risk(prior: Prior, u_m: float, tolerance_limits, max_consumer_risk: float) -> float:
+    """The guard band w >= 0 (acceptance limits A_L = T_L + w, A_U = T_U - w) at which the global
+    consumer's risk R_C equals ``max_consumer_risk`` (JCGM 106:2012, 9.5.4: an acceptance limit
+    chosen so that R_C does not exceed a stated value).  R_C falls as w grows; bisection to
+    1e-13 of the tolerance scale.  0 when simple acceptance already meets the target."""
+    t_lo, t_hi = tolerance_limits
+    if not 0.0 < max_consumer_risk < 1.0:
+        raise ModelError(f"max_consumer_risk = {max_consumer_risk!r} must lie strictly between 0 and 1")
+
+    def r_c(w):
+        acc = (None if t_lo is None else t_lo + w, None if t_hi is None else t_hi - w)
+        return global_risks(prior, u_m, tolerance_limits, acc).consumer
+
+    if r_c(0.0) <= max_consumer_risk:
+        return 0.0
+    width = (t_hi - t_lo) / 2.0 if (t_lo is not None and t_hi is not None) else prior.hi - prior.lo
+    lo, hi = 0.0, width
+    if r_c(hi) > max_consumer_risk:
+        raise ModelError("no guard band inside the tolerance interval reaches the stated consumer's risk")
+    scale = max(abs(v) for v in (t_lo, t_hi, width) if v is not None)
+    while hi - lo > 1e-13 * scale:
+        m = 0.5 * (lo + hi)
+        if r_c(m) > max_consumer_risk:
+            lo = m
+        else:
+            hi = m
+    return 0.5 * (lo + hi)
