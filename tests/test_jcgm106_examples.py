@@ -169,10 +169,17 @@ def test_guarded_acceptance_lowers_the_consumers_and_raises_the_producers_risk()
     assert risks[0].producer < risks[1].producer < risks[2].producer
 
 
-def test_the_consumers_risk_vanishes_with_the_measurement_uncertainty():
-    prior = cf.normal_prior(0.0, 1.0)
-    r = [cf.global_risks(prior, u, (-2.0, 2.0), (-2.0, 2.0)).consumer for u in (0.4, 0.1, 0.01)]
-    assert r[0] > r[1] > r[2] and r[2] < 1e-3
+@pytest.mark.parametrize("u_m", [1e-2, 1e-3, 1e-4])
+def test_small_u_m_risks_follow_their_two_term_expansion(u_m):
+    """For u_m -> 0 each tolerance limit T contributes ∫_0^∞ g₀(T ± t) Φ(-t/u_m) dt
+    = g₀(T) u_m/√(2π) ± g₀'(T) u_m²/4 + O(u_m³) (simple acceptance, A = C): with N(0, 1) and
+    C = [-2, 2], g₀(±2) = φ(2) and the prior falls away from the centre, so
+    R_C ≈ 2φ(2)(u_m/√(2π) - u_m²/2) and R_P ≈ 2φ(2)(u_m/√(2π) + u_m²/2)."""
+    r = cf.global_risks(cf.normal_prior(0.0, 1.0), u_m, (-2.0, 2.0), (-2.0, 2.0))
+    phi2 = math.exp(-2.0) / math.sqrt(2 * math.pi)
+    lead = 2 * phi2 * u_m / math.sqrt(2 * math.pi)
+    assert r.consumer == pytest.approx(lead - phi2 * u_m ** 2, rel=2 * u_m ** 2)
+    assert r.producer == pytest.approx(lead + phi2 * u_m ** 2, rel=2 * u_m ** 2)
 
 
 def test_bad_priors_and_uncertainties_are_refused():

@@ -297,9 +297,9 @@ def acceptance_limits_for_p_c(tolerance: Tolerance, u_um: float, p_min: float) -
     One-sided interval: A_U = T_U - z·u, A_L = T_L + z·u with z = Φ⁻¹(p_min) (JCGM 106:2012, 7.3
     Table 1, 8.3.2).  Two-sided interval: the far limit adds to 1 - p_c, so the exact limit is the
     root of Φ((T_U - A)/u) - Φ((T_L - A)/u) = p_min (JCGM 106:2012, 7.4 eq. (12)) on the side of
-    each limit, found by bisection (p_c is monotone in A between the midpoint and the limit);
-    ``(None, None)``-free: when even the midpoint has p_c < p_min the interval is empty and the
-    limits are returned crossed (A_L > A_U), as :func:`empty` reports."""
+    each limit, found by bisection (p_c is monotone in A between the midpoint and the limit).
+    When even the midpoint has p_c < p_min no value can be accepted: the limits are returned
+    crossed (A_L > A_U), which :func:`empty` reports."""
     u_mm = float(u_um) / UM_PER_MM
     if not (math.isfinite(u_mm) and u_mm > 0):
         raise ModelError(f"u = {u_um!r} µm must be a positive number")
@@ -390,15 +390,20 @@ def _p_accept(eta, u_m: float, acceptance):
     return np.asarray(p, float)
 
 
-def _pieces(prior: Prior, tolerance_limits):
-    """The support of the prior cut at the tolerance limits: [(a, b, conforming?)]."""
+def _pieces(prior: Prior, tolerance_limits, acceptance, u_m: float):
+    """The support of the prior cut at the tolerance limits and at A ± 12 u_m around each
+    acceptance limit: [(a, b, conforming?, near an acceptance limit?)].  Outside those windows
+    Pr(η_m ∈ A | η) is 0 or 1 to within Φ(-12) ≈ 2e-33, so the integrand is as smooth as the prior."""
     t_lo, t_hi = tolerance_limits
-    cuts = sorted({prior.lo, prior.hi, *(t for t in (t_lo, t_hi) if t is not None and prior.lo < t < prior.hi)})
+    win = [(a - 12 * u_m, a + 12 * u_m) for a in acceptance if a is not None]
+    pts = [t for t in (t_lo, t_hi) if t is not None] + [x for w in win for x in w]
+    cuts = sorted({prior.lo, prior.hi, *(t for t in pts if prior.lo < t < prior.hi)})
     out = []
     for a, b in zip(cuts[:-1], cuts[1:]):
         m = 0.5 * (a + b)
         ok = (t_lo is None or m >= t_lo) and (t_hi is None or m <= t_hi)
-        out.append((a, b, ok))
+        near = any(lo <= m <= hi for lo, hi in win)
+        out.append((a, b, ok, near))
     return out
 
 
@@ -420,12 +425,14 @@ def global_risks(prior: Prior, u_m: float, tolerance_limits, acceptance_limits_)
     with h(η_m | η) = N(η, u_m²) the measuring system's PDF, C = [T_L, T_U] the tolerance
     interval and A = [A_L, A_U] the acceptance interval (``None`` = no such limit; any one unit).
     The inner integrals are normal distribution functions; the outer one is composite Gauss-Legendre
-    quadrature split at the tolerance limits, with panels no wider than min(u_m, prior spread)/8."""
+    quadrature split at the tolerance limits, with panels no wider than u_m/8 within 12 u_m of an
+    acceptance limit and no wider than 1/640 of the prior's support elsewhere."""
     if not (math.isfinite(u_m) and u_m > 0):
         raise ModelError(f"u_m = {u_m!r} must be a positive number")
-    step = min(u_m, (prior.hi - prior.lo) / 80.0) / 8.0
+    coarse = (prior.hi - prior.lo) / 640.0
     r_c = r_p = bad = 0.0
-    for a, b, ok in _pieces(prior, tolerance_limits):
+    for a, b, ok, near in _pieces(prior, tolerance_limits, acceptance_limits_, u_m):
+        step = min(coarse, u_m / 8.0) if near else coarse
         if ok:
             r_p += _integrate(lambda x: prior.pdf(x) * (1.0 - _p_accept(x, u_m, acceptance_limits_)), a, b, step)
         else:
