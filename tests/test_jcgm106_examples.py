@@ -69,6 +69,15 @@ def test_two_sided_acceptance_limits_give_exactly_the_required_p_c(c_m):
     assert cf.specific_consumer_risk(hi, u_um, tol) == pytest.approx(0.05, abs=1e-12)
 
 
+def test_a_required_p_c_below_one_half_accepts_beyond_the_tolerance_limits():
+    """p_min = 0.3 (guarded rejection, 8.3.3): the limits lie outside [T_L, T_U], p_c there = 0.3."""
+    tol = cf.Tolerance.symmetric(5.0, 0.004)
+    lo, hi = cf.acceptance_limits_for_p_c(tol, 1.0, 0.3)
+    assert lo < tol.lsl_mm and hi > tol.usl_mm
+    assert cf.probability_of_conformance(hi, 1.0, tol) == pytest.approx(0.3, abs=1e-12)
+    assert (hi - tol.usl_mm) * 1000 == pytest.approx(-cf.norm_ppf(0.3), abs=1e-9)   # far tail: Φ(-8.5)
+
+
 def test_no_acceptance_interval_when_even_the_midpoint_falls_short():
     """C_m = 0.5: at the midpoint p_c = 2Φ(1) - 1 = 0.683 < 0.95, nothing can be accepted."""
     tol = cf.Tolerance.symmetric(0.0, 0.002)

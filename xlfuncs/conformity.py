@@ -297,7 +297,8 @@ def acceptance_limits_for_p_c(tolerance: Tolerance, u_um: float, p_min: float) -
     One-sided interval: A_U = T_U - z·u, A_L = T_L + z·u with z = Φ⁻¹(p_min) (JCGM 106:2012, 7.3
     Table 1, 8.3.2).  Two-sided interval: the far limit adds to 1 - p_c, so the exact limit is the
     root of Φ((T_U - A)/u) - Φ((T_L - A)/u) = p_min (JCGM 106:2012, 7.4 eq. (12)) on the side of
-    each limit, found by bisection (p_c is monotone in A between the midpoint and the limit).
+    each limit, found by bisection (p_c falls monotonically from the midpoint outwards; p_min < 1/2
+    puts the limits outside the tolerance interval, guarded rejection).
     When even the midpoint has p_c < p_min no value can be accepted: the limits are returned
     crossed (A_L > A_U), which :func:`empty` reports."""
     u_mm = float(u_um) / UM_PER_MM
@@ -311,7 +312,7 @@ def acceptance_limits_for_p_c(tolerance: Tolerance, u_um: float, p_min: float) -
     mid = tolerance.mid_mm
     if probability_of_conformance(mid, u_um, tolerance) < p_min:
         return acceptance_limits(tolerance, 0.5 * (tolerance.usl_mm - tolerance.lsl_mm) * UM_PER_MM * (1 + 1e-9))
-    lo, hi = mid, tolerance.usl_mm          # p_c(lo) >= p_min > p_c(hi): bisect on the upper side
+    lo, hi = mid, tolerance.usl_mm + 40 * u_mm   # p_c(lo) >= p_min > p_c(hi) ≈ 0: bisect on the upper side
     for _ in range(200):
         m = 0.5 * (lo + hi)
         if probability_of_conformance(m, u_um, tolerance) >= p_min:
