@@ -13,7 +13,7 @@ What each number is, and where it comes from (docs/errata.md, "JCGM 106:2012 wor
   reproduces this example; the printed pages of JCGM 106 9.5.4 themselves could not be read here,
   so those are the reference, to suncal's full printed precision, and the prior's non-conforming
   fraction is also checked against its closed form.
-* 9.5.1-9.5.2 (normal process and measuring system): no printed numbers at hand; checked against
+* 9.5 (normal process and measuring system): no printed numbers at hand; checked against
   closed forms (the probability of acceptance) and the other order of integration (JCGM 106:2012,
   9.5: R_C is also the integral over accepted measured values of the specific risk 1 - p_c under
   the posterior).
@@ -131,7 +131,7 @@ def test_a_guard_band_is_zero_when_simple_acceptance_already_meets_the_risk():
     assert cf.guard_band_for_global_risk(BEARINGS, U_M_UM, (None, T_U_UM), 0.05) == 0.0
 
 
-# -- 9.5.1-9.5.2: normal process and measuring system -------------------------------------------
+# -- 9.5: normal process and measuring system -------------------------------------------
 
 def _bvn_checks(mean, sd0, u_m, tol, acc):
     """R_C, R_P from the core and (1) the probability of acceptance in closed form, (2) R_C as

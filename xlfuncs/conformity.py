@@ -13,6 +13,12 @@ measured value and u its standard uncertainty (JCGM 106:2012, 7.2-7.3).  A toler
   9.3: an accepted item at the acceptance limit of a one-sided interval has p_c = 1 - α).
 * :func:`decide`: the outcome for one characteristic: ``conforms``, ``does not conform`` or
   ``cannot be decided``, and the zone the measured value falls in.
+* :func:`acceptance_limits_for_p_c`: the exact acceptance limits for a required p_c (one- and
+  two-sided), :func:`specific_consumer_risk` = 1 - p_c (JCGM 106:2012, 9.3).
+* :func:`global_risks`, :func:`guard_band_for_global_risk`: global consumer's and producer's risks
+  of a production process with a prior PDF (:func:`normal_prior`, :func:`gamma_prior`) inspected
+  by a measuring system N(η, u_m²), and the guard band for a stated global consumer's risk
+  (JCGM 106:2012, 9.5; these take any one unit, not mm/µm).
 
 Units: values and limits in mm, uncertainties in µm (the project's convention); the functions
 convert with :data:`UM_PER_MM`.  numpy and the standard library only; no spreadsheet knowledge.
@@ -330,7 +336,7 @@ def acceptance_limits_for_p_c(tolerance: Tolerance, u_um: float, p_min: float) -
 @dataclass(frozen=True)
 class Prior:
     """The prior PDF g₀(η) of the property η of items from a production process (JCGM 106:2012,
-    9.1, 9.5.1): ``pdf`` (vectorised callable) on the support [lo, hi] (finite bounds that hold
+    9.5): ``pdf`` (vectorised callable) on the support [lo, hi] (finite bounds that hold
     all but a negligible part of the probability).  Any one unit (that of the tolerance limits and
     of u_m)."""
 
@@ -341,7 +347,7 @@ class Prior:
 
 
 def normal_prior(mean: float, sd: float) -> Prior:
-    """g₀ = N(y₀, u₀²) (JCGM 106:2012, 9.5.2, normal process PDF), cut at ± 40 u₀ (the
+    """g₀ = N(y₀, u₀²) (JCGM 106:2012, 9.5, normal process PDF), cut at ± 40 u₀ (the
     mass beyond is below 1e-300)."""
     if not (math.isfinite(mean) and math.isfinite(sd) and sd > 0):
         raise ModelError(f"a normal prior needs a finite mean and sd > 0 (got {mean!r}, {sd!r})")
@@ -383,7 +389,7 @@ def _integrate(f, a: float, b: float, step: float) -> float:
 
 
 def _p_accept(eta, u_m: float, acceptance):
-    """Pr(η_m ∈ A | η) for η_m ~ N(η, u_m²) (JCGM 106:2012, 9.5.1: the measuring system's PDF)."""
+    """Pr(η_m ∈ A | η) for η_m ~ N(η, u_m²) (JCGM 106:2012, 9.5: the measuring system's PDF)."""
     lo, hi = acceptance
     p = norm_cdf((hi - np.asarray(eta, float)) / u_m) if hi is not None else np.ones(np.shape(eta))
     if lo is not None:
@@ -417,8 +423,8 @@ class GlobalRisks:
     nonconforming: float       #: the prior probability that an item does not conform (no inspection)
 
 
-def global_risks(prior: Prior, u_m: float, tolerance_limits, acceptance_limits_) -> GlobalRisks:
-    """R_C and R_P (JCGM 106:2012, 9.5.1-9.5.2):
+def global_risks(prior: Prior, u_m: float, tolerance_limits, acceptance) -> GlobalRisks:
+    """R_C and R_P (JCGM 106:2012, 9.5):
 
         R_C = ∫_{η ∉ C} g₀(η) ∫_{η_m ∈ A} h(η_m | η) dη_m dη,
         R_P = ∫_{η ∈ C} g₀(η) ∫_{η_m ∉ A} h(η_m | η) dη_m dη,
@@ -432,12 +438,12 @@ def global_risks(prior: Prior, u_m: float, tolerance_limits, acceptance_limits_)
         raise ModelError(f"u_m = {u_m!r} must be a positive number")
     coarse = (prior.hi - prior.lo) / 640.0
     r_c = r_p = bad = 0.0
-    for a, b, ok, near in _pieces(prior, tolerance_limits, acceptance_limits_, u_m):
+    for a, b, ok, near in _pieces(prior, tolerance_limits, acceptance, u_m):
         step = min(coarse, u_m / 8.0) if near else coarse
         if ok:
-            r_p += _integrate(lambda x: prior.pdf(x) * (1.0 - _p_accept(x, u_m, acceptance_limits_)), a, b, step)
+            r_p += _integrate(lambda x: prior.pdf(x) * (1.0 - _p_accept(x, u_m, acceptance)), a, b, step)
         else:
-            r_c += _integrate(lambda x: prior.pdf(x) * _p_accept(x, u_m, acceptance_limits_), a, b, step)
+            r_c += _integrate(lambda x: prior.pdf(x) * _p_accept(x, u_m, acceptance), a, b, step)
             bad += _integrate(prior.pdf, a, b, step)
     return GlobalRisks(consumer=r_c, producer=r_p, nonconforming=bad)
 
