@@ -97,7 +97,7 @@ SUNCAL = {"nonconforming": 0.04238011199168401, "R_C": 0.008019111884303471,
 
 
 def test_bearings_nonconforming_fraction_without_inspection():
-    """JCGM 106:2012, 9.5.4: Pr(η > T_U) = 4.2 % of the bearings do not conform.  For integer α
+    """9.5.4 (as suncal states it): Pr(η > T_U) = 4.2 % of the bearings do not conform.  For integer α
     the gamma tail is e^(-βT) Σ_{j<α} (βT)^j/j!, here 126⅓·e⁻⁸."""
     r = cf.global_risks(BEARINGS, U_M_UM, (None, T_U_UM), (None, T_U_UM))
     exact = math.exp(-8.0) * sum(8.0 ** j / math.factorial(j) for j in range(4))
@@ -107,8 +107,8 @@ def test_bearings_nonconforming_fraction_without_inspection():
 
 
 def test_bearings_global_consumers_risk_with_simple_acceptance():
-    """9.5.4: inspecting every bearing with u_m = 0.25 µm and accepting below T_U leaves
-    R_C = 0.8 % (suncal: 0.008019111884303471)."""
+    """9.5.4 (as suncal states it): inspecting every bearing with u_m = 0.25 µm and accepting
+    below T_U leaves R_C = 0.8 % (suncal: 0.008019111884303471)."""
     r = cf.global_risks(BEARINGS, U_M_UM, (None, T_U_UM), (None, T_U_UM))
     assert printed(100 * r.consumer, 0.8, 1)
     assert close(r.consumer, SUNCAL["R_C"], rel=1e-9)
@@ -116,8 +116,8 @@ def test_bearings_global_consumers_risk_with_simple_acceptance():
 
 
 def test_bearings_acceptance_limit_for_a_global_consumers_risk_of_0_1_percent():
-    """9.5.4: a required R_C <= 0.1 % moves the acceptance limit to A_U = T_U - w = 1.67 µm;
-    the producer's risk grows (more conforming bearings are rejected)."""
+    """9.5.4 (suncal's result): a required R_C <= 0.1 % moves the acceptance limit to
+    A_U = T_U - w = 1.67 µm; the producer's risk grows (more conforming bearings are rejected)."""
     w = cf.guard_band_for_global_risk(BEARINGS, U_M_UM, (None, T_U_UM), 0.001)
     assert abs(w - SUNCAL["w_um"]) <= 1e-9
     assert printed(T_U_UM - w, 1.67, 2) and abs(T_U_UM - w - SUNCAL["A_U_um"]) <= 1e-9
