@@ -8,11 +8,10 @@
 The names the rest of the project uses are re-exported here.
 """
 
-from .decide import (BONUS_CONDITIONS, DecisionSpec, ToleranceSpec, characteristic_tolerances,
-                     decide_all, margin_label, read_spec, rule_json, rows_of, symbol)
+from .decide import (BONUS_CONDITIONS, characteristic_tolerances, decide_all, margin_label, read_spec, rule_json,
+                     symbol)
 from .readback import read_back
-from .sheet import FIRST_ROW, column, mm_format, write_sheet
+from .sheet import FIRST_ROW, column, write_sheet
 
-__all__ = ["BONUS_CONDITIONS", "DecisionSpec", "FIRST_ROW", "ToleranceSpec", "characteristic_tolerances",
-           "column", "decide_all", "margin_label", "mm_format", "read_back", "read_spec", "rows_of",
-           "rule_json", "symbol", "write_sheet"]
+__all__ = ["BONUS_CONDITIONS", "FIRST_ROW", "characteristic_tolerances", "column", "decide_all", "margin_label",
+           "read_back", "read_spec", "rule_json", "symbol", "write_sheet"]
