@@ -111,8 +111,8 @@ def oxt_bytes() -> bytes:
         add("CalcAddIns.xcu", calc_addins_xcu().encode())
         add(COMPONENT, (SOURCES / COMPONENT).read_text().replace("@VERSION@", __version__).encode())
         core = Path(xlfuncs.__file__).parent
-        for f in sorted(core.glob("*.py")):
-            add(f"pythonpath/xlfuncs/{f.name}", f.read_bytes())
+        for f in sorted(core.rglob("*.py")):          # with its subpackages (features/, partial/, ...)
+            add(f"pythonpath/xlfuncs/{f.relative_to(core).as_posix()}", f.read_bytes())
     return buf.getvalue()
 
 

@@ -10,6 +10,7 @@ import pytest
 from scipy.optimize import linprog
 
 from xlfuncs import characteristics as ch
+from xlfuncs.characteristics import evaluation as che
 from xlfuncs import features as ft
 from xlfuncs import plate as pl
 from xlfuncs import pointcloud as pc
@@ -143,7 +144,7 @@ def test_features_measured_by_one_cmm_are_correlated_and_repeatability_alone_doe
 
 def test_the_datum_frame_of_the_plate_is_the_drawing_frame(plate):
     jf, frames = plate["jf"], plate["frames"]
-    F = ch._Context(jf, {f.name: f for f in frames}).frame("ABC")
+    F = ch.Context(jf, {f.name: f for f in frames}).frame("ABC")
     # A, B, C are exact planes through the origin (A with 4 µm form): the frame is the
     # machine frame to within the form's tilt of the least-squares plane A
     assert np.allclose(F.R[0], np.eye(3), atol=2e-5)
@@ -155,8 +156,8 @@ def test_a_shifted_secondary_datum_moves_the_origin_by_the_shift(plate):
     Xs = X.copy()
     Xs[np.asarray(feats[1].indices), 0] += 0.25        # datum B 0.25 mm further along x
     jf = ch.fit_features(X, N, feats)
-    a = ch._Context(jf, {"ABC": frames[0]}).frame("ABC").origin_mm[0]
-    b = ch._Context(ch.fit_features(Xs, N, feats), {"ABC": frames[0]}).frame("ABC").origin_mm[0]
+    a = ch.Context(jf, {"ABC": frames[0]}).frame("ABC").origin_mm[0]
+    b = ch.Context(ch.fit_features(Xs, N, feats), {"ABC": frames[0]}).frame("ABC").origin_mm[0]
     # the origin slides along the line where A meets C, 0.25 mm in x
     line = np.cross(jf.fits["A"].R[:, 2], jf.fits["C"].R[:, 2])
     assert b[0] - a[0] == pytest.approx(0.25, abs=1e-12)
@@ -312,12 +313,12 @@ def test_an_orientation_zone_turned_to_its_minimum_is_the_lp_optimum(plate):
     ls, mz, par = ch.evaluate(jf, frames, ORIENTATION_MZ)
     assert mz.value < ls.value and ls.value == pytest.approx(res0["perp_D_A"].value, rel=1e-12)
     assert par.value == pytest.approx(res0["par_T_A"].value, rel=1e-12)
-    ctx = ch._Context(jf, {f.name: f for f in frames})
-    zd, _ = ch._datum_direction(ctx, ORIENTATION_MZ[1])
-    _, frozen = ch._orientation(ctx, ORIENTATION_MZ[1], {}, None)
+    ctx = ch.Context(jf, {f.name: f for f in frames})
+    zd, _ = che._datum_direction(ctx, ORIENTATION_MZ[1])
+    _, frozen = che._orientation(ctx, ORIENTATION_MZ[1], {}, None)
     g = ctx.geom("D")
-    t = ch._perp_unit(g.direction, zd, ctx.frame("ABC").R[:, :, 0])
-    e = ch._rotate(t, zd, frozen["phi"])
+    t = che._perp_unit(g.direction, zd, ctx.frame("ABC").R[:, :, 0])
+    e = che._rotate(t, zd, frozen["phi"])
     P = ctx.points("D")[0]
     d, gg = P @ e[0], -(P @ np.cross(zd, e)[0])[:, None]
     assert linprog_zone(d, gg) == pytest.approx(mz.value, rel=1e-9)

@@ -326,7 +326,7 @@ def test_jacobian_is_the_derivative_of_the_distance():
             e = np.zeros(f.n); e[j] = h
             res = []
             for sgn in (1, -1):
-                o, R, sh = features._update(f.kind, f.origin_mm, f.R, f.shape, sgn * e)
+                o, R, sh = features.update_one(f.kind, f.origin_mm, f.R, f.shape, sgn * e)
                 d, _, _ = features.local_model(f.kind, (X - o) @ R, sh)
                 res.append(d.reshape(-1))
             np.testing.assert_allclose((res[0] - res[1]) / (2 * h), f.J[:, j], atol=2e-7,

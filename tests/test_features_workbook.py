@@ -16,7 +16,7 @@ import openpyxl
 import pytest
 
 from conftest import ENGINES, EXAMPLES
-from generator.feature import book as feature_book, job as feature_job
+from generator.feature import book as feature_book, job as feature_job, va_sheets
 from generator.cli import build_task, main
 from generator.errors import InputError
 from generator.workbook.recalc import recalculate, results_rows
@@ -218,7 +218,7 @@ def test_workbook_agrees_with_the_json(built, case, engine):
                 f"{engine} {n} u_{fac}: {got} vs {ref}"
     # the covariance of the reported parameters
     f_n, g = len(fe["local"]["parameter_names"]), len(names)
-    L, Gl = feature_book.v_a_layout(f_n, g)["total"]
+    L, Gl = va_sheets.v_a_layout(f_n, g)["total"]
     C = block_values(values, Gl)
     ref = np.array(fe["covariance"])
     assert np.all(np.abs(C - ref) <= REL * np.abs(ref) + 1e-12 * np.abs(ref).max())
@@ -275,11 +275,11 @@ def test_above_the_native_limit_the_heavy_blocks_are_labelled_values(tmp_path, e
     book = next(f for f in files if f.suffix == ".xlsx")
     wb = openpyxl.load_workbook(book)
     assert "V_X" not in wb.sheetnames and "Coords" not in wb.sheetnames
-    L, G = feature_book.v_a_layout(3, 6)["ET"]
+    L, G = va_sheets.v_a_layout(3, 6)["ET"]
     c = wb["V_A"].cell(row=L.row, column=G.column + G.n_cols + 2)
     assert isinstance(c.value, float) and "VALUES, not formulas" in c.comment.text
     assert "x 1e-12" in wb["V_A"].cell(row=L.row, column=L.column).comment.text
-    L, _ = feature_book.v_a_layout(3, 6)["R"]
+    L, _ = va_sheets.v_a_layout(3, 6)["R"]
     assert "sigma_R_um" in str(wb["V_A"].cell(row=L.row, column=L.column).value.text)
     values = recalculate(book, engine)
     for r in results_rows(values):

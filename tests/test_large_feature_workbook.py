@@ -20,7 +20,7 @@ from openpyxl.utils import get_column_letter, range_boundaries
 from openpyxl.worksheet.formula import ArrayFormula
 
 from conftest import ENGINES, close, recalc
-from generator.feature import book as feature_book, job as feature_job
+from generator.feature import book as feature_book, job as feature_job, va_sheets
 from generator.pointcloud import large_book
 from generator.cli import build_task
 from generator.workbook.recalc import results_rows
@@ -187,7 +187,7 @@ def assert_addin_formulas_reproduce_the_values(book: Path, values: dict, results
         for k, (got, e) in enumerate(zip(row[2:], exp)):
             assert close(got ** 2, e ** 2, floor=1e-12 * fe["u"][name] ** 2 + 1e-30), \
                 f"cmm_feature {name} column {k + 3}: {got} vs {e}"
-    layout = feature_book.v_a_layout(n, g)
+    layout = va_sheets.v_a_layout(n, g)
     va = values["V_A"]
     V_total, V_paper = np.array(fe["covariance"]), np.array(fe["local"]["covariance"]) * 1e12
     total = block_values(va, *_at(layout["R"][1]))             # R: a native formula on V_A
@@ -260,7 +260,7 @@ def test_live_addin_layout_and_notes(bore):
     args = '"cylinder",Points!$A$2:$H$121,Inputs!$A$17:$H$18,Inputs!$A$2:$B$13'
     opts = '"",Local!$B$2:$B$121,$L$3:$N$3,$L$4:$N$4)'
     assert live["A3"].value.text == f"=cmm_feature({args},{opts}" and live["A3"].value.ref == "A3:I9"
-    L, Gl = feature_book.v_a_layout(5, 7)["ET"]
+    L, Gl = va_sheets.v_a_layout(5, 7)["ET"]
     c = live.cell(row=Gl.row, column=Gl.column).value
     assert c.text == f'=cmm_feature_va({args},"ET",{opts}' and c.ref == "I43:O49"
     assert [[live.cell(row=r, column=k).value for k in range(12, 15)] for r in (3, 4)] == \
@@ -289,7 +289,7 @@ def test_above_the_dense_size_the_notes_name_the_blocked_propagation(tmp_path, m
     monkeypatch.setattr(feature_job, "DENSE_MAX_POINTS", 100)
     results, files = build_task(write_bore_task(tmp_path), tmp_path / "out", plots=False)
     wb = openpyxl.load_workbook(next(f for f in files if f.suffix == ".xlsx"))
-    L, Gl = feature_book.v_a_layout(5, 7)["S"]
+    L, Gl = va_sheets.v_a_layout(5, 7)["S"]
     note = wb["V_A"].cell(row=L.row, column=Gl.column + 7 + 2).comment.text
     assert "xlfuncs.blocked.propagate_cloud" in note and "features.propagate" not in note
     assert any("xlfuncs.blocked.propagate_cloud" in str(c.value) for c in wb["Instructions"]["A"])

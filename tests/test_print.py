@@ -13,7 +13,7 @@ from pathlib import Path
 import openpyxl
 import pytest
 
-from generator.budget import book as budget_book
+from generator.budget import block as budget_block
 from generator.cli import main
 from generator.workbook.recalc import soffice
 
@@ -92,7 +92,7 @@ def test_every_knuckle_budget_prints_on_one_page(demo):
                 for key in ("sensitivity_mm/mm", "contribution_um", "u_POS_um", "U_POS_um"):
                     assert key in chunk, f"{heading!r}: {key} not on the same page"
             else:
-                for key in (*budget_book.BUDGET_HEADER[1:], "u_c_um", "U_um"):
+                for key in (*budget_block.BUDGET_HEADER[1:], "u_c_um", "U_um"):
                     assert key in chunk, f"{heading!r}: {key} not on the same page"
     assert set(names) <= seen, f"characteristics without a printed budget: {set(names) - seen}"
 
@@ -111,7 +111,7 @@ def test_numeric_headers_of_results_and_budgets_carry_units(demo):
 
 
 def test_knuckle_budget_headers_carry_units():
-    assert all(UNIT.search(h) for h in budget_book.BUDGET_HEADER[1:])
+    assert all(UNIT.search(h) for h in budget_block.BUDGET_HEADER[1:])
 
 
 def test_no_header_is_cut(demo):

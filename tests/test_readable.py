@@ -18,7 +18,7 @@ import pytest
 from conftest import EXAMPLES
 from generator.build import build_task
 from generator.errors import InputError
-from generator.feature import book as feature_book
+from generator.feature import va_sheets
 from generator.feature.task import FIT_CURRENT, FIT_STALE
 from generator.taskfile import key_line
 from generator.workbook import plots
@@ -185,7 +185,7 @@ def test_feature_budget_headers_carry_units(sphere_book):
     header = [c.value for c in ws[1]]
     assert header[1] == "value_mm" and header[4] == "u_um" and header[5:11] == \
         [f"u_{f}_um" for f in ("R", "PQ", "S", "ET", "ER", "P")]
-    assert feature_book.with_units("u", ["µm", "1e-6", "µm"]) == "u (µm, 1e-6)"
+    assert va_sheets.with_units("u", ["µm", "1e-6", "µm"]) == "u (µm, 1e-6)"
     assert ws["B2"].number_format == "0.000000"      # 250.000000 mm, not 250.000000000
 
 

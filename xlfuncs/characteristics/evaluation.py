@@ -1,34 +1,7 @@
-"""Characteristics of a drawing from several least-squares features fitted in one task, with
-their uncertainty under the full point-cloud variance V_X of one CMM (Forbes 2025 eq. (28)).
-
-Features (Forbes 2022): every feature is fitted to its own points of one joint point set;
-stacking their sensitivity matrices G_A|X (eq. (8)) row-wise gives the joint
-
-    G = [G_1 (columns of the points of feature 1); G_2; ...]   (sum n_f) x 3m,
-    V_A = G V_X G^T                                            (Forbes 2025 section 5.6),
-
-whose off-diagonal blocks are the correlations between features measured by one CMM (scale,
-squareness, the spatially correlated errors, a probe qualification shared by all points).
-
-Characteristics (ISO 1101:2017 / ASME Y14.5-2018 names) are functions of the features' local
-parameters a and, for form and for orientation zones of surfaces, of the extreme points
-directly.  Each is linearised as
-
-    delta c = s_A delta a + s_Xd delta x   ->   s_X = s_Xd + s_A G,   u^2(c) = s_X V_X s_X^T,
-
-s_A by central differences through the features' geometry (xlfuncs.features.update_frame),
-s_Xd over the coordinates of the points that decide the value (the contact points of a minimum
-zone, the highest and lowest point of a peak-to-valley) with those points held fixed.  For the
-smooth characteristics (size, distance, angle, orientation and position of axes) s_Xd = 0 and
-u^2 = s_A V_A s_A^T -- the workbook's live MMULT.  Form values and zones of surfaces are maxima
-over points: their u is the active-set linearisation; the Monte Carlo (:func:`monte_carlo`)
-says how good it is.
-
-Conventions (docs/characteristics.md): lengths in mm, angles in degrees; u in µm (lengths) or
-µrad (angles).  The size of a feature of size is its least-squares diameter (not the ASME
-actual mating envelope); position and axis orientation are evaluated at the ends of the axis
-over the extent of the feature's points along the datum axis at the reference.
-"""
+"""The value, sensitivities and uncertainty of every characteristic of a joint fit: each
+characteristic linearised as delta c = s_A delta a + s_Xd delta x, s_X = s_Xd + s_A G,
+u^2(c) = s_X V_X s_X^T (Forbes 2025 eq. (28) for V_X; the method in the package docstring,
+:mod:`xlfuncs.characteristics`)."""
 
 from __future__ import annotations
 
@@ -38,22 +11,14 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-from . import features as ft
-from .datums import AXIS, PLANE, Frame, Geometry, datum_frame, role
-from .errors import ModelError
-from .minzone import basis_is_optimal, chebyshev_zone
+from .. import features as ft
+from ..datums import AXIS, PLANE, Frame, Geometry, datum_frame, role
+from ..errors import ModelError
+from ..minzone import chebyshev_zone
+from .joint import JointFit
+from .specs import FORM_TYPES, ORIENTATION_TYPES, SMOOTH_TYPES, TYPES, CharacteristicSpec, FrameSpec
 
-__all__ = [
-    "FeatureSpec", "FrameSpec", "CharacteristicSpec", "JointFit", "Result", "TYPES",
-    "fit_features", "joint_V_A", "evaluate", "monte_carlo", "FORM_TYPES", "SMOOTH_TYPES",
-]
 
-FORM_TYPES = ("flatness", "straightness", "roundness", "cylindricity")
-ORIENTATION_TYPES = ("perpendicularity", "parallelism", "angularity")
-SIZE_TYPES = ("diameter", "width", "cone_angle")
-TYPES = SIZE_TYPES + ("distance", "angle") + FORM_TYPES + ORIENTATION_TYPES + ("position",)
-#: the types whose value is a smooth function of the features' parameters only
-SMOOTH_TYPES = SIZE_TYPES + ("distance", "angle", "position")
 FORM_ELEMENT = {"flatness": ("plane",), "straightness": ("line",), "roundness": ("circle",),
                 "cylindricity": ("cylinder",)}
 #: the residual derivative columns that are free zone parameters (small-angle form): the
@@ -61,93 +26,6 @@ FORM_ELEMENT = {"flatness": ("plane",), "straightness": ("line",), "roundness": 
 FREE_COLUMNS = {"plane": (1, 2), "circle": (0, 1), "cylinder": (0, 1, 2, 3)}
 STEP = 1e-5          # central-difference step, mm or rad
 RAD = math.pi / 180.0
-
-
-# ------------------------------------------------------------------------------------------
-# specifications
-# ------------------------------------------------------------------------------------------
-
-@dataclass(frozen=True)
-class FeatureSpec:
-    """A feature: ``element`` fitted to the points ``indices`` of the joint point set."""
-
-    name: str
-    element: str
-    indices: tuple[int, ...]
-    circle_plane: str | None = "xy"
-    axis_hint: tuple[float, float, float] | None = None
-
-
-@dataclass(frozen=True)
-class FrameSpec:
-    """A datum reference frame A|B|C: feature names in order of precedence."""
-
-    name: str
-    primary: str
-    secondary: str | None = None
-    tertiary: str | None = None
-
-
-@dataclass(frozen=True)
-class CharacteristicSpec:
-    """A characteristic of the drawing.
-
-    ``type``: diameter (circle, cylinder, sphere), width (two planes), cone_angle (a cone's
-    included angle 2 phi, deg), distance (locating point
-    of the second feature to the first element), angle (between the two fitted directions --
-    normals outward, axes as oriented -- 0 to 180 deg),
-    flatness/straightness/roundness/cylindricity (``method`` "LS" peak-to-valley of the
-    residuals to the least-squares feature, or "MZ" minimum zone), perpendicularity/parallelism/
-    angularity (to the primary datum of ``frame``, or to the feature ``datum``; a plane's zone
-    oriented by its least-squares normal, or with ``method`` "MZ" turned about the datum
-    direction to its minimum; ``zone``
-    "planar" for a surface, "diametral" for an axis; angularity's ``nominal`` angle in deg),
-    position (of an axis or centre in ``frame``, at ``nominal_position_mm`` in frame
-    coordinates, diametral zone; ``material_condition`` MMC/LMC with the bonus from the size
-    characteristic ``size``; ``internal`` for a hole).
-    ``direction``: straightness only, the zone direction (the surface's nominal normal).
-    Tolerances are carried here, not decided (the build decides them: generator.decision):
-    ``lsl``/``usl`` (size, distance, angle) or ``tolerance_mm`` (zone width of form,
-    orientation, position).
-    """
-
-    name: str
-    type: str
-    features: tuple[str, ...]
-    method: str = "LS"
-    frame: str | None = None
-    datum: str | None = None
-    nominal: float | None = None
-    nominal_position_mm: tuple[float, ...] | None = None
-    zone: str = "planar"
-    material_condition: str = "RFS"
-    size: str | None = None
-    internal: bool = True
-    direction: tuple[float, float, float] | None = None
-    lsl: float | None = None
-    usl: float | None = None
-    tolerance_mm: float | None = None
-
-
-@dataclass
-class JointFit:
-    """The features of one task fitted to their points, and the joint G (module docstring)."""
-
-    X_mm: np.ndarray
-    normals: np.ndarray
-    specs: dict[str, FeatureSpec]
-    fits: dict[str, ft.FeatureFit]
-    rows: dict[str, slice]
-    G: np.ndarray
-    param_names: tuple[str, ...]
-
-    @property
-    def n(self) -> int:
-        return self.G.shape[0]
-
-    @property
-    def m(self) -> int:
-        return self.X_mm.shape[0]
 
 
 @dataclass
@@ -188,61 +66,6 @@ class Result:
 
 
 # ------------------------------------------------------------------------------------------
-# the joint fit
-# ------------------------------------------------------------------------------------------
-
-def fit_features(X_mm, normals, specs: Sequence[FeatureSpec]) -> JointFit:
-    """Fit every feature to its points (Forbes 2022) and stack the G_A|X into the joint G."""
-    X = np.asarray(X_mm, float)
-    N = np.asarray(normals, float)
-    m = X.shape[0]
-    if N.shape != X.shape:
-        raise ModelError("normals must have the same shape as the points")
-    names = [s.name for s in specs]
-    if len(set(names)) != len(names):
-        raise ModelError("feature names must be unique")
-    fits, rows, blocks, pnames = {}, {}, [], []
-    r0 = 0
-    for s in specs:
-        idx = np.asarray(s.indices, int)
-        if idx.size == 0 or idx.min() < 0 or idx.max() >= m:
-            raise ModelError(f"feature {s.name}: point indices out of range")
-        if len(set(idx.tolist())) != idx.size:
-            raise ModelError(f"feature {s.name}: a point is listed twice")
-        try:
-            f = ft.fit(s.element, X[idx], normals=N[idx], axis_hint=s.axis_hint,
-                       circle_plane=s.circle_plane if s.element == "circle" else "xy")
-        except ModelError as err:
-            raise type(err)(f"feature {s.name}: {err}") from None
-        Gf = ft.G_A_X(f)
-        Gj = np.zeros((f.n, 3 * m))
-        cols = (3 * idx[:, None] + np.arange(3)).reshape(-1)
-        Gj[:, cols] = Gf
-        fits[s.name] = f
-        rows[s.name] = slice(r0, r0 + f.n)
-        r0 += f.n
-        blocks.append(Gj)
-        pnames += [f"{s.name}.{p}" for p in f.local_names]
-    return JointFit(X_mm=X, normals=N, specs={s.name: s for s in specs}, fits=fits, rows=rows,
-                    G=np.vstack(blocks), param_names=tuple(pnames))
-
-
-def joint_V_A(jf: JointFit, V_X_um2: Mapping[str, np.ndarray] | np.ndarray) -> dict[str, np.ndarray]:
-    """V_A = G V_X G^T of all features' local parameters (mm, rad), per factor and "total"."""
-    comps = {"V_X": V_X_um2} if isinstance(V_X_um2, np.ndarray) else dict(V_X_um2)
-    out, total = {}, np.zeros((jf.n, jf.n))
-    for k, V in comps.items():
-        V = np.asarray(V, float)
-        if V.shape != (3 * jf.m, 3 * jf.m):
-            raise ModelError(f"V_X component {k}: expected {3 * jf.m} x {3 * jf.m}")
-        Va = jf.G @ V @ jf.G.T * ft.UM2_TO_MM2
-        out[k] = 0.5 * (Va + Va.T)
-        total = total + out[k]
-    out["total"] = total
-    return out
-
-
-# ------------------------------------------------------------------------------------------
 # geometry of (perturbed) features, batched
 # ------------------------------------------------------------------------------------------
 
@@ -260,7 +83,7 @@ def _geometry(f: ft.FeatureFit, delta=None, B: int = 1) -> Geometry:
     return Geometry(element=f.element, kind=f.kind, point=o, R=R, shape=sh)
 
 
-class _Context:
+class Context:
     """Batched geometry of every feature and the points (B draws or perturbations)."""
 
     def __init__(self, jf: JointFit, frames: Mapping[str, FrameSpec], deltas=None, X=None,
@@ -346,7 +169,7 @@ def _angle(ctx, c, consts, frozen):
     return np.degrees(np.arctan2(np.linalg.norm(np.cross(v1, v2), axis=-1), _dot(v1, v2))), frozen
 
 
-def _form_residuals(ctx, c):
+def form_residuals(ctx, c):
     """(d (B x m_f), g (B x m_f x k)) of the form feature's points in its (batched) geometry."""
     name = c.features[0]
     g = ctx.geom(name)
@@ -373,7 +196,7 @@ def _extremes(h):
     return h[b, i] - h[b, j], {"w": w}
 
 
-def _form(ctx, c, consts, frozen):
+def form(ctx, c, consts, frozen):
     el = ctx.jf.fits[c.features[0]].element
     if el not in FORM_ELEMENT[c.type]:
         raise ModelError(f"{c.name}: {c.type} needs a {FORM_ELEMENT[c.type][0]} feature, not {el}")
@@ -386,8 +209,8 @@ def _form(ctx, c, consts, frozen):
         name = c.features[0]
         base = ctx.deltas.get(name)
         delta = frozen["delta"] if base is None else base + frozen["delta"]
-        ctx = _Context(ctx.jf, ctx.frame_specs, deltas={name: delta}, X=ctx.X, B=ctx.B)
-    d, g = _form_residuals(ctx, c)
+        ctx = Context(ctx.jf, ctx.frame_specs, deltas={name: delta}, X=ctx.X, B=ctx.B)
+    d, g = form_residuals(ctx, c)
     if frozen is not None:
         return d @ frozen["w"], frozen
     if c.method == "LS":
@@ -403,12 +226,12 @@ def _mz_exact(ctx, c, consts):
     f = ctx.jf.fits[name]
     free = FREE_COLUMNS.get(f.kind)
     if c.type == "straightness" or free is None:
-        return _form(ctx, c, consts, None)
+        return form(ctx, c, consts, None)
     delta = np.zeros((1, f.n))
     basis, its = None, 0
     for _ in range(20):
-        sub = _Context(ctx.jf, ctx.frame_specs, deltas={name: delta}, X=ctx.X)
-        d, g = _form_residuals(sub, c)
+        sub = Context(ctx.jf, ctx.frame_specs, deltas={name: delta}, X=ctx.X)
+        d, g = form_residuals(sub, c)
         zone = chebyshev_zone(d[0], g[0], basis=basis)
         basis, its = zone.basis, its + zone.iterations
         if np.max(np.abs(zone.p)) <= 1e-12:
@@ -543,15 +366,15 @@ def _position(ctx, c, consts, frozen):
     return 2.0 * np.hypot(q[:, 0] - nom[0], q[:, 1] - nom[1]), frozen
 
 
-_VALUE = {"diameter": _size, "width": _size, "cone_angle": _size, "distance": _distance, "angle": _angle,
-          "flatness": _form, "straightness": _form, "roundness": _form, "cylindricity": _form,
+VALUE = {"diameter": _size, "width": _size, "cone_angle": _size, "distance": _distance, "angle": _angle,
+          "flatness": form, "straightness": form, "roundness": form, "cylindricity": form,
           "perpendicularity": _orientation, "parallelism": _orientation,
           "angularity": _orientation, "position": _position}
 
 
-def _constants(jf: JointFit, frames, c: CharacteristicSpec) -> dict:
+def constants(jf: JointFit, frames, c: CharacteristicSpec) -> dict:
     """What is fixed at the reference: an axis's length over its points, a position's heights."""
-    ctx = _Context(jf, frames)
+    ctx = Context(jf, frames)
     out: dict = {}
     if c.type in ORIENTATION_TYPES or c.type == "position":
         g = ctx.geom(c.features[0])
@@ -595,7 +418,7 @@ def _point_columns(jf: JointFit, name: str, local: np.ndarray) -> np.ndarray:
 def _sensitivities(jf, frames, c, consts, frozen):
     """(s_A, s_Xd) by central differences with the active set held (module docstring), all
     perturbations in one batch."""
-    fn = _VALUE[c.type]
+    fn = VALUE[c.type]
     n = jf.n
     deltas = {}
     for name, sl in jf.rows.items():
@@ -604,7 +427,7 @@ def _sensitivities(jf, frames, c, consts, frozen):
         d[j, j - sl.start] = STEP
         d[n + j, j - sl.start] = -STEP
         deltas[name] = d
-    v, _ = fn(_Context(jf, frames, deltas=deltas, B=2 * n), c, consts, frozen)
+    v, _ = fn(Context(jf, frames, deltas=deltas, B=2 * n), c, consts, frozen)
     s_A = (v[:n] - v[n:]) / (2 * STEP)
     # central-difference rounding of parameters the value does not depend on: exactly zero
     s_A[np.abs(s_A) <= 1e-9 * np.abs(s_A).max(initial=0.0)] = 0.0
@@ -618,7 +441,7 @@ def _sensitivities(jf, frames, c, consts, frozen):
                 for a in range(3):
                     Xb[3 * q + a, i, a] += STEP
                     Xb[k + 3 * q + a, i, a] -= STEP
-            v, _ = fn(_Context(jf, frames, X=Xb, B=2 * k), c, consts, frozen)
+            v, _ = fn(Context(jf, frames, X=Xb, B=2 * k), c, consts, frozen)
             dv = (v[:k] - v[k:]) / (2 * STEP)
             for q, i in enumerate(cols):
                 s_Xd[3 * i:3 * i + 3] = dv[3 * q:3 * q + 3]
@@ -663,14 +486,14 @@ def evaluate(jf: JointFit, frames: Sequence[FrameSpec] | Mapping[str, FrameSpec]
     for i in order:
         c = chars[i]
         _check(c, jf, frames)
-        consts = _constants(jf, frames, c)
-        ctx = _Context(jf, frames)
+        consts = constants(jf, frames, c)
+        ctx = Context(jf, frames)
         its = None
         if c.type in FORM_TYPES and c.method == "MZ":
             value, frozen = _mz_exact(ctx, c, consts)
             its = frozen.get("iterations")
         else:
-            value, frozen = _VALUE[c.type](ctx, c, consts, None)
+            value, frozen = VALUE[c.type](ctx, c, consts, None)
         value = float(value[0])
         s_A, s_Xd = _sensitivities(jf, frames, c, consts, frozen)
         s_X = s_Xd + s_A @ jf.G
@@ -717,82 +540,3 @@ def propagate(results: Sequence[Result], V_X_um2) -> None:
         if r.s_X_margin is not None:
             tot = sum(float(r.s_X_margin @ V @ r.s_X_margin) for V in comps.values())
             r.u_margin_um = math.sqrt(max(tot, 0.0))
-
-
-# ------------------------------------------------------------------------------------------
-# Monte Carlo (JCGM 101) of every characteristic: refit, re-evaluate exactly
-# ------------------------------------------------------------------------------------------
-
-def monte_carlo(jf: JointFit, frames, chars: Sequence[CharacteristicSpec], results: Sequence[Result],
-                cloud, params, *, n_dig: int = 2, batch: int = 2000, max_draws: int = 400_000,
-                rng=None, sampler=None):
-    """JCGM 101 adaptive Monte Carlo of the characteristics: every draw of the six influence
-    factors (xlfuncs.montecarlo.PointCloudSampler over the joint point set) moves the points,
-    every feature is refitted (Gauss-Newton from the reference, xlfuncs.montecarlo.refit_batch)
-    and every characteristic evaluated anew: the extreme points found again, the minimum zone
-    solved again (small-angle LP about the draw's least-squares feature, warm-started from the
-    reference's contact points).  Returns the MCResult, u in the results' units (µm, µrad), then
-    the margin (zone - value, µm) of every position with a tolerance, its MMC/LMC bonus taken
-    from the drawn size."""
-    from . import montecarlo as mc
-
-    frames = frames if isinstance(frames, Mapping) else {f.name: f for f in frames}
-    sampler = sampler or mc.PointCloudSampler(cloud, params)
-    consts = [_constants(jf, frames, c) for c in chars]
-    ref_basis = []
-    for ci, c in enumerate(chars):
-        if c.type in FORM_TYPES and c.method == "MZ":
-            _, fz = _form(_Context(jf, frames), c, consts[ci], None)
-            ref_basis.append(fz["zone"].basis)
-        else:
-            ref_basis.append(None)
-    ref_local = {nm: mc.refit_batch(f, f.X_mm[None])[0] for nm, f in jf.fits.items()}
-    ref_values = np.array([_VALUE[c.type](_Context(jf, frames), c, consts[ci], None)[0][0]
-                           if ref_basis[ci] is None else
-                           _form(_Context(jf, frames), c, consts[ci], None)[0][0]
-                           for ci, c in enumerate(chars)])
-    conv = np.array([1e3 if r.unit == "mm" else RAD * 1e6 for r in results])
-
-    def one_batch(M, g):
-        out = np.zeros((M, len(chars)))
-        for s0 in range(0, M, 1000):
-            Mb = min(1000, M - s0)
-            dl = sum(sampler.draw(Mb, g).values())          # (Mb, m, 3) µm
-            Xb = jf.X_mm[None] + dl * mc.MILLI
-            deltas = {nm: mc.refit_batch(f, Xb[:, np.asarray(jf.specs[nm].indices, int)])
-                      - ref_local[nm] for nm, f in jf.fits.items()}
-            ctx = _Context(jf, frames, deltas=deltas, X=Xb, B=Mb)
-            for ci, c in enumerate(chars):
-                if ref_basis[ci] is None:
-                    out[s0:s0 + Mb, ci] = _VALUE[c.type](ctx, c, consts[ci], None)[0]
-                    continue
-                # minimum zone: the reference contact points checked in one go, LP where changed
-                ds, gs = _form_residuals(ctx, c)
-                ok, h, _ = basis_is_optimal(ds, gs, ref_basis[ci])
-                for b in np.flatnonzero(~ok):
-                    h[b] = chebyshev_zone(ds[b], gs[b], basis=ref_basis[ci]).h
-                out[s0:s0 + Mb, ci] = h
-        cols = [(out - ref_values) * conv]
-        for ci, si, sign, lim in margins:      # zone - value, the bonus from the drawn size
-            bonus = np.clip(sign * (out[:, si] - lim), 0.0, None)
-            cols.append(((chars[ci].tolerance_mm + bonus - out[:, ci]) - ref_margin[ci])[:, None] * 1e3)
-        return {"total": np.hstack(cols)}
-
-    # the margins of positions with a tolerance (MMC/LMC bonus from the size characteristic)
-    by_name = {c.name: i for i, c in enumerate(chars)}
-    margins = []
-    for ci, (c, r) in enumerate(zip(chars, results)):
-        if c.type != "position" or c.tolerance_mm is None:
-            continue
-        if c.material_condition == "RFS":
-            margins.append((ci, ci, 0.0, 0.0))
-            continue
-        size = chars[by_name[c.size]]
-        mmc = c.material_condition == "MMC"
-        lim = (size.lsl if c.internal else size.usl) if mmc else (size.usl if c.internal else size.lsl)
-        margins.append((ci, by_name[c.size], (1.0 if c.internal else -1.0) * (1.0 if mmc else -1.0), lim))
-    ref_margin = {ci: c.tolerance_mm + max(0.0, sign * (ref_values[si] - lim)) - ref_values[ci]
-                  for ci, si, sign, lim in margins for c in [chars[ci]]}
-
-    names = [c.name for c in chars] + [f"{chars[ci].name} margin" for ci, *_ in margins]
-    return mc.adaptive(one_batch, names, n_dig=n_dig, batch=batch, max_draws=max_draws, rng=rng)

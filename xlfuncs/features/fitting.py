@@ -1,184 +1,20 @@
-"""Least-squares fitted features and their sensitivities (Forbes 2022), propagated from the
-point-cloud variance matrix V_X of Forbes 2025 per influence factor (Forbes 2025, section 5.6).
-
-Fits (Forbes 2022 section 3): orthogonal distance regression, minimise sum_i w_i^2 d_i^2
-(eqs. (7), (11)) by Gauss-Newton in the stable parametrisation of the paper: each iteration
-moves the data into the frame in which the current element is in standard position (axis
-along z, locating point at the origin) and solves for small changes of the local parameters
-
-=========  ===========================================================  =========
-element    local parameters (paper's order)                             residuals
-=========  ===========================================================  =========
-line       x_A_mm, y_A_mm, rot_x_rad, rot_y_rad                         2 / point
-plane      z_A_mm, rot_x_rad, rot_y_rad                                 1 / point
-circle     x0_mm, y0_mm, r0_mm (in a coordinate plane, section 4)       1 / point
-circle     x_A_mm, y_A_mm, z_A_mm, rot_x_rad, rot_y_rad, r0_mm (space)  2 / point
-sphere     x0_mm, y0_mm, z0_mm, r0_mm                                   1 / point
-cylinder   x_A_mm, y_A_mm, rot_x_rad, rot_y_rad, r0_mm                  1 / point
-cone       x_A_mm, y_A_mm, rot_x_rad, rot_y_rad, r0_mm, phi_rad         1 / point
-=========  ===========================================================  =========
-
-rot_x, rot_y are small rotations of the axis about the frame's x and y axes (axis direction
-R_y(rot_y) R_x(rot_x) e_z ~ (rot_y, -rot_x, 1)); they are the u_A, v_A of the paper's
-Jacobians in sections 7 and 8 (docs/errata.md).  The line and the circle in space have two
-residuals per point (offsets along two normals); the sum of their squares is the squared
-orthogonal distance.
-
-At the solution the sensitivity matrix is (eqs. (8), (12))
-
-    G_A|X = G_A|D N^T,   G_A|D = -(J^T W J)^{-1} J^T W,   W = diag(w_i^2),
-
-with N the 3m x (k m) block-diagonal matrix of the fitted surface normals, and for any V_X
-
-    V_A = G_A|X V_X G_A|X^T,     V_A = sum_f G_A|X V_X,f G_A|X^T   (Forbes 2025 sec. 5.6).
-
-Reported parameters ("global"): the fitted element in machine coordinates -- locating point
-(for axes and planes the point of the axis/plane nearest to the centroid of the points),
-unit direction/normal components, radius, cone angle -- with covariance T V_A T^T, where T
-is the linear map from the local parameters to the global ones.  Along the axis the locating
-point is a convention, not a measurement: its uncertainty is that of the axis' intersection
-with the plane through x_A orthogonal to the axis, and a direction vector's covariance is
-singular along the direction itself.
-
-Units: coordinates and lengths in mm, angles in rad, V_X in µm^2 as produced by
-:func:`xlfuncs.pointcloud.V_X_components`; covariances of the parameters in their own units
-(mm^2, mm*rad, rad^2), i.e. V_X is converted with 1 µm^2 = 1e-6 mm^2.
-"""
+"""The least-squares fit of an element (Forbes 2022 section 3): orthogonal distance regression by
+Gauss-Newton in the stable parametrisation of the paper, from robust starting values, and the
+sensitivity matrix G_A|X = G_A|D N^T, G_A|D = -(J^T W J)^{-1} J^T W at the solution
+(eqs. (8), (12)); the method in the package docstring, :mod:`xlfuncs.features`."""
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Mapping, Sequence
+from typing import Sequence
 
 import numpy as np
 
-from .errors import ConvergenceError, DegenerateGeometryError, ModelError
-from .partial import frame_from_axis
-
-__all__ = [
-    "ELEMENTS", "MIN_POINTS", "FeatureFit", "FeatureUncertainty", "fit", "propagate",
-    "G_A_X", "local_model", "UM2_TO_MM2", "update_frame", "rot_xy_batch",
-]
-
-ELEMENTS: tuple[str, ...] = ("line", "plane", "circle", "sphere", "cylinder", "cone")
-
-#: 1 µm^2 in mm^2
-UM2_TO_MM2 = 1e-6
-
-#: smallest number of points (with positive weight) that can determine each element
-MIN_POINTS = {"line": 2, "plane": 3, "circle": 3, "circle_space": 3, "sphere": 4,
-              "cylinder": 5, "cone": 6}
-
-CIRCLE_PLANES = {
-    # plane: (frame R columns, names of the centre coordinates)
-    "xy": ((0, 1, 2), ("x0_mm", "y0_mm")),
-    "yz": ((1, 2, 0), ("y0_mm", "z0_mm")),
-    "zx": ((2, 0, 1), ("z0_mm", "x0_mm")),
-}
-
-LOCAL_NAMES = {
-    "line": ("x_A_mm", "y_A_mm", "rot_x_rad", "rot_y_rad"),
-    "plane": ("z_A_mm", "rot_x_rad", "rot_y_rad"),
-    "circle_space": ("x_A_mm", "y_A_mm", "z_A_mm", "rot_x_rad", "rot_y_rad", "r0_mm"),
-    "sphere": ("x0_mm", "y0_mm", "z0_mm", "r0_mm"),
-    "cylinder": ("x_A_mm", "y_A_mm", "rot_x_rad", "rot_y_rad", "r0_mm"),
-    "cone": ("x_A_mm", "y_A_mm", "rot_x_rad", "rot_y_rad", "r0_mm", "phi_rad"),
-}
-
-GLOBAL_NAMES = {
-    "line": ("x_A_mm", "y_A_mm", "z_A_mm", "dir_x", "dir_y", "dir_z"),
-    "plane": ("x_A_mm", "y_A_mm", "z_A_mm", "n_x", "n_y", "n_z"),
-    "circle_space": ("x0_mm", "y0_mm", "z0_mm", "n_x", "n_y", "n_z", "r0_mm"),
-    "sphere": ("x0_mm", "y0_mm", "z0_mm", "r0_mm"),
-    "cylinder": ("x_A_mm", "y_A_mm", "z_A_mm", "dir_x", "dir_y", "dir_z", "r0_mm"),
-    "cone": ("x_A_mm", "y_A_mm", "z_A_mm", "dir_x", "dir_y", "dir_z", "r0_mm", "phi_rad"),
-}
-
-#: residuals per point
-K_RESIDUALS = {"line": 2, "plane": 1, "circle": 1, "circle_space": 2, "sphere": 1,
-               "cylinder": 1, "cone": 1}
-
-
-# --------------------------------------------------------------------------------------------
-# the local models: residuals, Jacobian and normals in standard position
-# --------------------------------------------------------------------------------------------
-
-def local_model(kind: str, P: np.ndarray, shape: Sequence[float]):
-    """Residuals d (..., m, k), Jacobian J (..., m, k, n) with respect to the local parameters
-    at zero, and unit normals (..., m, k, 3) in the frame, for points P (..., m, 3) given in
-    the frame in which the element is in standard position.
-
-    ``shape`` = (r0,) for circles, spheres and cylinders, (r0, phi) for cones, () otherwise.
-    ``kind`` is an element name or ``"circle_space"``.  Leading batch dimensions are allowed
-    (used by the vectorised Monte Carlo in the tests).
-    """
-    x, y, z = P[..., 0], P[..., 1], P[..., 2]
-    zero = np.zeros_like(x)
-    one = np.ones_like(x)
-    if kind == "plane":
-        d = z[..., None]
-        J = np.stack([-one, -y, x], axis=-1)[..., None, :]
-        Nl = np.stack([zero, zero, one], axis=-1)[..., None, :]
-        return d, J, Nl
-    if kind == "line":
-        d = np.stack([x, y], axis=-1)
-        J1 = np.stack([-one, zero, zero, -z], axis=-1)
-        J2 = np.stack([zero, -one, z, zero], axis=-1)
-        n1 = np.stack([one, zero, zero], axis=-1)
-        n2 = np.stack([zero, one, zero], axis=-1)
-        return d, np.stack([J1, J2], axis=-2), np.stack([n1, n2], axis=-2)
-    if kind == "sphere":
-        rho = np.sqrt(x * x + y * y + z * z)
-        _nonzero(rho, "sphere", "a point coincides with the sphere centre")
-        n = P / rho[..., None]
-        d = (rho - shape[0])[..., None]
-        J = -np.concatenate([n, one[..., None]], axis=-1)[..., None, :]
-        return d, J, n[..., None, :]
-    rho = np.sqrt(x * x + y * y)
-    _nonzero(rho, kind, "a point lies on the axis")
-    c, s = x / rho, y / rho
-    if kind == "circle":
-        d = (rho - shape[0])[..., None]
-        J = np.stack([-c, -s, -one], axis=-1)[..., None, :]
-        Nl = np.stack([c, s, zero], axis=-1)[..., None, :]
-        return d, J, Nl
-    if kind == "cylinder":
-        d = (rho - shape[0])[..., None]
-        J = np.stack([-c, -s, z * s, -z * c, -one], axis=-1)[..., None, :]
-        Nl = np.stack([c, s, zero], axis=-1)[..., None, :]
-        return d, J, Nl
-    if kind == "circle_space":
-        d = np.stack([z, rho - shape[0]], axis=-1)
-        J1 = np.stack([zero, zero, -one, -y, x, zero], axis=-1)
-        J2 = np.stack([-c, -s, zero, z * s, -z * c, -one], axis=-1)
-        n1 = np.stack([zero, zero, one], axis=-1)
-        n2 = np.stack([c, s, zero], axis=-1)
-        return d, np.stack([J1, J2], axis=-2), np.stack([n1, n2], axis=-2)
-    if kind == "cone":
-        r0, phi = shape
-        cp, sp = math.cos(phi), math.sin(phi)
-        dC = rho - r0
-        # Forbes 2022 eq. (26): d = cos(phi) d_C + sin(phi) d_P
-        d = (cp * dC + sp * z)[..., None]
-        J = np.stack([-cp * c, -cp * s, cp * z * s - sp * y, -cp * z * c + sp * x,
-                      -cp * one, -sp * dC + cp * z], axis=-1)[..., None, :]
-        Nl = np.stack([cp * c, cp * s, sp * one], axis=-1)[..., None, :]
-        return d, J, Nl
-    raise ModelError(f"unknown element {kind!r}")
-
-
-def _nonzero(rho: np.ndarray, kind: str, what: str) -> None:
-    if np.any(rho <= 0.0):
-        raise DegenerateGeometryError(f"{kind} fit: {what}; the distance is not differentiable")
-
-
-def _rot_xy(rx: float, ry: float) -> np.ndarray:
-    """R_y(ry) R_x(rx): maps e_z to (sin ry cos rx, -sin rx, cos rx cos ry)."""
-    cx, sx, cy, sy = math.cos(rx), math.sin(rx), math.cos(ry), math.sin(ry)
-    Rx = np.array([[1, 0, 0], [0, cx, -sx], [0, sx, cx]])
-    Ry = np.array([[cy, 0, sy], [0, 1, 0], [-sy, 0, cy]])
-    return Ry @ Rx
+from ..errors import ConvergenceError, DegenerateGeometryError, ModelError
+from ..partial import frame_from_axis
+from .models import (CIRCLE_PLANES, ELEMENTS, GLOBAL_NAMES, K_RESIDUALS, LOCAL_NAMES, MIN_POINTS, local_model,
+                     update_one)
 
 
 # --------------------------------------------------------------------------------------------
@@ -398,64 +234,6 @@ def _starts(kind, X, w, N_points, axis_hint, circle_plane):
     return _start_axis_elements(kind, X, w, N_points, axis_hint)
 
 
-def _update(kind, origin, R, shape, delta):
-    """Apply local parameter changes delta to the frame and shape."""
-    if kind == "sphere":
-        return origin + delta[:3], R, (shape[0] + delta[3],)
-    if kind == "circle":
-        return origin + R @ np.array([delta[0], delta[1], 0.0]), R, (shape[0] + delta[2],)
-    if kind == "plane":
-        dz, rx, ry = delta
-        return origin + R[:, 2] * dz, R @ _rot_xy(rx, ry), ()
-    if kind == "line":
-        dx, dy, rx, ry = delta
-        return origin + R @ np.array([dx, dy, 0.0]), R @ _rot_xy(rx, ry), ()
-    if kind == "circle_space":
-        dx, dy, dz, rx, ry, dr = delta
-        return (origin + R @ np.array([dx, dy, dz]), R @ _rot_xy(rx, ry), (shape[0] + dr,))
-    if kind == "cylinder":
-        dx, dy, rx, ry, dr = delta
-        return (origin + R @ np.array([dx, dy, 0.0]), R @ _rot_xy(rx, ry), (shape[0] + dr,))
-    if kind == "cone":
-        dx, dy, rx, ry, dr, dphi = delta
-        return (origin + R @ np.array([dx, dy, 0.0]), R @ _rot_xy(rx, ry),
-                (shape[0] + dr, shape[1] + dphi))
-    raise ModelError(kind)
-
-
-def rot_xy_batch(rx, ry) -> np.ndarray:
-    """R_y(ry) R_x(rx) for arrays of angles (B,) -> (B, 3, 3), as :func:`_rot_xy`."""
-    cx, sx, cy, sy = np.cos(rx), np.sin(rx), np.cos(ry), np.sin(ry)
-    z = np.zeros_like(rx)
-    return np.stack([np.stack([cy, sy * sx, sy * cx], -1), np.stack([z, cx, -sx], -1),
-                     np.stack([-sy, cy * sx, cy * cx], -1)], -2)
-
-
-def update_frame(kind: str, origin, R, shape, delta):
-    """The element moved by small changes of its local parameters (the paper's order,
-    LOCAL_NAMES) -- the Gauss-Newton update of :func:`_update` for a batch: ``delta`` (B x n),
-    ``origin`` (3,), ``R`` (3 x 3), ``shape`` (s,) -> origin (B x 3), R (B x 3 x 3),
-    shape (B x s).  Used by xlfuncs.characteristics to differentiate through the geometry."""
-    d = np.asarray(delta, float)
-    B = d.shape[0]
-    o = np.broadcast_to(np.asarray(origin, float), (B, 3)).copy()
-    Rb = np.broadcast_to(np.asarray(R, float), (B, 3, 3)).copy()
-    sh = np.broadcast_to(np.asarray(shape, float), (B, len(shape))).copy()
-    if kind == "sphere":
-        return o + d[:, :3], Rb, sh + d[:, 3:4]
-    if kind == "circle":
-        return o + np.einsum("bij,bj->bi", Rb[:, :, :2], d[:, :2]), Rb, sh + d[:, 2:3]
-    if kind == "plane":
-        return o + Rb[:, :, 2] * d[:, :1], Rb @ rot_xy_batch(d[:, 1], d[:, 2]), sh
-    if kind == "circle_space":
-        return (o + np.einsum("bij,bj->bi", Rb, d[:, :3]), Rb @ rot_xy_batch(d[:, 3], d[:, 4]),
-                sh + d[:, 5:6])
-    if kind in ("line", "cylinder", "cone"):
-        return (o + np.einsum("bij,bj->bi", Rb[:, :, :2], d[:, :2]),
-                Rb @ rot_xy_batch(d[:, 2], d[:, 3]), sh + d[:, 4:])
-    raise ModelError(kind)
-
-
 def _gauss_newton(kind, X, w, origin, R, shape, scale, max_iter):
     k = K_RESIDUALS[kind]
     wr = np.repeat(w, k)  # residual rows are multiplied by w_i (eq. (11))
@@ -475,7 +253,7 @@ def _gauss_newton(kind, X, w, origin, R, shape, scale, max_iter):
             return origin, R, shape, it
         t = 1.0
         for _ in range(40):
-            o2, R2, sh2 = _update(kind, origin, R, shape, t * delta)
+            o2, R2, sh2 = update_one(kind, origin, R, shape, t * delta)
             try:
                 d2, J2 = evaluate(o2, R2, sh2)
                 ss2 = float(d2 @ d2)
@@ -698,57 +476,3 @@ def _hint(kind: str) -> str:
         "cylinder": "are the points on one circle or one line of the cylinder?",
         "cone": "are the points on one circle or one generator of the cone?",
     }[kind]
-
-
-# --------------------------------------------------------------------------------------------
-# propagation of V_X per influence factor (Forbes 2025 section 5.6)
-# --------------------------------------------------------------------------------------------
-
-@dataclass(frozen=True)
-class FeatureUncertainty:
-    """V_A of a fitted feature, total and per influence factor.
-
-    ``V_local[f]`` (n x n) and ``V[f]`` (global, T V_local T^T) are in the parameters' units
-    (mm^2, rad^2, ...); ``"total"`` is their sum over the factors.
-    """
-
-    fit: FeatureFit
-    G: np.ndarray                         # G_A|X, n x 3m, local parameter unit per mm
-    V_local: dict[str, np.ndarray]
-    V: dict[str, np.ndarray]
-    factors: tuple[str, ...]
-    #: the low-rank evaluation's ranks and error bounds (xlfuncs.lowrank.Approximation), or None
-    approximation: object = None
-
-    def u(self, factor: str = "total") -> np.ndarray:
-        return np.sqrt(np.clip(np.diag(self.V[factor]), 0.0, None))
-
-    def u_local(self, factor: str = "total") -> np.ndarray:
-        return np.sqrt(np.clip(np.diag(self.V_local[factor]), 0.0, None))
-
-
-def propagate(f: FeatureFit, V_X_um2: Mapping[str, np.ndarray] | np.ndarray,
-              *, G: np.ndarray | None = None) -> FeatureUncertainty:
-    """V_A = G_A|X V_X G_A|X^T for every factor of a V_X decomposition (µm^2, 3m x 3m,
-    interleaved x1, y1, z1, ...).  A single matrix is treated as one factor named "V_X"."""
-    comps = {"V_X": V_X_um2} if isinstance(V_X_um2, np.ndarray) else dict(V_X_um2)
-    if not comps:
-        raise ModelError("no V_X components to propagate")
-    G = G_A_X(f) if G is None else G
-    V_local, V = {}, {}
-    total_l = np.zeros((f.n, f.n))
-    for name, Vx in comps.items():
-        Vx = np.asarray(Vx, dtype=float)
-        if Vx.shape != (3 * f.m, 3 * f.m):
-            raise ModelError(f"V_X component {name}: expected a {3 * f.m} x {3 * f.m} matrix, "
-                             f"got {Vx.shape[0]} x {Vx.shape[1] if Vx.ndim > 1 else 1}")
-        if not np.all(np.isfinite(Vx)):
-            raise ModelError(f"V_X component {name} has non-finite entries")
-        Va = (G @ Vx @ G.T) * UM2_TO_MM2
-        Va = 0.5 * (Va + Va.T)
-        V_local[name] = Va
-        V[name] = f.T @ Va @ f.T.T
-        total_l = total_l + Va
-    V_local["total"] = total_l
-    V["total"] = f.T @ total_l @ f.T.T
-    return FeatureUncertainty(fit=f, G=G, V_local=V_local, V=V, factors=tuple(comps))

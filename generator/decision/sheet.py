@@ -1,0 +1,276 @@
+"""The ``Decision`` sheet of a workbook: the conformity decisions of
+:mod:`generator.decision.decide` as live formulas.
+
+The sheet computes everything from the Results cells and its own inputs (limits, measured
+values, r, max_pfa, k) with formulas all three engines accept (``_xlfn.NORM.S.DIST``,
+``_xlfn.NORM.S.INV``, measured in ``docs/engines.md``); JCGM 106:2012, 7.3-7.4.
+"""
+
+from __future__ import annotations
+
+import textwrap
+from typing import Any
+
+from openpyxl.chart import Reference
+
+from xlfuncs import conformity as cf
+from xlfuncs import dof
+from xlfuncs.errors import ModelError
+from xlfuncs.statement import decimals_for
+
+from ..workbook.book import HEADER_FONT, TITLE_FONT, Book, ChartSeries, FMT_MM, FMT_UM
+from ..workbook.xlref import cell, col, quote_sheet
+from .decide import DecisionSpec, rows_of
+
+SHEET = "Decision"
+FMT_P = "0.000000"
+HEADER_ROW = 7
+FIRST_ROW = HEADER_ROW + 1     #: the first characteristic's row
+#: columns of the decision table (first row of the table: headers with units)
+COLUMNS = ["item", "characteristic", "value_mm", "u_task_um", "s_um", "n_repeats", "u_A_um", "nu_A", "u_um", "nu_eff",
+           "k", "U_um", "lsl_mm", "usl_mm", "w_um", "A_L_mm", "A_U_mm", "R_L_mm", "R_U_mm", "p_c", "outcome",
+           "zone"]
+
+
+def column(name: str) -> int:
+    """1-based column of the Decision table (``COLUMNS``)."""
+    return COLUMNS.index(name) + 1
+#: chart data: deviations from the reference (tolerance midpoint or the one limit), µm
+CHART_COLUMNS = ["dev_um", "dev_plus_U_um", "dev_minus_U_um", "lsl_dev_um", "usl_dev_um",
+                 "A_L_dev_um", "A_U_dev_um"]
+
+
+def _results_cols(book: Book, sheet: str = "Results") -> dict[str, int]:
+    """Column (1-based) of each header name in row 1 of ``sheet``."""
+    ws = book.wb[sheet]
+    return {str(c.value): c.column for c in ws[1] if c.value is not None}
+
+
+def write_sheet(book: Book, kind: str, spec: DecisionSpec, results: dict, decisions: list[dict]
+                ) -> dict[str, dict[str, Any]]:
+    """The ``Decision`` sheet; returns the values to cache in its formula cells
+    ({sheet: {coordinate: value}}, from the core's ``decisions``)."""
+    rows = rows_of(kind, results, spec)
+    sheet_cols = {name: _results_cols(book, name) for name in {row.sheet for row in rows.values()}}
+    ws = book.sheet(SHEET)
+    cache: dict[str, Any] = {}
+    rule = spec.rule
+    book.text(ws, 1, 1, "Conformity decisions", font=TITLE_FONT)
+    intro = textwrap.wrap(f"Decision rule: {rule.text}. p_c = probability of conformance, normal PDF "
+                          "(JCGM 106:2012, 7.3-7.4); A = acceptance limits, R = limits beyond which the value "
+                          "does not conform; w = guard band (µm).", 150)
+    for j, line in enumerate(intro[:HEADER_ROW - 3]):
+        book.text(ws, 2 + j, 1, line)
+    # rule parameters (named inputs)
+    r0 = HEADER_ROW - 1
+    book.text(ws, r0, 1, "rule", font=HEADER_FONT)
+    book.text(ws, r0, 2, rule.kind)
+    params = []
+    if rule.kind in ("guarded_acceptance", "guarded_rejection"):
+        params.append(("decision_r", "r", rule.r, 0.0, 10.0, "guard band factor: w = r·U (JCGM 106:2012, 8.3.2)"))
+    if rule.kind == "specific_risk":
+        params.append(("decision_max_pfa", "max_pfa", rule.max_pfa, 1e-9, 0.5,
+                       "largest probability of false acceptance: accept when p_c >= 1 - max_pfa (JCGM 106:2012, 9.3)"))
+    if spec.k is not None:
+        params.append(("decision_k", "k", spec.k, 0.1, 10.0, "coverage factor: U = k·u"))
+    for j, (name, label, value, lo, hi, note) in enumerate(params):
+        book.text(ws, r0, 3 + 2 * j, label, font=HEADER_FONT)
+        book.input(ws, r0, 4 + 2 * j, name, value, lo=lo, hi=hi, note=note)
+    h = HEADER_ROW
+    book.header(ws, h, 1, COLUMNS + CHART_COLUMNS, notes=[
+        None, "the characteristic (Results row)", "measured value (input) or the task's value (from Results)",
+        "the task's standard uncertainty (type B, ν = ∞)",
+        "repeatability: standard deviation of the n repeated measurements whose mean is the value (input)",
+        "number of repeated measurements (input)", "type A: u_A = s/√n (GUM 4.2.3)", "ν_A = n - 1 (GUM G.3.3)",
+        "combined standard uncertainty u = √(u_task² + u_A²)",
+        "effective degrees of freedom, Welch–Satterthwaite (GUM G.4.1, eq. (G.2b))",
+        "coverage factor: t_95.45(⌊ν_eff⌋) with [decision] k_from_dof (GUM G.6.4), else the task's k",
+        "expanded uncertainty U = k·u", "lower specification limit (input)",
+        "upper specification limit (input)", "guard band; > 0: acceptance interval inside the tolerance",
+        "lower acceptance limit A_L = T_L + w (JCGM 106:2012, 8.3)", "upper acceptance limit A_U = T_U - w",
+        "below R_L: does not conform", "above R_U: does not conform",
+        "probability of conformance p_c = Φ((T_U-y)/u) - Φ((T_L-y)/u) (JCGM 106:2012, eq. (12))",
+        "the decision", "the zone of the measured value"] + [f"chart: {c} from the tolerance midpoint "
+                                                              "(one-sided: from the limit)" for c in CHART_COLUMNS])
+    c = {name: j + 1 for j, name in enumerate(COLUMNS + CHART_COLUMNS)}
+    for i, (t, d) in enumerate(zip(spec.tolerances, decisions)):
+        r = h + 1 + i
+        row = rows[t.label]
+        rr = row.index + 2
+        results_sheet = quote_sheet(row.sheet)
+        rcols = sheet_cols[row.sheet]
+        fmt_mm = mm_format(d["U_um"])
+        at = lambda name: cell(r, c[name], absolute=False)  # noqa: E731
+        ws.cell(r, c["item"]).value = i + 1
+        book.text(ws, r, c["characteristic"], t.label)
+        if t.measured_mm is not None:
+            book.input(ws, r, c["value_mm"], f"{t.name_prefix}_measured_mm", t.measured_mm, fmt=fmt_mm,
+                       note="measured value (input)")
+        else:
+            book.formula(ws, r, c["value_mm"], f"={results_sheet}!{cell(rr, rcols[row.value_col])}", fmt=fmt_mm,
+                         note="the task's value (Results); give [[decision.tolerances]] measured_mm for a measured one")
+            cache[at("value_mm")] = d["value_mm"]
+        u_ref = f"{results_sheet}!{cell(rr, rcols[row.u_col])}"
+        book.formula(ws, r, c["u_task_um"], f"={u_ref}" if row.u_scale == 1 else f"={u_ref}*{row.u_scale:g}",
+                     fmt=FMT_UM)
+        cache[at("u_task_um")] = d["u_task_um"]
+        # the task's own coverage factor: U/u of its Results (budget, pointcloud) or [decision] k
+        k_task = (f"{results_sheet}!{cell(rr, rcols[row.U_col])}/{u_ref}" if row.U_col is not None
+                  else "decision_k")
+        if t.type_a:
+            book.input(ws, r, c["s_um"], f"{t.name_prefix}_s_um", t.s_um, lo=0.0, fmt=FMT_UM,
+                       note="standard deviation of the repeated measurements (µm)")
+            book.input(ws, r, c["n_repeats"], f"{t.name_prefix}_n_repeats", t.n_repeats, lo=2.0, fmt="0",
+                       note="number of repeated measurements")
+            book.formula(ws, r, c["u_A_um"], f"={at('s_um')}/SQRT({at('n_repeats')})", fmt=FMT_UM)
+            book.formula(ws, r, c["nu_A"], f"={at('n_repeats')}-1", fmt="0")
+            book.formula(ws, r, c["u_um"], f"=SQRT({at('u_task_um')}^2+{at('u_A_um')}^2)", fmt=FMT_UM)
+            book.formula(ws, r, c["nu_eff"], f"={at('u_um')}^4/({at('u_A_um')}^4/{at('nu_A')})", fmt="0.00")
+            cache.update({at("u_A_um"): d["u_A_um"], at("nu_A"): d["nu_A"], at("nu_eff"): d["nu_eff"]})
+            if spec.k_from_dof:
+                book.formula(ws, r, c["k"], f"=_xlfn.T.INV.2T(1-{dof.P_K2},INT({at('nu_eff')}))", fmt="0.000",
+                             note="t_95.45(ν) for ν = ⌊ν_eff⌋ (GUM G.6.4)")
+            else:
+                book.formula(ws, r, c["k"], f"={k_task}", fmt="0.000")
+            book.formula(ws, r, c["U_um"], f"={at('k')}*{at('u_um')}", fmt=FMT_UM)
+        else:
+            for name in ("s_um", "n_repeats", "u_A_um", "nu_A"):
+                book.text(ws, r, c[name], "—")
+            book.text(ws, r, c["nu_eff"], "∞")
+            book.formula(ws, r, c["u_um"], f"={at('u_task_um')}", fmt=FMT_UM)
+            book.formula(ws, r, c["k"], f"={k_task}", fmt="0.000")
+            if row.U_col is not None:
+                book.formula(ws, r, c["U_um"], f"={results_sheet}!{cell(rr, rcols[row.U_col])}", fmt=FMT_UM)
+            else:
+                book.formula(ws, r, c["U_um"], f"={at('k')}*{at('u_um')}", fmt=FMT_UM)
+        cache[at("u_um")] = d["u_um"]
+        cache[at("k")] = d["k"]
+        cache[at("U_um")] = d["U_um"]
+        tol = d
+        for key in ("lsl_mm", "usl_mm"):
+            if tol[key] is None:
+                book.text(ws, r, c[key], "—")
+            elif key in t.limit_cells:      # the kind's own tolerance cell (Characteristics)
+                ccols = sheet_cols.get("Characteristics") or _results_cols(book, "Characteristics")
+                expr = t.limit_cells[key].format(**{name: f"{quote_sheet('Characteristics')}!{cell(rr, j)}"
+                                                    for name, j in ccols.items() if name.isidentifier()})
+                book.formula(ws, r, c[key], f"={expr}", fmt=fmt_mm,
+                             note=("the tolerance typed on 'Characteristics'" if expr != "0" else
+                                   "a margin (zone - value) conforms when >= 0"))
+                cache[at(key)] = tol[key]
+            else:
+                book.input(ws, r, c[key], f"{t.name_prefix}_{key}", tol[key], fmt=fmt_mm,
+                           note=("lower" if key == "lsl_mm" else "upper") + " specification limit (mm)")
+        y, u, U = at("value_mm"), at("u_um"), at("U_um")
+        lsl = at("lsl_mm") if tol["lsl_mm"] is not None else None
+        usl = at("usl_mm") if tol["usl_mm"] is not None else None
+        w = {"simple": "=0", "iso14253": f"={U}", "guarded_acceptance": f"=decision_r*{U}",
+             "guarded_rejection": f"=-(decision_r*{U})",
+             "specific_risk": f"=_xlfn.NORM.S.INV(1-decision_max_pfa)*{u}"}[rule.kind]
+        book.formula(ws, r, c["w_um"], w, fmt=FMT_UM)
+        cache[at("w_um")] = d["w_um"]
+        wc = at("w_um")
+        acc = [None, None]
+        sides = ((lsl, "+", "A_L_mm", "R_L_mm"), (usl, "-", "A_U_mm", "R_U_mm"))
+        for j, (lim, sign, a_name, r_name) in enumerate(sides):
+            if lim is None:
+                book.text(ws, r, c[a_name], "—")
+                book.text(ws, r, c[r_name], "—")
+                continue
+            book.formula(ws, r, c[a_name], f"={lim}{sign}{wc}/1000", fmt=fmt_mm)
+            cache[at(a_name)] = d["acceptance_limits_mm"][j]
+            acc[j] = at(a_name)
+            other = "-" if sign == "+" else "+"
+            if rule.kind == "iso14253":
+                book.formula(ws, r, c[r_name], f"={lim}{other}{U}/1000", fmt=fmt_mm)
+                cache[at(r_name)] = (d["lsl_mm"] - d["U_um"] / 1000) if j == 0 else (d["usl_mm"] + d["U_um"] / 1000)
+            else:
+                book.formula(ws, r, c[r_name], f"={at(a_name)}", fmt=fmt_mm)
+                cache[at(r_name)] = d["acceptance_limits_mm"][j]
+        terms = []
+        if usl is not None:
+            terms.append(f"_xlfn.NORM.S.DIST(({usl}-{y})*1000/{u},TRUE)")
+        if lsl is not None:
+            terms.append(f"_xlfn.NORM.S.DIST(({lsl}-{y})*1000/{u},TRUE)")
+        pc = terms[0] if usl is not None else f"1-{terms[0]}"
+        if len(terms) == 2:
+            pc = f"{terms[0]}-{terms[1]}"
+        book.formula(ws, r, c["p_c"], "=" + pc, fmt=FMT_P,
+                     note="JCGM 106:2012, 7.3 eq. (9)-(10) and 7.4 eq. (12); u in µm, limits in mm")
+        cache[at("p_c")] = d["p_c"]
+        inside_acc = _inside(y, acc[0], acc[1])
+        rl = at("R_L_mm") if lsl is not None else None
+        ru = at("R_U_mm") if usl is not None else None
+        if rule.kind == "iso14253":
+            outside_rej = _outside(y, rl, ru)
+            outcome = (f'=IF({inside_acc},"{cf.CONFORMS}",IF({outside_rej},"{cf.DOES_NOT_CONFORM}",'
+                       f'"{cf.UNDECIDED}"))')
+            zone = (f'=IF({inside_acc},"conformance zone",IF({outside_rej},"non-conformance zone",'
+                    f'"uncertainty range"))')
+        elif rule.kind == "specific_risk":
+            ok = f"{at('p_c')}>=1-decision_max_pfa"
+            outcome = f'=IF({ok},"{cf.CONFORMS}","{cf.DOES_NOT_CONFORM}")'
+            zone = f'=IF({ok},"acceptance zone","rejection zone")'
+        else:
+            outcome = f'=IF({inside_acc},"{cf.CONFORMS}","{cf.DOES_NOT_CONFORM}")'
+            zone = f'=IF({inside_acc},"acceptance zone","rejection zone")'
+        book.formula(ws, r, c["outcome"], outcome, fmt=None)
+        book.formula(ws, r, c["zone"], zone, fmt=None)
+        cache[at("outcome")] = d["outcome"]
+        cache[at("zone")] = d["zone"]
+        # chart data: deviations (µm) from the reference
+        ref = f"({lsl}+{usl})/2" if (lsl and usl) else (lsl or usl)
+        ref_v = (d["lsl_mm"] + d["usl_mm"]) / 2 if (lsl and usl) else (d["lsl_mm"] if lsl else d["usl_mm"])
+        dev = (d["value_mm"] - ref_v) * 1000
+        book.formula(ws, r, c["dev_um"], f"=({y}-{ref})*1000", fmt=FMT_UM)
+        book.formula(ws, r, c["dev_plus_U_um"], f"={at('dev_um')}+{U}", fmt=FMT_UM)
+        book.formula(ws, r, c["dev_minus_U_um"], f"={at('dev_um')}-{U}", fmt=FMT_UM)
+        cache.update({at("dev_um"): dev, at("dev_plus_U_um"): dev + d["U_um"], at("dev_minus_U_um"): dev - d["U_um"]})
+        for lim, j, name, aname in ((lsl, 0, "lsl_dev_um", "A_L_dev_um"), (usl, 1, "usl_dev_um", "A_U_dev_um")):
+            if lim is None:
+                continue
+            book.formula(ws, r, c[name], f"=({lim}-{ref})*1000", fmt=FMT_UM)
+            book.formula(ws, r, c[aname], f"=({acc[j]}-{ref})*1000", fmt=FMT_UM)
+            cache[at(name)] = (d["lsl_mm" if j == 0 else "usl_mm"] - ref_v) * 1000
+            cache[at(aname)] = (d["acceptance_limits_mm"][j] - ref_v) * 1000
+    n = len(spec.tolerances)
+    last = h + n
+    xs = Reference(ws, min_col=c["item"], min_row=h + 1, max_row=last)
+
+    def ref_of(name):
+        return Reference(ws, min_col=c[name], min_row=h + 1, max_row=last)
+
+    series = [ChartSeries("measured value", xs, ref_of("dev_um"), colour="000000"),
+              ChartSeries("value + U", xs, ref_of("dev_plus_U_um"), colour="1F77B4"),
+              ChartSeries("value − U", xs, ref_of("dev_minus_U_um"), colour="1F77B4"),
+              ChartSeries("lower specification limit", xs, ref_of("lsl_dev_um"), colour="D62728", symbol="dash"),
+              ChartSeries("upper specification limit", xs, ref_of("usl_dev_um"), colour="D62728", symbol="dash"),
+              ChartSeries("lower acceptance limit", xs, ref_of("A_L_dev_um"), colour="2CA02C", symbol="dash"),
+              ChartSeries("upper acceptance limit", xs, ref_of("A_U_dev_um"), colour="2CA02C", symbol="dash")]
+    book.scatter(ws, f"B{last + 3}", "Measured value ± U against the specification (red) and acceptance (green) "
+                 "limits", "item (row of the table)", "deviation from the tolerance midpoint (µm)",
+                 series, width=24, height=11, x_min=0)
+    for name, width in (("characteristic", 18), ("outcome", 18), ("zone", 22)):
+        ws.column_dimensions[col(c[name])].width = width
+    book.print_setup(ws, landscape=True, title_rows=h, area=f"A1:{col(c['zone'])}{last + 26}")
+    return {SHEET: cache}
+
+
+def mm_format(U_um: float) -> str:
+    """The number format of a row's values and limits in mm: 0.1 µm (FMT_MM), or finer so that
+    U below 1 µm still shows its two significant digits (GUM 7.2.6): U = 0.64 µm -> 0.00001 mm."""
+    try:
+        dec = decimals_for(U_um) + 3
+    except ModelError:
+        return FMT_MM
+    return FMT_MM if dec <= 4 else "0." + "0" * min(dec, 9)
+
+
+def _inside(y: str, lo: str | None, hi: str | None) -> str:
+    parts = ([f"{y}>={lo}"] if lo else []) + ([f"{y}<={hi}"] if hi else [])
+    return parts[0] if len(parts) == 1 else f"AND({','.join(parts)})"
+
+
+def _outside(y: str, lo: str | None, hi: str | None) -> str:
+    parts = ([f"{y}<{lo}"] if lo else []) + ([f"{y}>{hi}"] if hi else [])
+    return parts[0] if len(parts) == 1 else f"OR({','.join(parts)})"
