@@ -27,7 +27,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from xlfuncs import features, partial, pointcloud  # noqa: E402
 
-from xlfuncs.model import MPE1 as PARAMS  # Forbes 2025 Table 3
+from xlfuncs.model import MPE1 as PARAMS  # noqa: E402  (Forbes 2025 Table 3)
 
 
 def cylinder_scan(m_theta: int, m_z: int, seed: int = 1):

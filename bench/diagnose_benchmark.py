@@ -57,7 +57,7 @@ from xlfuncs.locator import effects as fx  # noqa: E402
 from xlfuncs import pointcloud as pc  # noqa: E402
 from xlfuncs.locator import simulate as sm  # noqa: E402
 
-from xlfuncs.model import MPE1  # Forbes 2025 Table 3
+from xlfuncs.model import MPE1  # noqa: E402  (Forbes 2025 Table 3)
 SNR_LO, SNR_HI = 10.0, 13.0
 MASK_FACTOR = 3.0
 ALPHA = 0.01
