@@ -22,14 +22,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from .errors import DegenerateGeometryError, ModelError
-from .model import (FACTORS, MAX_PARAMETER, MILLI, MIN_LENGTH_SCALE, Parameters, PointCloud, Probe,
-                    V_S_diag_um_per_mm2, factor_block, gauss_kernel, probe_arrays, scale_rows, sq_dists)
-
-__all__ = ["FACTORS", "MAX_PARAMETER", "MILLI", "MIN_LENGTH_SCALE", "Parameters", "Probe", "PointCloud",
-           "V_S_diag_um_per_mm2", "gauss_kernel", "probe_arrays", "sq_dists", "V_X_components", "V_X",
-           "all_pairs", "check_pairs", "distance_components", "iter_distance_components",
-           "rect_variances", "pair_arrays", "summary_components_um", "mpe_um", "C_of_d", "mpe_check",
-           "MPECheck", "conforming_parameters"]
+# the model's names, also importable from here (xlfuncs.pointcloud.Parameters, ...)
+from .model import (FACTORS, MAX_PARAMETER, MILLI, MIN_LENGTH_SCALE, Parameters, PointCloud,  # noqa: F401
+                    Probe, V_S_diag_um_per_mm2, factor_block, gauss_kernel, probe_arrays, scale_rows, sq_dists)
 
 
 # ---------------------------------------------------------------------------------------------
