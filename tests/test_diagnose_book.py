@@ -15,8 +15,8 @@ from xlfuncs.locator import effects as fx
 from xlfuncs import pointcloud as pc
 from xlfuncs.locator import simulate as sm
 from xlfuncs.locator.recordings import write_recordings
-
 from xlfuncs.model import MPE1  # Forbes 2025 Table 3
+
 ONE = (pc.Probe("P1", (0.0, 0.0, -50.0)),)
 PAIR = (pc.Probe("P1", (0.0, 20.0, -30.0)), pc.Probe("P2", (0.0, -20.0, -30.0)))
 THREE = (pc.Probe("P1", (0.0, 0.0, -50.0)), pc.Probe("P2", (150.0, 0.0, -50.0)), pc.Probe("P3", (0.0, 150.0, -50.0)))
