@@ -50,9 +50,7 @@ def main(argv: list[str]) -> int:
             m = int(a.split("=")[1])
     rows = []
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as c:
-        MPE1 = pc.Parameters(sigma_R_um=0.20, sigma_S_ppm=0.7, sigma_Sa_ppm=0.7, sigma_Q_ppm=0.7, sigma_PQ_um=0.20,
-                             sigma_ET_um=0.2, lambda_ET_mm=200.0, sigma_ER_urad=4.0, lambda_ER_mm=400.0,
-                             sigma_P0_um=0.10, sigma_P_um=0.10, lambda_P=0.5)
+        from xlfuncs.model import MPE1  # Forbes 2025 Table 3
         PROBES = (pc.Probe("P1", (0.0, 0.0, -50.0)), pc.Probe("P2", (150.0, 0.0, -50.0)),
                   pc.Probe("P3", (0.0, 150.0, -50.0)))
         L = sm.iso10360(PROBES, repeats=-(-n // 70), fractions=tuple(np.linspace(0.07, 0.7, 10)), hours=8.0)

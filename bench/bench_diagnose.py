@@ -34,9 +34,7 @@ from xlfuncs import pointcloud as pc  # noqa: E402
 from xlfuncs.locator import simulate as sm  # noqa: E402
 from xlfuncs.locator.recordings import read_recordings, write_recordings  # noqa: E402
 
-MPE1 = pc.Parameters(sigma_R_um=0.20, sigma_S_ppm=0.7, sigma_Sa_ppm=0.7, sigma_Q_ppm=0.7, sigma_PQ_um=0.20,
-                     sigma_ET_um=0.2, lambda_ET_mm=200.0, sigma_ER_urad=4.0, lambda_ER_mm=400.0,
-                     sigma_P0_um=0.10, sigma_P_um=0.10, lambda_P=0.5)
+from xlfuncs.model import MPE1  # noqa: E402  (Forbes 2025 Table 3)
 PROBES = (pc.Probe("P1", (0.0, 0.0, -50.0)), pc.Probe("P2", (150.0, 0.0, -50.0)), pc.Probe("P3", (0.0, 150.0, -50.0)))
 
 

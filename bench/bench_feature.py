@@ -27,10 +27,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from xlfuncs import features, partial, pointcloud  # noqa: E402
 
-PARAMS = pointcloud.Parameters(  # Forbes 2025 Table 3, MPE1
-    sigma_R_um=0.20, sigma_S_ppm=0.7, sigma_Sa_ppm=0.7, sigma_Q_ppm=0.7, sigma_PQ_um=0.20,
-    sigma_ET_um=0.2, lambda_ET_mm=200.0, sigma_ER_urad=4.0, lambda_ER_mm=400.0,
-    sigma_P0_um=0.10, sigma_P_um=0.10, lambda_P=0.5)
+from xlfuncs.model import MPE1 as PARAMS  # noqa: E402  (Forbes 2025 Table 3)
 
 
 def cylinder_scan(m_theta: int, m_z: int, seed: int = 1):

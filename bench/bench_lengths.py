@@ -32,9 +32,7 @@ import time, resource, json, math
 import numpy as np
 from xlfuncs import pointcloud as pc
 from xlfuncs.locator import diagnose as dg, simulate as sm
-MPE1 = pc.Parameters(sigma_R_um=0.20, sigma_S_ppm=0.7, sigma_Sa_ppm=0.7, sigma_Q_ppm=0.7, sigma_PQ_um=0.20,
-                     sigma_ET_um=0.2, lambda_ET_mm=200.0, sigma_ER_urad=4.0, lambda_ER_mm=400.0,
-                     sigma_P0_um=0.10, sigma_P_um=0.10, lambda_P=0.5)
+from xlfuncs.model import MPE1  # Forbes 2025 Table 3
 PROBES = (pc.Probe("P1", (0.0, 0.0, -50.0)), pc.Probe("P2", (150.0, 0.0, -50.0)), pc.Probe("P3", (0.0, 150.0, -50.0)))
 n = {n}
 L = sm.iso10360(PROBES, repeats=-(-n // 70), fractions=tuple(np.linspace(0.07, 0.7, 10)), hours=8.0)

@@ -224,9 +224,7 @@ import time, resource, json, sys
 import numpy as np
 from xlfuncs import pointcloud as pc
 from xlfuncs.locator import diagnose as dg, simulate as sm
-MPE1 = pc.Parameters(sigma_R_um=0.20, sigma_S_ppm=0.7, sigma_Sa_ppm=0.7, sigma_Q_ppm=0.7, sigma_PQ_um=0.20,
-                     sigma_ET_um=0.2, lambda_ET_mm=200.0, sigma_ER_urad=4.0, lambda_ER_mm=400.0,
-                     sigma_P0_um=0.10, sigma_P_um=0.10, lambda_P=0.5)
+from xlfuncs.model import MPE1  # Forbes 2025 Table 3
 PAIR = (pc.Probe("P1", (0.0, 20.0, -30.0)), pc.Probe("P2", (0.0, -20.0, -30.0)))
 n = {n}
 rec = sm.simulate(sm.scan(PAIR, points=n), MPE1, {{"scale": 30.0, "probe_radius": 8.0}}, seed=3)
@@ -246,9 +244,7 @@ import time, resource, json
 import numpy as np
 from xlfuncs import pointcloud as pc
 from xlfuncs.locator import diagnose as dg, simulate as sm
-MPE1 = pc.Parameters(sigma_R_um=0.20, sigma_S_ppm=0.7, sigma_Sa_ppm=0.7, sigma_Q_ppm=0.7, sigma_PQ_um=0.20,
-                     sigma_ET_um=0.2, lambda_ET_mm=200.0, sigma_ER_urad=4.0, lambda_ER_mm=400.0,
-                     sigma_P0_um=0.10, sigma_P_um=0.10, lambda_P=0.5)
+from xlfuncs.model import MPE1  # Forbes 2025 Table 3
 PAIR = (pc.Probe("P1", (0.0, 20.0, -30.0)), pc.Probe("P2", (0.0, -20.0, -30.0)))
 rec = sm.simulate(sm.scan(PAIR, points={n}), MPE1, {{"scale": 30.0, "probe_radius": 8.0}}, seed=3)
 model = dg.Model(MPE1, PAIR, True)

@@ -57,9 +57,7 @@ from xlfuncs.locator import effects as fx  # noqa: E402
 from xlfuncs import pointcloud as pc  # noqa: E402
 from xlfuncs.locator import simulate as sm  # noqa: E402
 
-MPE1 = pc.Parameters(sigma_R_um=0.20, sigma_S_ppm=0.7, sigma_Sa_ppm=0.7, sigma_Q_ppm=0.7, sigma_PQ_um=0.20,
-                     sigma_ET_um=0.2, lambda_ET_mm=200.0, sigma_ER_urad=4.0, lambda_ER_mm=400.0,
-                     sigma_P0_um=0.10, sigma_P_um=0.10, lambda_P=0.5)
+from xlfuncs.model import MPE1  # noqa: E402  (Forbes 2025 Table 3)
 SNR_LO, SNR_HI = 10.0, 13.0
 MASK_FACTOR = 3.0
 ALPHA = 0.01

@@ -45,6 +45,7 @@ NUMERIC_MODULES = {
     "test_all_pairs_probe_tables",
     "test_characteristic_decisions",
     "test_budget_dof",
+    "test_model_paths",
 }
 
 

@@ -13,6 +13,7 @@ from xlfuncs.locator import diagnose as dg
 from xlfuncs import features as ft
 from xlfuncs import pointcloud as pc
 from xlfuncs.errors import DegenerateGeometryError, ModelError
+from model_reference import length_covariance_dense
 
 FACTORS = pc.FACTORS
 REL = 1e-10
@@ -143,7 +144,7 @@ def test_record_covariance_equals_the_mismatch_locator_and_the_dense_reference()
     for f in FACTORS:
         assert rel_err(fast[f], ref[f]) <= REL, f
     total = bl.record_covariance(cloud, PARAMS, I, J)
-    assert rel_err(total, dg.length_covariance_dense(cloud, PARAMS, I, J)) <= REL
+    assert rel_err(total, length_covariance_dense(cloud, PARAMS, I, J)) <= REL
 
 
 def test_distances_on_a_backend_are_the_local_numbers():

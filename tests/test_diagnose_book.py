@@ -15,10 +15,8 @@ from xlfuncs.locator import effects as fx
 from xlfuncs import pointcloud as pc
 from xlfuncs.locator import simulate as sm
 from xlfuncs.locator.recordings import write_recordings
+from xlfuncs.model import MPE1  # Forbes 2025 Table 3
 
-MPE1 = pc.Parameters(sigma_R_um=0.20, sigma_S_ppm=0.7, sigma_Sa_ppm=0.7, sigma_Q_ppm=0.7, sigma_PQ_um=0.20,
-                     sigma_ET_um=0.2, lambda_ET_mm=200.0, sigma_ER_urad=4.0, lambda_ER_mm=400.0,
-                     sigma_P0_um=0.10, sigma_P_um=0.10, lambda_P=0.5)
 ONE = (pc.Probe("P1", (0.0, 0.0, -50.0)),)
 PAIR = (pc.Probe("P1", (0.0, 20.0, -30.0)), pc.Probe("P2", (0.0, -20.0, -30.0)))
 THREE = (pc.Probe("P1", (0.0, 0.0, -50.0)), pc.Probe("P2", (150.0, 0.0, -50.0)), pc.Probe("P3", (0.0, 150.0, -50.0)))

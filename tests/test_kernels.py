@@ -23,9 +23,7 @@ import numpy as np
 import threadpoolctl
 from xlfuncs import pointcloud as pc
 from xlfuncs.locator import diagnose as dg, simulate as sm
-MPE1 = pc.Parameters(sigma_R_um=0.20, sigma_S_ppm=0.7, sigma_Sa_ppm=0.7, sigma_Q_ppm=0.7, sigma_PQ_um=0.20,
-                     sigma_ET_um=0.2, lambda_ET_mm=200.0, sigma_ER_urad=4.0, lambda_ER_mm=400.0,
-                     sigma_P0_um=0.10, sigma_P_um=0.10, lambda_P=0.5)
+from xlfuncs.model import MPE1  # Forbes 2025 Table 3
 ONE = (pc.Probe("P1", (0.0, 0.0, -50.0)),)
 rec = sm.simulate(sm.layout("ballplate", ONE), MPE1, {}, seed=5)
 j = dg.diagnose(rec, dg.Model(MPE1, ONE, True)).to_json()
@@ -39,9 +37,7 @@ import json
 import numpy as np
 import threadpoolctl
 from xlfuncs import montecarlo as mc, pointcloud as pc
-params = pc.Parameters(sigma_R_um=0.2, sigma_S_ppm=0.7, sigma_Sa_ppm=0.7, sigma_Q_ppm=0.7, sigma_PQ_um=0.2,
-                       sigma_ET_um=0.2, lambda_ET_mm=200.0, sigma_ER_urad=4.0, lambda_ER_mm=400.0,
-                       sigma_P0_um=0.1, sigma_P_um=0.1, lambda_P=0.5)
+from xlfuncs.model import MPE1 as params  # Forbes 2025 Table 3
 g = np.arange(6) * 60.0                      # a 6 x 6 grid of points: degenerate kernel spectra
 X = np.array([[x, y, 0.0] for x in g for y in g])
 N = np.tile([0.0, 0.0, 1.0], (len(X), 1))

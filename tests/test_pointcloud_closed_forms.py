@@ -8,6 +8,7 @@ import pytest
 
 from xlfuncs import pointcloud as pc
 from xlfuncs.errors import DegenerateGeometryError, ModelError
+from xlfuncs.model import skew
 
 rng = np.random.default_rng(20250101)
 
@@ -108,7 +109,7 @@ def test_6_5_rotation_errors_two_probes():
     i, j = 0, 1
     n = unit(c.X_mm[j] - c.X_mm[i])
     P = c.offsets_mm
-    mi, mj = pc.skew_G(P[i]).T @ n, pc.skew_G(P[j]).T @ n
+    mi, mj = skew(P[i])[0].T @ n, skew(P[j])[0].T @ n
     rho = np.exp(-np.sum((c.ram_mm[j] - c.ram_mm[i]) ** 2) / 250**2)
     var = (5e-3) ** 2 * (mi @ mi + mj @ mj - 2 * (mi @ mj) * rho)
     assert dense_u(c, p, i, j, "ER") == pytest.approx(np.sqrt(var), rel=1e-10)

@@ -53,6 +53,7 @@ import numpy as np
 from . import pointcloud as pc
 from .errors import ModelError
 from .execution import ProgressBar, ThreadBackend, run_blocks
+from .model import G_S, check_factors, factor_block, gauss_kernel, scale_rows, skew, sq_dists
 
 FACTORS = pc.FACTORS
 MILLI = pc.MILLI
@@ -70,99 +71,15 @@ __all__ = [
 # blocks of V_X (any rows and columns), pair blocks of eq. (29)
 # ---------------------------------------------------------------------------------------------
 
-def _index(cloud: pc.PointCloud, I) -> np.ndarray:
-    if isinstance(I, slice):
-        return np.arange(cloud.m)[I]
-    I = np.asarray(I, dtype=int).reshape(-1)
-    if I.size and (I.min() < 0 or I.max() >= cloud.m):
-        raise ModelError("point index out of range")
-    return I
-
-
-def _sq_dists(A: np.ndarray, B: np.ndarray) -> np.ndarray:
-    """Squared distances between the rows of A and B by coordinate differences (as the dense
-    path of :func:`xlfuncs.pointcloud.V_X_components`, no cancellation)."""
-    out = (A[:, 0][:, None] - B[:, 0][None, :]) ** 2
-    for k in (1, 2):
-        out += (A[:, k][:, None] - B[:, k][None, :]) ** 2
-    return out
-
-
-def skew(P: np.ndarray) -> np.ndarray:
-    """G_k of Forbes 2025 eq. (24) for every row of P (n x 3): (n, 3, 3), as pc.skew_G."""
-    P = np.asarray(P, dtype=float).reshape(-1, 3)
-    px, py, pz = P.T
-    z = np.zeros_like(px)
-    return np.stack([np.stack([z, pz, -py], -1), np.stack([-pz, z, px], -1),
-                     np.stack([py, -px, z], -1)], -2)
-
-
-def G_S(U: np.ndarray) -> np.ndarray:
-    """G(u) of Forbes 2025 eq. (11) for every row of U (n x 3): (n, 3, 7), as pc.G_S_point."""
-    U = np.asarray(U, dtype=float).reshape(-1, 3)
-    x, y, z = U.T
-    o = np.zeros_like(x)
-    return np.stack([np.stack([x, x, o, o, y, z, o], -1), np.stack([y, o, y, o, o, o, z], -1),
-                     np.stack([z, o, o, z, o, o, o], -1)], -2)
-
-
 def V_X_block(cloud: pc.PointCloud, params: pc.Parameters, I, J,
               factors: Sequence[str] = FACTORS) -> dict[str, np.ndarray]:
     """Rows of points I and columns of points J of every factor of eq. (28), µm².
 
-    Returns ``{factor: (3|I|) x (3|J|)}``, coordinates interleaved as in
-    :func:`xlfuncs.pointcloud.V_X_components` (the same numbers as its sub-blocks), plus
-    ``"X"`` (their sum) when all six factors are requested.
+    Returns :func:`xlfuncs.model.factor_block` (``{factor: (3|I|) x (3|J|)}``, coordinates
+    interleaved as in :func:`xlfuncs.pointcloud.V_X_components`, the same numbers as its
+    sub-blocks), plus ``"X"`` (their sum) when all six factors are requested.
     """
-    I, J = _index(cloud, I), _index(cloud, J)
-    for f in factors:
-        if f not in FACTORS:
-            raise ModelError(f"unknown influence factor {f!r}; known: {', '.join(FACTORS)}")
-    pa = pc.probe_arrays(cloud, params)
-    ki, kj = cloud.probe_index[I], cloud.probe_index[J]
-    same = (ki[:, None] == kj[None, :]).astype(float)
-    nI, nJ = len(I), len(J)
-    I3 = np.eye(3)
-    U = cloud.ram_mm
-    out: dict[str, np.ndarray] = {}
-
-    def kron_I3(A):
-        return np.kron(A, I3)
-
-    D2 = None
-    if "ET" in factors or "ER" in factors:
-        D2 = _sq_dists(U[I], U[J])
-    for f in factors:
-        if f == "R":
-            out[f] = params.sigma_R_um**2 * kron_I3((I[:, None] == J[None, :]).astype(float))
-        elif f == "PQ":
-            s = pa["sigma_PQ_um"]
-            out[f] = kron_I3(same * np.outer(s[I], s[J]))
-        elif f == "S":
-            GI = G_S(U[I]).reshape(3 * nI, 7)
-            GJ = G_S(U[J]).reshape(3 * nJ, 7)
-            out[f] = (GI * pc.V_S_diag_um_per_mm2(params)) @ GJ.T
-        elif f == "ET":
-            out[f] = (kron_I3(params.sigma_ET_um**2 * np.exp(-D2 / params.lambda_ET_mm**2))
-                      if params.sigma_ET_um > 0 else np.zeros((3 * nI, 3 * nJ)))
-        elif f == "ER":
-            if params.sigma_ER_urad > 0:
-                P = cloud.offsets_mm
-                GRI, GRJ = skew(P[I]), skew(P[J])
-                rho = np.exp(-D2 / params.lambda_ER_mm**2)
-                B = np.einsum("ij,iac,jbc->iajb", rho, GRI, GRJ).reshape(3 * nI, 3 * nJ)
-                out[f] = (params.sigma_ER_urad * MILLI) ** 2 * B
-            else:
-                out[f] = np.zeros((3 * nI, 3 * nJ))
-        elif f == "P":
-            N = cloud.N
-            s0, sp, lam = pa["sigma_P0_um"], pa["sigma_P_um"], pa["lambda_P"]
-            spp = np.outer(sp[I], sp[J])
-            lam2 = np.outer(lam[I], lam[J])
-            with np.errstate(divide="ignore", invalid="ignore"):
-                kern = np.where(spp > 0, np.exp(-_sq_dists(N[I], N[J]) / np.where(lam2 > 0, lam2, 1.0)), 0.0)
-            V_DP = same * (np.outer(s0[I], s0[J]) + spp * kern)
-            out[f] = np.einsum("ij,ia,jb->iajb", V_DP, N[I], N[J]).reshape(3 * nI, 3 * nJ)
+    out = factor_block(cloud, params, I, J, factors)
     if tuple(factors) == FACTORS:
         out["X"] = sum(out[f] for f in FACTORS)
     return out
@@ -327,7 +244,7 @@ def _kernel_rows(item, shared):
     q, i0, i1 = item
     Z, terms = shared["problems"][q]
     ZI = Z[i0:i1]
-    D2 = _sq_dists(ZI, Z[i0:])
+    D2 = sq_dists(ZI, Z[i0:])
     b = i1 - i0
     out = {}
     K = np.empty_like(D2)
@@ -387,9 +304,7 @@ def V_A_components(G: np.ndarray, cloud: pc.PointCloud, params: pc.Parameters, *
         raise ModelError(f"G_A|X must have 3m = {3 * m} columns, got shape {G.shape}")
     if not np.all(np.isfinite(G)):
         raise ModelError("G_A|X has non-finite entries")
-    for f in factors:
-        if f not in FACTORS:
-            raise ModelError(f"unknown influence factor {f!r}; known: {', '.join(FACTORS)}")
+    check_factors(factors)
     nA = G.shape[0]
     Gp = G.reshape(nA, m, 3)                   # Gp[:, i, :] = G_i
     Wx = np.ascontiguousarray(Gp.transpose(1, 0, 2))   # m x n_A x 3
@@ -504,9 +419,11 @@ def propagate_cloud(fit, cloud: pc.PointCloud, params: pc.Parameters, *, G: np.n
 # ---------------------------------------------------------------------------------------------
 
 def _record_rows(item, shared):
+    """Rows a0 .. a1-1 of C_f = G V_X,f G^T for the factors R, PQ, ET, ER, P: the sum over the
+    ends s of record a and t of record b of sign_s sign_t n_a^T V_f(s_a, t_b) n_b."""
     a0, a1 = item
     cloud, params, pa = shared["cloud"], shared["params"], shared["pa"]
-    I, J, na = shared["I"], shared["J"], shared["na"]
+    I, J, na, dll = shared["I"], shared["J"], shared["na"], shared["d_log_lambda"]
     X_ = slice(a0, a1)
     U, N, P = cloud.ram_mm, cloud.N, cloud.offsets_mm
     kp = cloud.probe_index
@@ -520,34 +437,45 @@ def _record_rows(item, shared):
             sign = ss * st
             same_pt = sa[:, None] == t[None, :]
             same_pr = kp[sa][:, None] == kp[t][None, :]
+            # R (eq. 8): one probing, one repeatability draw; PQ (eq. 9)
             out["R"] += sign * params.sigma_R_um**2 * same_pt * NN
             out["PQ"] += sign * same_pr * np.outer(sPQ[sa], sPQ[t]) * NN
             if params.sigma_ET_um > 0 or params.sigma_ER_urad > 0:
-                D2 = _sq_dists(U[sa], U[t])
-            if params.sigma_ET_um > 0:
-                out["ET"] += sign * params.sigma_ET_um**2 * np.exp(-D2 / params.lambda_ET_mm**2) * NN
-            if params.sigma_ER_urad > 0:
+                D2 = sq_dists(U[sa], U[t])
+            if params.sigma_ET_um > 0:      # ET (eq. 21): independent axes
+                out["ET"] += sign * params.sigma_ET_um**2 * gauss_kernel(D2, params.lambda_ET_mm**2, dll) * NN
+            if params.sigma_ER_urad > 0:    # ER (eq. 25): w = G_k^T n = n x p (eq. 24)
                 w_s = np.cross(na[X_], P[sa])
                 w_t = np.cross(na, P[t])
                 out["ER"] += sign * (params.sigma_ER_urad * MILLI) ** 2 * \
-                    np.exp(-D2 / params.lambda_ER_mm**2) * (w_s @ w_t.T)
+                    gauss_kernel(D2, params.lambda_ER_mm**2, dll) * (w_s @ w_t.T)
+            # P (eqs. 26-27): o = n_a . n_point, same probe only
             o_s = np.einsum("ij,ij->i", na[X_], N[sa])
             o_t = np.einsum("ij,ij->i", na, N[t])
             spp = np.outer(sp[sa], sp[t])
-            lam2 = np.outer(lam[sa], lam[t])
-            kern = np.where(spp > 0, np.exp(-_sq_dists(N[sa], N[t]) / np.where(lam2 > 0, lam2, 1.0)), 0.0)
-            out["P"] += sign * same_pr * (np.outer(s0[sa], s0[t]) + spp * kern) * np.outer(o_s, o_t)
+            kern = np.where(spp > 0, gauss_kernel(sq_dists(N[sa], N[t]), np.outer(lam[sa], lam[t]), dll), 0.0)
+            radius = 0.0 if dll else np.outer(s0[sa], s0[t])
+            out["P"] += sign * same_pr * (radius + spp * kern) * np.outer(o_s, o_t)
     return out
 
 
 def record_covariance(cloud: pc.PointCloud, params: pc.Parameters, I, J, *, components: bool = False,
-                      block: int = BLOCK_ENTRIES // 16, backend=None, progress=None):
+                      d_log_lambda: bool = False, block: int = BLOCK_ENTRIES // 16, backend=None,
+                      progress=None):
     """Covariance (µm²) of the lengths d_a = ||x_J[a] - x_I[a]||: C = G V_X G^T with
     g_a = -n_a at point I[a] and +n_a at J[a] (eq. 29), per factor if ``components``.
 
-    The same numbers as :func:`xlfuncs.locator.diagnose.length_covariance`, but every entry is built
-    from the kernel at the records' four end-point combinations in row blocks of records, so
-    no m x m kernel of the unique points is formed: memory O(n^2) for n records, whatever m.
+    The one implementation of the length-record covariance (the locator's
+    :func:`xlfuncs.locator.model.length_covariance` is this function): each factor of eq. (28)
+    is a point kernel times a direction term, so every entry is built from the kernel at the
+    records' four end-point combinations (w = n_a for R, PQ, ET; n_a x p for ER, eq. 24;
+    n_a . n_point for P, eq. 26; S is rank 7, eq. 11), in row blocks of records: no m x m kernel
+    of the unique points is formed, memory O(n^2) for n records, whatever m.
+
+    ``d_log_lambda`` (with ``components``): the GP factors ET, ER and P with every kernel
+    exp(-D^2/lambda^2) replaced by its derivative in log lambda (:func:`xlfuncs.model.gauss_kernel`),
+    the radius part of P dropped: the closed-form dC/d(log lambda) of the hyper-parameter fit
+    (:mod:`xlfuncs.calibrate`).
     """
     I = np.asarray(I, dtype=int).reshape(-1)
     J = np.asarray(J, dtype=int).reshape(-1)
@@ -566,17 +494,14 @@ def record_covariance(cloud: pc.PointCloud, params: pc.Parameters, I, J, *, comp
     rows = max(1, block // max(n, 1))
     items = [(a0, min(a0 + rows, n)) for a0 in range(0, n, rows)]
     shared = {"cloud": cloud, "params": params, "pa": pc.probe_arrays(cloud, params),
-              "I": I, "J": J, "na": na}
+              "I": I, "J": J, "na": na, "d_log_lambda": d_log_lambda}
     out = {f: np.empty((n, n)) for f in FACTORS}
     for (a0, a1), part in zip(items, run_blocks(_record_rows, items, shared, backend, progress,
                                           [a1 - a0 for a0, a1 in items])):
         for f in ("R", "PQ", "ET", "ER", "P"):
             out[f][a0:a1] = part[f]
     # S: rank 7 at the ram positions (eq. 11)
-    du = cloud.ram_mm[J] - cloud.ram_mm[I]
-    nx, ny, nz = na.T
-    ux, uy, uz = du.T
-    g7 = np.column_stack([nx * ux + ny * uy + nz * uz, nx * ux, ny * uy, nz * uz, nx * uy, nx * uz, ny * uz])
+    g7 = scale_rows(na, cloud.ram_mm[J] - cloud.ram_mm[I])
     out["S"] = (g7 * pc.V_S_diag_um_per_mm2(params)) @ g7.T
     for f in FACTORS:
         out[f] = 0.5 * (out[f] + out[f].T)

@@ -55,6 +55,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from . import pointcloud as pc
+from .model import sq_dists
 from .errors import ModelError
 from .locator.model import Prepared, is_structured, length_covariance
 
@@ -325,7 +326,7 @@ def bounds(sets: list[RecordSet], start: dict[str, float], free: list[str]) -> B
         U = s.op.cloud.ram_mm
         travel = max(travel, float(np.max(np.ptp(U, axis=0))))
         if len(U) > 1:
-            D = np.sqrt(np.maximum(pc.sq_dists(U, U), 0.0))
+            D = np.sqrt(sq_dists(U, U))
             D[D < 1e-9] = np.inf
             spacing = min(spacing, float(np.min(D)))
     travel = travel or 1.0

@@ -38,6 +38,7 @@ import numpy as np
 from scipy.linalg import solve_triangular
 
 from .errors import ModelError
+from .model import sq_dists
 
 #: stop choosing pivots when the largest residual diagonal of the (unit) kernel is below this
 PIVOT_TOL = 1e-12
@@ -51,15 +52,9 @@ BLOCK_ENTRIES = 1 << 21
 __all__ = ["KernelFactor", "Approximation", "pivots", "nystrom_project", "PIVOT_TOL"]
 
 
-def _sq_dists(A: np.ndarray, B: np.ndarray) -> np.ndarray:
-    out = (A[:, 0][:, None] - B[:, 0][None, :]) ** 2
-    for k in range(1, A.shape[1]):
-        out += (A[:, k][:, None] - B[:, k][None, :]) ** 2
-    return out
-
-
 def _kernel(A, B, inv_lam2):
-    K = _sq_dists(A, B)
+    """exp(-|a - b|^2 inv_lam2) for the rows of A and B (the unit kernel of eqs. 21, 25, 27)."""
+    K = sq_dists(A, B)
     K *= -inv_lam2
     return np.exp(K, out=K)
 

@@ -34,6 +34,7 @@ from typing import Callable, Sequence
 import numpy as np
 
 from . import pointcloud as pc
+from .model import G_S, skew, sq_dists
 from .errors import ModelError
 
 FACTORS = pc.FACTORS
@@ -92,11 +93,11 @@ class PointCloudSampler:
             maps["PQ"] = A.reshape(3 * m, 3 * nP)
             inputs["PQ"] = [(3 * nP, 1, None)]
         if "S" in factors:
-            maps["S"] = pc.G_X_S(cloud) * np.sqrt(pc.V_S_diag_um_per_mm2(params)) if m else np.zeros((0, 7))
+            maps["S"] = G_S(cloud.ram_mm).reshape(-1, 7) * np.sqrt(pc.V_S_diag_um_per_mm2(params)) if m else np.zeros((0, 7))
             inputs["S"] = [(7, 1, None)]
         D2 = None
         if ("ET" in factors and params.sigma_ET_um > 0) or ("ER" in factors and params.sigma_ER_urad > 0):
-            D2 = pc.sq_dists(U, U)
+            D2 = sq_dists(U, U)
         if "ET" in factors:
             if params.sigma_ET_um > 0:
                 L, T = kernel_basis(np.exp(-D2 / params.lambda_ET_mm**2), rank_tol)
@@ -107,7 +108,7 @@ class PointCloudSampler:
         if "ER" in factors:
             if params.sigma_ER_urad > 0:
                 L, T = kernel_basis(np.exp(-D2 / params.lambda_ER_mm**2), rank_tol)
-                GR = np.array([pc.skew_G(p) for p in cloud.offsets_mm]).reshape(m, 3, 3)
+                GR = skew(cloud.offsets_mm)
                 maps["ER"] = params.sigma_ER_urad * MILLI * np.einsum("iac,ir->iarc", GR, L).reshape(3 * m, -1)
                 inputs["ER"] = [(m, 3, T)]
             else:
@@ -124,7 +125,7 @@ class PointCloudSampler:
                 cols.append(c0)
                 segs.append((1, 1, None))
                 if sp[idx[0]] > 0:
-                    L, T = kernel_basis(np.exp(-pc.sq_dists(N[idx], N[idx]) / lam[idx[0]] ** 2), rank_tol)
+                    L, T = kernel_basis(np.exp(-sq_dists(N[idx], N[idx]) / lam[idx[0]] ** 2), rank_tol)
                     cP = np.zeros((m, L.shape[1]))
                     cP[idx] = sp[idx[0]] * L
                     cols.append(cP)

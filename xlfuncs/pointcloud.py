@@ -1,23 +1,9 @@
-"""Point-cloud variance V_X from six CMM influence factors (Forbes 2025, sections 4-6).
+"""Point-cloud variance V_X from six CMM influence factors (Forbes 2025, sections 4-6): the
+dense V_X, distances and their uncertainty components, the summary formula and the MPE check.
 
-Units: coordinates, offsets and distances in mm; uncertainties in µm, variances in µm².
-Scale and squareness hyper-parameters are in ppm (1e-6), rotations in µrad, so that
-``ppm * mm = 1e-3 µm`` and ``µrad * mm = 1e-3 µm``.
-
-Factors (labels of Forbes 2025, section 2.4):
-
-====  ==========================================  =====================
-R     repeatability                               eq. (8)
-PQ    probe qualification, per probe              eq. (9)
-S     scale and squareness, G(x_i - p_k(i))       eqs. (10)-(14)
-ET    spatially correlated location errors (GP)   eqs. (20)-(21), 5.3
-ER    spatially correlated rotation errors (GP)   eqs. (22)-(25)
-P     probing: radius + direction-correlated GP   eqs. (26)-(27)
-====  ==========================================  =====================
-
-The spatial kernels of ET and ER act on the machine (ram) positions ``x_i - p_k(i)``
-(Forbes 2025, section 5.3, multiple probes).  Probing effects of different probes are
-independent (section 5.5).
+The model itself (``FACTORS``, :class:`Parameters`, :class:`Probe`, :class:`PointCloud`, the
+six factor covariances of eq. 28) lives in :mod:`xlfuncs.model`; its names are importable from
+here as well.  Units: coordinates mm, uncertainties µm, variances µm² (see :mod:`xlfuncs.model`).
 
 Two evaluation paths give the same numbers:
 
@@ -28,260 +14,33 @@ Two evaluation paths give the same numbers:
 
 from __future__ import annotations
 
-import math
 import os
 import threading
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass
 
 import numpy as np
 
 from .errors import DegenerateGeometryError, ModelError
-
-FACTORS: tuple[str, ...] = ("R", "PQ", "S", "ET", "ER", "P")
-
-#: conversion of ppm*mm (or µrad*mm) to µm
-MILLI = 1e-3
-
-
-#: largest value any hyper-parameter may take (µm, ppm, µrad, mm); squares stay far from overflow
-MAX_PARAMETER = 1e9
-#: smallest length scale of a switched-on GP; exp(-d^2/lambda^2) stays well defined
-MIN_LENGTH_SCALE = 1e-6
-
-
-def _check_length_scale(lam_name: str, lam: float, sigma_name: str, sigma: float) -> None:
-    if sigma > 0 and lam < MIN_LENGTH_SCALE:
-        raise ModelError(f"{lam_name} must be at least {MIN_LENGTH_SCALE:g} when {sigma_name} > 0, got {lam!r}")
-
-
-@dataclass(frozen=True)
-class Parameters:
-    """Statistical hyper-parameters of Forbes 2025, Tables 1 and 3 (task-file names and units).
-
-    ``sigma_PQ_um``, ``sigma_P0_um``, ``sigma_P_um`` and ``lambda_P`` are defaults that a
-    probe may override.
-    """
-
-    sigma_R_um: float = 0.0
-    sigma_S_ppm: float = 0.0
-    sigma_Sa_ppm: float = 0.0
-    sigma_Q_ppm: float = 0.0
-    sigma_PQ_um: float = 0.0
-    sigma_ET_um: float = 0.0
-    lambda_ET_mm: float = 0.0
-    sigma_ER_urad: float = 0.0
-    lambda_ER_mm: float = 0.0
-    sigma_P0_um: float = 0.0
-    sigma_P_um: float = 0.0
-    lambda_P: float = 0.0
-
-    #: names of the standard-deviation parameters, rescaled by C_max (section 6.8)
-    SIGMAS = (
-        "sigma_R_um", "sigma_S_ppm", "sigma_Sa_ppm", "sigma_Q_ppm", "sigma_PQ_um",
-        "sigma_ET_um", "sigma_ER_urad", "sigma_P0_um", "sigma_P_um",
-    )
-
-    def __post_init__(self) -> None:
-        for name in self.__dataclass_fields__:
-            value = getattr(self, name)
-            if not math.isfinite(value):
-                raise ModelError(f"{name} must be a finite number, got {value!r}")
-            if value < 0:
-                raise ModelError(f"{name} must not be negative, got {value!r}")
-            if value > MAX_PARAMETER:
-                raise ModelError(f"{name} = {value!r} is beyond any CMM (at most {MAX_PARAMETER:g})")
-        for sigma, lam in (("sigma_ET_um", "lambda_ET_mm"), ("sigma_ER_urad", "lambda_ER_mm"),
-                           ("sigma_P_um", "lambda_P")):
-            _check_length_scale(lam, getattr(self, lam), sigma, getattr(self, sigma))
-
-    def scaled(self, factor: float) -> "Parameters":
-        """All standard deviations divided by ``factor`` (section 6.8: divide by C_max)."""
-        return replace(self, **{n: getattr(self, n) / factor for n in self.SIGMAS})
-
-
-@dataclass(frozen=True)
-class Probe:
-    """A probe (stylus) configuration: offset p_k and its per-probe uncertainty parameters.
-
-    ``None`` for a sigma means: use the task-wide value of :class:`Parameters`.
-    """
-
-    id: str
-    offset_mm: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    sigma_PQ_um: float | None = None
-    sigma_P0_um: float | None = None
-    sigma_P_um: float | None = None
-    lambda_P: float | None = None
-
-    def resolved(self, params: Parameters) -> "Probe":
-        """A copy with every ``None`` replaced by the task-wide default."""
-        vals = {n: getattr(params, n) if getattr(self, n) is None else getattr(self, n)
-                for n in ("sigma_PQ_um", "sigma_P0_um", "sigma_P_um", "lambda_P")}
-        for n, v in vals.items():
-            if not math.isfinite(v) or v < 0 or v > MAX_PARAMETER:
-                raise ModelError(f"probe {self.id}: {n} must be a finite number from 0 to {MAX_PARAMETER:g}")
-        _check_length_scale(f"probe {self.id}: lambda_P", vals["lambda_P"], "sigma_P_um", vals["sigma_P_um"])
-        return replace(self, **vals)
-
-
-@dataclass(frozen=True)
-class PointCloud:
-    """Measured points x_i (mm), outward unit normals n_i and the probe used for each point.
-
-    ``probe_index[i]`` indexes ``probes``.  ``labels`` are the point ids.
-    """
-
-    X_mm: np.ndarray
-    N: np.ndarray
-    probe_index: np.ndarray
-    probes: tuple[Probe, ...]
-    labels: tuple[str, ...] = field(default=())
-
-    def __post_init__(self) -> None:
-        X = np.asarray(self.X_mm, dtype=float)
-        N = np.asarray(self.N, dtype=float)
-        k = np.asarray(self.probe_index, dtype=int)
-        if X.ndim != 2 or X.shape[1] != 3:
-            raise ModelError("points must be an m x 3 array of coordinates in mm")
-        if N.shape != X.shape:
-            raise ModelError("normals must have the same shape as the points")
-        if k.shape != (X.shape[0],):
-            raise ModelError("every point needs a probe")
-        if not np.all(np.isfinite(X)) or not np.all(np.isfinite(N)):
-            raise ModelError("points and normals must be finite numbers")
-        if len(self.probes) == 0 or k.min(initial=0) < 0 or k.max(initial=0) >= len(self.probes):
-            raise ModelError("probe index out of range")
-        object.__setattr__(self, "X_mm", X)
-        object.__setattr__(self, "N", N)
-        object.__setattr__(self, "probe_index", k)
-        if not self.labels:
-            object.__setattr__(self, "labels", tuple(f"X{i + 1}" for i in range(X.shape[0])))
-
-    @property
-    def m(self) -> int:
-        return self.X_mm.shape[0]
-
-    @property
-    def offsets_mm(self) -> np.ndarray:
-        """p_k(i) for every point (m x 3)."""
-        P = np.array([p.offset_mm for p in self.probes], dtype=float).reshape(-1, 3)
-        return P[self.probe_index]
-
-    @property
-    def ram_mm(self) -> np.ndarray:
-        """Machine positions x_i - p_k(i) (m x 3) on which the S, ET and ER models act."""
-        return self.X_mm - self.offsets_mm
+# the model's names, also importable from here (xlfuncs.pointcloud.Parameters, ...)
+from .model import (FACTORS, MAX_PARAMETER, MILLI, MIN_LENGTH_SCALE, Parameters, PointCloud,  # noqa: F401
+                    Probe, V_S_diag_um_per_mm2, factor_block, gauss_kernel, probe_arrays, scale_rows, sq_dists)
 
 
 # ---------------------------------------------------------------------------------------------
 # Dense V_X (Forbes 2025 eq. 28), one 3m x 3m matrix per factor, µm²
 # ---------------------------------------------------------------------------------------------
 
-def skew_G(p_mm: np.ndarray) -> np.ndarray:
-    """Sensitivity of R(alpha) p to alpha at alpha = 0 (Forbes 2025 eq. 24), mm per rad."""
-    px, py, pz = np.asarray(p_mm, dtype=float)
-    return np.array([[0.0, pz, -py], [-pz, 0.0, px], [py, -px, 0.0]])
-
-
-def G_S_point(u_mm: np.ndarray) -> np.ndarray:
-    """3 x 7 scale/squareness sensitivity G(x_i - p_k(i)) of Forbes 2025 eq. (11), in mm."""
-    x, y, z = np.asarray(u_mm, dtype=float)
-    return np.array([[x, x, 0, 0, y, z, 0], [y, 0, y, 0, 0, 0, z], [z, 0, 0, z, 0, 0, 0]], dtype=float)
-
-
-def G_X_S(cloud: PointCloud) -> np.ndarray:
-    """3m x 7 sensitivity matrix G_X|S assembled from eq. (11) at x_i - p_k(i) (mm)."""
-    return np.vstack([G_S_point(u) for u in cloud.ram_mm])
-
-
-def V_S_diag_um_per_mm2(params: Parameters) -> np.ndarray:
-    """Diagonal of V_B of eq. (13), converted from ppm² to (µm/mm)²."""
-    s = np.array([params.sigma_S_ppm, params.sigma_Sa_ppm, params.sigma_Sa_ppm, params.sigma_Sa_ppm,
-                  params.sigma_Q_ppm, params.sigma_Q_ppm, params.sigma_Q_ppm]) * MILLI
-    return s**2
-
-
-def probe_arrays(cloud: PointCloud, params: Parameters) -> dict[str, np.ndarray]:
-    """Per point (length m): the sigma_PQ_um, sigma_P0_um, sigma_P_um and lambda_P of its probe,
-    per-probe overrides resolved against the task-wide defaults."""
-    probes = [p.resolved(params) for p in cloud.probes]
-    k = cloud.probe_index
-    return {n: np.array([getattr(p, n) for p in probes], dtype=float)[k]
-            for n in ("sigma_PQ_um", "sigma_P0_um", "sigma_P_um", "lambda_P")}
-
-
-def sq_dists(A: np.ndarray, B: np.ndarray) -> np.ndarray:
-    """Matrix of squared Euclidean distances between the rows of A and B."""
-    D = A[:, None, :] - B[None, :, :]
-    return np.einsum("ijk,ijk->ij", D, D)
-
-
-def gauss_kernel(D2: np.ndarray, lam2, d_log_lambda: bool = False) -> np.ndarray:
-    """The squared-exponential correlation exp(-D^2/lambda^2) of eqs. (21), (25), (27)
-    (``lam2`` = lambda^2, a number or an array), or with ``d_log_lambda`` its derivative in
-    log lambda, (2 D^2/lambda^2) exp(-D^2/lambda^2)."""
-    with np.errstate(divide="ignore", invalid="ignore"):
-        q = D2 / lam2
-        k = np.exp(-q)
-        return 2.0 * q * k if d_log_lambda else k
-
-
 def V_X_components(cloud: PointCloud, params: Parameters, *, d_log_lambda: bool = False) -> dict[str, np.ndarray]:
-    """The six 3m x 3m contributions of Forbes 2025 eq. (28), in µm², keyed by ``FACTORS``.
+    """The six 3m x 3m contributions of Forbes 2025 eq. (28), in µm², keyed by ``FACTORS``:
+    :func:`xlfuncs.model.factor_block` over every point.
 
     Coordinates are interleaved ``x1, y1, z1, x2, ...`` (the paper's x_{1:m}).
     ``d_log_lambda``: the GP factors ET, ER and P with their kernels replaced by the derivative
     in log lambda (:func:`gauss_kernel`; the radius part of P dropped), the closed-form dV/d(log
     lambda) of the hyper-parameter fit (:mod:`xlfuncs.calibrate`).
     """
-    m = cloud.m
-    n3 = 3 * m
-    pa = probe_arrays(cloud, params)
-    k = cloud.probe_index
-    same_probe = (k[:, None] == k[None, :]).astype(float)
-    I3 = np.eye(3)
-    U = cloud.ram_mm
-    D2 = sq_dists(U, U)
-    out: dict[str, np.ndarray] = {}
-
-    # R, eq. (8): sigma_R^2 I
-    out["R"] = params.sigma_R_um**2 * np.eye(n3)
-
-    # PQ, eq. (9): G_X|PQ V_PQ G_X|PQ^T, same probe -> sigma_PQ,k^2 I_3 in every block pair
-    s = pa["sigma_PQ_um"]
-    out["PQ"] = np.kron(same_probe * np.outer(s, s), I3)
-
-    # S, eqs. (11)-(14) at x_i - p_k(i)
-    G = G_X_S(cloud)
-    out["S"] = (G * V_S_diag_um_per_mm2(params)) @ G.T
-
-    # ET, eq. (21): independent axes, kernel on ram positions
-    if params.sigma_ET_um > 0:
-        out["ET"] = np.kron(params.sigma_ET_um**2 * gauss_kernel(D2, params.lambda_ET_mm**2, d_log_lambda), I3)
-    else:
-        out["ET"] = np.zeros((n3, n3))
-
-    # ER, eq. (25): sigma_ER^2 exp(-d_ij^2/lambda^2) G_k(i) G_k(j)^T
-    if params.sigma_ER_urad > 0:
-        GR = np.vstack([skew_G(p) for p in cloud.offsets_mm])  # 3m x 3, mm/rad
-        rho = gauss_kernel(D2, params.lambda_ER_mm**2, d_log_lambda)
-        out["ER"] = (params.sigma_ER_urad * MILLI) ** 2 * np.kron(rho, np.ones((3, 3))) * (GR @ GR.T)
-    else:
-        out["ER"] = np.zeros((n3, n3))
-
-    # P, eqs. (26)-(27): N V_DP N^T, probes independent
-    N = cloud.N
-    DN2 = sq_dists(N, N)
-    lam = pa["lambda_P"]
-    sP = pa["sigma_P_um"]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        kern = np.where(np.outer(sP, sP) > 0, gauss_kernel(DN2, np.outer(lam, lam), d_log_lambda), 0.0)
-    radius = 0.0 if d_log_lambda else np.outer(pa["sigma_P0_um"], pa["sigma_P0_um"])
-    V_DP = same_probe * (radius + np.outer(sP, sP) * kern)
-    NN = np.einsum("ia,jb->iajb", N, N).reshape(n3, n3) if m else np.zeros((0, 0))
-    out["P"] = np.kron(V_DP, np.ones((3, 3))) * NN
-    return out
+    return factor_block(cloud, params, d_log_lambda=d_log_lambda)
 
 
 def V_X(cloud: PointCloud, params: Parameters) -> np.ndarray:
@@ -332,10 +91,7 @@ def _distance_block(cloud: PointCloud, params: Parameters, pa: dict, i: np.ndarr
 
     # S: n^T (G(u_j) - G(u_i)) = n^T G(u_j - u_i), G linear (eq. 11)
     du = U[j] - U[i]
-    nx, ny, nz = n.T
-    ux, uy, uz = du.T
-    g7 = np.column_stack([nx * ux + ny * uy + nz * uz, nx * ux, ny * uy, nz * uz, nx * uy, nx * uz, ny * uz])
-    var["S"] = g7**2 @ V_S_diag_um_per_mm2(params)
+    var["S"] = scale_rows(n, du) ** 2 @ V_S_diag_um_per_mm2(params)
 
     du2 = np.einsum("ij,ij->i", du, du)
     if params.sigma_ET_um > 0:

@@ -6,13 +6,24 @@ left faces with p_L = (0, 20, 0), right faces with p_R = (0, -20, 0).
 """
 from pathlib import Path
 
+from xlfuncs.model import TABLE3
+
 HERE = Path(__file__).parent
-TABLE3 = {
-    "MPE1": dict(A_um=1.0, B_mm=500, sigma_R_um=0.20, s=0.7, sigma_PQ_um=0.20, sigma_ET_um=0.2,
-                 lambda_ET_mm=200, sigma_ER_urad=4.0, lambda_ER_mm=400, sigma_P0_um=0.10, sigma_P_um=0.10),
-    "MPE2": dict(A_um=3.0, B_mm=200, sigma_R_um=0.60, s=2.1, sigma_PQ_um=0.60, sigma_ET_um=0.6,
-                 lambda_ET_mm=100, sigma_ER_urad=12.0, lambda_ER_mm=200, sigma_P0_um=0.30, sigma_P_um=0.30),
-}
+
+
+def _num(v: float) -> str:
+    """A Table 3 value as the task files write it: lengths of 100 mm and more without decimals."""
+    return str(int(v)) if v >= 100 and v == int(v) else repr(float(v))
+
+
+def _table3(mpe: str) -> dict:
+    """Forbes 2025 Table 3, column ``mpe`` (:data:`xlfuncs.model.TABLE3`), as task-file text."""
+    sc = TABLE3[mpe]
+    p = sc.params
+    out = {n: _num(getattr(p, n)) for n in ("sigma_R_um", "sigma_PQ_um", "sigma_ET_um", "lambda_ET_mm",
+                                            "sigma_ER_urad", "lambda_ER_mm", "sigma_P0_um", "sigma_P_um")}
+    out.update(A_um=_num(sc.A_um), B_mm=_num(sc.B_mm), s=_num(p.sigma_S_ppm), half_PQ=repr(p.sigma_PQ_um / 2))
+    return out
 
 
 def points(scenario):
@@ -25,10 +36,10 @@ def points(scenario):
 
 
 def task(scenario, mpe):
-    p = TABLE3[mpe]
+    p = _table3(mpe)
     probes = ('[[probes]]\nid = "P1"\noffset_mm = [0.0, 0.0, -20.0]\nsigma_PQ_um = {h}\n' if scenario == "I" else
               '[[probes]]\nid = "PL"\noffset_mm = [0.0, 20.0, 0.0]\nsigma_PQ_um = {h}\n\n'
-              '[[probes]]\nid = "PR"\noffset_mm = [0.0, -20.0, 0.0]\nsigma_PQ_um = {h}\n').format(h=p["sigma_PQ_um"] / 2)
+              '[[probes]]\nid = "PR"\noffset_mm = [0.0, -20.0, 0.0]\nsigma_PQ_um = {h}\n').format(h=p["half_PQ"])
     dist = []
     for k in range(2, 27):
         dist.append(f'  {{from = "L1", to = "L{k}", group = "LL"}},')

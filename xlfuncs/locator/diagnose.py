@@ -49,7 +49,7 @@ from . import effects as fx
 from ..errors import ModelError
 from .linalg import Whitener, cancorr, gls, orth, project_out, structured_whitener
 from .model import (STRUCTURED_MIN_OBS, Model, Prepared, direction_label, is_structured,
-                            kabsch, length_covariance, length_covariance_dense, prepare, resolve_probes,
+                            kabsch, length_covariance, prepare, resolve_probes,
                             uses_structured)
 from .report import (Diagnosis, diagnosis_json, effect_estimates, groups_of, indicated_report,
                              locate_groups, locate_records, outlier_report, summary_text, unexplained_rest)
@@ -60,7 +60,7 @@ from .recordings import LengthRecords, PointRecords
 
 __all__ = ["diagnose", "diagnose_prepared", "effect_covariance", "check_alphas", "NAME_SHARE",
            "Model", "Prepared", "prepare", "resolve_probes", "kabsch", "uses_structured", "is_structured",
-           "STRUCTURED_MIN_OBS", "length_covariance", "length_covariance_dense", "Whitener", "Diagnosis",
+           "STRUCTURED_MIN_OBS", "length_covariance", "Whitener", "Diagnosis",
            "Candidate", "diagnosis_json", "effect_estimates", "locate_groups", "locate_records",
            "unexplained_rest", "summary_text", "direction_label", "chi2_logsf", "chi2_sf", "f_logsf",
            "f_logcdf", "ModelError", "LengthRecords", "PointRecords"]

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import effects as fx
+from .. import blocked as bl
 from .. import pointcloud as pc
 from . import structured_lengths as sl
 from ..errors import ModelError
@@ -243,102 +244,16 @@ def prepare(rec: LengthRecords | PointRecords, model: Model, structured: bool | 
 # covariance of length records: C = G V_X G^T in kernel form (Forbes 2025 eqs. 28-29)
 # ---------------------------------------------------------------------------------------------
 
-def _sqdist(A: np.ndarray, B: np.ndarray) -> np.ndarray:
-    d = np.einsum("ij,ij->i", A, A)[:, None] + np.einsum("ij,ij->i", B, B)[None, :] - 2.0 * A @ B.T
-    return np.maximum(d, 0.0)
-
-
 def length_covariance(cloud: pc.PointCloud, params: pc.Parameters, I: np.ndarray, J: np.ndarray,
                       *, components: bool = False, d_log_lambda: bool = False):
     """Covariance (µm²) of the lengths d_a = ||x_J[a] - x_I[a]|| of the unique points of
-    ``cloud``: Cov(d_a, d_b) = g_a^T V_X g_b with g_a = -n_a at I[a] and +n_a at J[a].
+    ``cloud``: Cov(d_a, d_b) = g_a^T V_X g_b with g_a = -n_a at I[a] and +n_a at J[a]
+    (eqs. 28-29), per factor if ``components``; ``d_log_lambda`` (with ``components``): the
+    closed-form dC/d(log lambda) of the hyper-parameter fit (:mod:`xlfuncs.calibrate`).
 
-    Each factor of eq. (28) is a point kernel K(p, q) times a direction term, so
-    Cov(d_a, d_b) = sum over the ends s of a and t of b of sign_s sign_t K(s_a, t_b) w_{a,s}.w_{b,t}
-    with w = n_a (R, PQ, ET), w = n_a x p (ER, eq. 24) or w = n_a . n_point (P, eq. 26);
-    scale/squareness is rank 7 (eq. 11).  Memory and time O(n^2 + m^2), m unique points.
-
-    ``d_log_lambda`` (with ``components``): the GP factors ET, ER and P with every kernel
-    exp(-D^2/lambda^2) replaced by its derivative in log lambda, (2 D^2/lambda^2) exp(-D^2/lambda^2)
-    (:func:`xlfuncs.pointcloud.gauss_kernel`), the radius part of P dropped: the closed-form
-    dC/d(log lambda) of the hyper-parameter fit (:mod:`xlfuncs.calibrate`)."""
-    kernel = lambda D2_, lam2_: pc.gauss_kernel(D2_, lam2_, d_log_lambda)  # noqa: E731
-    X, U, N = cloud.X_mm, cloud.ram_mm, cloud.N
-    kp = cloud.probe_index
-    d = X[J] - X[I]
-    na = d / np.linalg.norm(d, axis=1)[:, None]
-    pa = pc.probe_arrays(cloud, params)
-    NN = na @ na.T
-    out: dict[str, np.ndarray] = {}
-
-    def four(kern, WI=None, WJ=None) -> np.ndarray:
-        """sum_{s,t} sign_s sign_t kern(s, t)[a, b] (W_s[a] . W_t[b]) over the ends s of record a
-        and t of record b (W None: 1)."""
-        total = np.zeros((len(I), len(I)))
-        for s, ss, Ws in ((I, -1.0, WI), (J, 1.0, WJ)):
-            for t_, st, Wt in ((I, -1.0, WI), (J, 1.0, WJ)):
-                term = kern(s, t_)
-                if Ws is not None:
-                    term = term * (Ws @ Wt.T)
-                total += ss * st * term
-        return total
-
-    def gather(K: np.ndarray):
-        return lambda s, t_: K[np.ix_(s, t_)]
-
-    # R (eq. 8): one probing, one repeatability draw
-    out["R"] = params.sigma_R_um**2 * four(lambda s, t_: (s[:, None] == t_[None, :]).astype(float)) * NN
-    # PQ (eq. 9)
-    s = pa["sigma_PQ_um"]
-    out["PQ"] = four(lambda a, b: (kp[a][:, None] == kp[b][None, :]) * np.outer(s[a], s[b])) * NN
-    # S (eqs. 11-14): rank 7 at the ram positions
-    g7 = sl.scale_rows(na, U[J] - U[I])
-    out["S"] = (g7 * pc.V_S_diag_um_per_mm2(params)) @ g7.T
-    D2 = None
-    if params.sigma_ET_um > 0 or params.sigma_ER_urad > 0:
-        D2 = _sqdist(U, U)
-    # ET (eq. 21): independent axes
-    if params.sigma_ET_um > 0:
-        out["ET"] = params.sigma_ET_um**2 * four(gather(kernel(D2, params.lambda_ET_mm**2))) * NN
-    else:
-        out["ET"] = np.zeros_like(NN)
-    # ER (eq. 25): w = G_k^T n (= p x n; the common sign cancels)
-    if params.sigma_ER_urad > 0:
-        P = cloud.offsets_mm
-        out["ER"] = (params.sigma_ER_urad * pc.MILLI) ** 2 * four(
-            gather(kernel(D2, params.lambda_ER_mm**2)), np.cross(na, P[I]), np.cross(na, P[J]))
-    else:
-        out["ER"] = np.zeros_like(NN)
-    # P (eqs. 26-27): o = n_a . n_point, same probe only
-    s0, sp, lam = pa["sigma_P0_um"], pa["sigma_P_um"], pa["lambda_P"]
-    if np.any(s0 > 0) or np.any(sp > 0):
-        same = kp[:, None] == kp[None, :]
-        DN2 = _sqdist(N, N)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            kern = np.where(np.outer(sp, sp) > 0, kernel(DN2, np.outer(lam, lam)), 0.0)
-        KP = same * ((0.0 if d_log_lambda else np.outer(s0, s0)) + np.outer(sp, sp) * kern)
-        out["P"] = four(gather(KP), np.einsum("ij,ij->i", na, N[I])[:, None],
-                        np.einsum("ij,ij->i", na, N[J])[:, None])
-    else:
-        out["P"] = np.zeros_like(NN)
-    if components:
-        return out
-    total = out["R"]
-    for f in ("PQ", "S", "ET", "ER", "P"):
-        total = total + out[f]
-    return 0.5 * (total + total.T)
-
-
-def length_covariance_dense(cloud: pc.PointCloud, params: pc.Parameters, I, J) -> np.ndarray:
-    """Reference implementation: G V_X G^T with the dense V_X of eq. (28) (tests only)."""
-    V = pc.V_X(cloud, params)
-    d = cloud.X_mm[J] - cloud.X_mm[I]
-    na = d / np.linalg.norm(d, axis=1)[:, None]
-    G = np.zeros((len(I), 3 * cloud.m))
-    for a in range(len(I)):
-        G[a, 3 * I[a]:3 * I[a] + 3] -= na[a]
-        G[a, 3 * J[a]:3 * J[a] + 3] += na[a]
-    return G @ V @ G.T
+    :func:`xlfuncs.blocked.record_covariance`, the one implementation (kernel form, row blocks
+    of records, memory O(n^2) whatever m)."""
+    return bl.record_covariance(cloud, params, I, J, components=components, d_log_lambda=d_log_lambda)
 
 
 def group_labels(prep: Prepared) -> dict[str, list[str]]:

@@ -40,6 +40,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .. import pointcloud as pc
+from ..model import sq_dists
 from ..errors import ModelError
 from .recordings import LengthRecords, PointRecords
 
@@ -304,9 +305,7 @@ def _gp(points: np.ndarray, sigma: float, lam: float, rng, size: int = 1) -> np.
         keep = w > 1e-12 * w[-1]
         y = V[:, keep] @ ((V[:, keep].T @ y) / np.sqrt(w[keep])[:, None])
         return sigma * np.concatenate([Lb.T @ y for Lb in Lt])
-    D2 = np.sum((points[:, None, :] - points[None, :, :]) ** 2, axis=-1) if m <= 1500 else \
-        np.maximum(np.sum(points**2, 1)[:, None] + np.sum(points**2, 1)[None, :] - 2 * points @ points.T, 0)
-    K = sigma**2 * np.exp(-D2 / lam**2)
+    K = sigma**2 * np.exp(-sq_dists(points, points) / lam**2)
     w, V = np.linalg.eigh(K)
     # the symmetric square root K^(1/2) z, not V diag(w)^(1/2) z: eigenvectors of a degenerate
     # eigenvalue (a symmetric grid has many) are any basis of their space and the BLAS kernel

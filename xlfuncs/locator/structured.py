@@ -36,7 +36,7 @@ from scipy.linalg import cho_factor, cho_solve
 
 from .. import lowrank as lr
 from .. import pointcloud as pc
-from ..blocked import G_S, skew
+from ..model import G_S, skew
 from ..errors import ModelError
 
 #: points per block of the passes over U

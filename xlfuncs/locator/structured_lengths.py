@@ -48,6 +48,7 @@ from .. import pointcloud as pc
 from ..errors import ModelError
 from ..execution import ThreadBackend
 from ..memory import ResourceError, available_bytes
+from ..model import scale_rows
 from .structured import GramWhitener
 
 #: records per block of the passes over U
@@ -56,14 +57,6 @@ BLOCK_RECORDS = 4096
 TASK_RECORDS = 8 * BLOCK_RECORDS
 #: most columns of U (k); beyond, the structured path is refused with what fits
 MAX_COLUMNS = 4000
-
-
-def scale_rows(na: np.ndarray, du: np.ndarray) -> np.ndarray:
-    """g7 of the scale and squareness factor for lengths (Forbes 2025 eqs. 11-14): the rank-7
-    rows with C_S = g7 diag(V_B) g7^T; ``na`` unit directions, ``du`` ram displacement J - I (mm)."""
-    nx, ny, nz = na.T
-    ux, uy, uz = du.T
-    return np.column_stack([nx * ux + ny * uy + nz * uz, nx * ux, ny * uy, nz * uz, nx * uy, nx * uz, ny * uz])
 
 
 def probing_usage(I: np.ndarray, J: np.ndarray, m: int) -> np.ndarray:
