@@ -44,6 +44,7 @@ NUMERIC_MODULES = {
     "test_all_pairs_probe_tables",
     "test_characteristic_decisions",
     "test_budget_dof",
+    "test_diagnose_effect_formulas",
 }
 
 
