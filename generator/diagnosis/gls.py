@@ -23,6 +23,8 @@ ZFMT = "0.000"
 
 
 def gls_sheets(book: Book, diag: Diagnosis, obs: dict, native: bool) -> dict:
+    """Cov + Cinv (``native``) or Whitened, and the normal equations on GLS; returns their blocks
+    (``fill_after`` adds the statistics)."""
     prep = diag.prep
     n = prep.C.shape[0]
     p = diag.X_sel.shape[1]

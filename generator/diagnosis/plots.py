@@ -146,8 +146,8 @@ def write_plots(diag: Diagnosis, out_dir: Path) -> list[Path]:
     plt.close(fig)
     files.append(p)
     # 3. one figure per chosen effect: partial residual against the revealing quantity and the column
-    reveal = {"scale": "length d / mm", "scale_x": "direction", "scale_y": "direction", "scale_z": "direction",
-              "squareness_xy": "direction", "squareness_xz": "direction", "squareness_yz": "direction",
+    # by family (effects.EFFECTS): angular errors, by default, against the length or the distance
+    reveal = {"scale": "length d / mm", "scale_axis": "direction", "squareness": "direction",
               "thermal_expansion": "temperature / °C", "probe_radius": "probing", "probe_qualification": "probes",
               "scale_drift": "time / h", "offset_drift": "time / h"}
     qmap = {lab: (x, cat) for lab, x, cat in qs}
@@ -155,7 +155,7 @@ def write_plots(diag: Diagnosis, out_dir: Path) -> list[Path]:
         rows = diag.effect_rows(name)
         f = diag.X_sel[:, rows] @ diag.beta[rows]
         partial = diag.resid_after + f
-        want = reveal.get(name, "length d / mm" if diag.prep.design.kind == "length" else "distance from the centroid / mm")
+        want = reveal.get(fx.BY_NAME[name].family, "length d / mm" if diag.prep.design.kind == "length" else "distance from the centroid / mm")
         if want not in qmap:
             want = {"probing": "length d / mm", "probes": "probe"}.get(want, qs[0][0])
             want = want if want in qmap else qs[0][0]

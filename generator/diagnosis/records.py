@@ -20,7 +20,7 @@ def display_unit(unit: str) -> str:
 
 
 def travel_cells(book: Book, diag: Diagnosis, inputs: dict, sheet: str, cols: dict[str, list[int]],
-                  n: int) -> dict[str, tuple[str, str]]:
+                 n: int) -> dict[str, tuple[str, str]]:
     """For the chosen straightness effects (docs/recordings.md section 7): the travel of their
     carriage over the records, lo = MIN and hi = MAX of the ram coordinate columns ``cols[axis]``
     of ``sheet`` (rows 2..n+1), on Inputs; {carriage: (lo cell, hi cell)}."""
