@@ -73,8 +73,8 @@ RECORDINGS = {
 
 def core_columns(D: fx.Design) -> dict[str, tuple[list[str], np.ndarray, float | None, float]]:
     """{effect: (labels, columns, period, full scale)} of every effect that applies to these
-    records; a periodic
-    error at the longest period the records identify, with its period's column at AB0."""
+    records; a periodic error at the longest period the records identify, with its period's
+    column at AB0."""
     out = {}
     for name in fx.NAMES:
         try:
