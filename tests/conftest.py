@@ -46,6 +46,7 @@ NUMERIC_MODULES = {
     "test_characteristic_decisions",
     "test_budget_dof",
     "test_model_paths",
+    "test_diagnose_effect_formulas",
 }
 
 

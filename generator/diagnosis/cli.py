@@ -148,7 +148,8 @@ def run_diagnose(rec_path: Path, model: dg.Model, out_dir: Path, *, alpha: float
     """Diagnose ``rec_path`` into ``out_dir`` (all or nothing); returns the JSON and the files.
     ``exact``: the dense record covariance whatever the size (no structured approximation)."""
     from ..build import Staging as _Staging
-    from .book import write_book, write_plots
+    from .book import write_book
+    from .plots import write_plots
 
     rec_path = Path(rec_path)
     if not (0.0 < alpha < 1.0):

@@ -70,11 +70,21 @@ Second edition (docs/recordings.md section 7):
 For point records the scale-type effects, thermal expansion and scale drift act about the
 centroid c of the nominal points (docs/recordings.md section 6); the rigid alignment absorbs the choice
 for the effects that do not vary from record to record.
+
+One table: :data:`EFFECTS` has one entry per effect (its name, family, unit and the words of the
+answer); :data:`FAMILIES` the sensitivity columns of each family (effects that differ only by an
+axis or a rotation share a family), for length and for point records.  The diagnosis workbook
+writes the same columns as formulas from ``generator.diagnosis.formulas.FORMULAS``, keyed by the
+same families; ``tests/test_diagnose_effect_formulas.py`` recomputes every effect's columns and
+compares them with these cell by cell.  A new effect of an existing family is one entry in
+EFFECTS (plus, where it needs something, its check in :func:`_needs`); a new family adds one
+entry to FAMILIES and one to FORMULAS.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -87,7 +97,12 @@ AXES = "xyz"
 
 @dataclass(frozen=True)
 class Effect:
-    name: str
+    """One candidate effect: one entry of :data:`EFFECTS`.  ``family`` keys its sensitivity
+    columns (:data:`FAMILIES`) and the workbook's formulas of them
+    (``generator.diagnosis.formulas.FORMULAS``)."""
+
+    name: str                  # docs/recordings.md section 4 (the key of diagnosis.json)
+    family: str                # key of FAMILIES: effects that differ only by an axis share one
     unit: str                  # docs/recordings.md section 5 spelling
     plain: str                 # "a squareness error between x and y"
     hint: str                  # what separates it from look-alikes
@@ -96,7 +111,7 @@ class Effect:
 
 def _angular(rot: str, carriage: str) -> Effect:
     about = {"A": "x", "B": "y", "C": "z"}[rot]
-    return Effect(f"E{rot}{carriage}", "urad/m",
+    return Effect(f"E{rot}{carriage}", "angular", "urad/m",
                   f"an angular error motion E{rot}{carriage} (the {carriage} carriage rotating about "
                   f"{about} in proportion to its travel)",
                   "a second probe offset, in another direction, at the same positions (Forbes 2025 "
@@ -104,7 +119,7 @@ def _angular(rot: str, carriage: str) -> Effect:
 
 
 def _straightness(dev: str, car: str) -> Effect:
-    return Effect(f"E{dev}{car}", "um",
+    return Effect(f"E{dev}{car}", "straightness", "um",
                   f"a straightness error E{dev}{car} (the {car} carriage deviating along "
                   f"{dev.lower()}, orders 2 and 3 of its travel)",
                   f"records whose {dev.lower()} coordinate is seen at many places along the "
@@ -112,7 +127,7 @@ def _straightness(dev: str, car: str) -> Effect:
 
 
 def _reversal(ax: str) -> Effect:
-    return Effect(f"reversal_{ax}", "um",
+    return Effect(f"reversal_{ax}", "reversal", "um",
                   f"a reversal error along {ax} (backlash or pre-travel: points approached along "
                   f"+{ax} shifted by +r, along -{ax} by -r)",
                   f"points approached along {ax} from both sides, and points approached from other "
@@ -121,38 +136,38 @@ def _reversal(ax: str) -> Effect:
 
 #: the table of docs/recordings.md section 4, in its order (the order decides among exact aliases)
 EFFECTS: tuple[Effect, ...] = (
-    Effect("scale", "um/m", "a scale error", "lengths in several directions (ISO 10360-2: seven positions)"),
-    Effect("scale_x", "um/m", "an x-axis scale error", "lengths along other directions than x"),
-    Effect("scale_y", "um/m", "a y-axis scale error", "lengths along other directions than y"),
-    Effect("scale_z", "um/m", "a z-axis scale error", "lengths along other directions than z"),
-    Effect("squareness_xy", "urad", "a squareness error between x and y", "diagonal lengths in the xy plane"),
-    Effect("squareness_xz", "urad", "a squareness error between x and z", "diagonal lengths in the xz plane"),
-    Effect("squareness_yz", "urad", "a squareness error between y and z", "diagonal lengths in the yz plane"),
-    Effect("thermal_expansion", "ppm/K", "an expansion-coefficient error of the artefact",
+    Effect("scale", "scale", "um/m", "a scale error", "lengths in several directions (ISO 10360-2: seven positions)"),
+    Effect("scale_x", "scale_axis", "um/m", "an x-axis scale error", "lengths along other directions than x"),
+    Effect("scale_y", "scale_axis", "um/m", "a y-axis scale error", "lengths along other directions than y"),
+    Effect("scale_z", "scale_axis", "um/m", "a z-axis scale error", "lengths along other directions than z"),
+    Effect("squareness_xy", "squareness", "urad", "a squareness error between x and y", "diagonal lengths in the xy plane"),
+    Effect("squareness_xz", "squareness", "urad", "a squareness error between x and z", "diagonal lengths in the xz plane"),
+    Effect("squareness_yz", "squareness", "urad", "a squareness error between y and z", "diagonal lengths in the yz plane"),
+    Effect("thermal_expansion", "thermal_expansion", "ppm/K", "an expansion-coefficient error of the artefact",
            "records at different artefact temperatures (temperature_C varying)"),
-    Effect("probe_radius", "um", "a probe radius error",
+    Effect("probe_radius", "probe_radius", "um", "a probe radius error",
            "both unidirectional and bidirectional probing (normals of both signs)"),
-    Effect("probe_qualification", "um", "a probe qualification (offset) error",
+    Effect("probe_qualification", "probe_qualification", "um", "a probe qualification (offset) error",
            "lengths whose ends are probed with different probes, and with the probes swapped", vector=True),
     *(_angular(r, c) for c in "XYZ" for r in "ABC"),
-    Effect("scale_drift", "um/m/h", "a scale drifting in time",
+    Effect("scale_drift", "scale_drift", "um/m/h", "a scale drifting in time",
            "records spread in time in an order not tied to length or position (time_s)"),
-    Effect("offset_drift", "um/h", "a drift of every point in time",
+    Effect("offset_drift", "offset_drift", "um/h", "a drift of every point in time",
            "point records spread in time, repeated positions at different times (time_s)", vector=True),
     # second edition (docs/recordings.md section 7), after the first edition's: among exact
     # aliases the first edition's effect is named
     *(_straightness(d, c) for c in "XYZ" for d in "XYZ" if d != c),
     *(_reversal(ax) for ax in "xyz"),
-    Effect("probe_lobing", "um", "a probe lobing error (the probe's radius depending on the approach "
+    Effect("probe_lobing", "probe_lobing", "um", "a probe lobing error (the probe's radius depending on the approach "
            "direction: harmonics 2-4 of the normal's azimuth about the stylus axis)",
            "points probed from many directions around the stylus axis (a circle or sphere with 9 or more "
            "points per probe)", vector=True),
-    *(Effect(f"thermal_gradient_{a}", "ppm/K/m",
+    *(Effect(f"thermal_gradient_{a}", "thermal_gradient", "ppm/K/m",
              f"an expansion-coefficient error of the artefact varying linearly along {a} (a thermal "
              "gradient)",
              f"records at different temperatures spread along {a} (temperature_C varying with position)")
       for a in AXES),
-    *(Effect(f"periodic_{a}", "um",
+    *(Effect(f"periodic_{a}", "periodic", "um",
              f"a periodic error along {a} (a sine of the {a} travel: ball screw lead, scale grating)",
              f"records sampling the {a} travel densely (a step gauge or a scan along {a}: four or more "
              f"probings per period, three or more periods)", vector=True)
@@ -160,11 +175,17 @@ EFFECTS: tuple[Effect, ...] = (
 )
 BY_NAME = {e.name: e for e in EFFECTS}
 NAMES = tuple(e.name for e in EFFECTS)
-ANGULAR = tuple(e.name for e in EFFECTS if e.unit == "urad/m")
-STRAIGHTNESS = tuple(f"E{d}{c}" for c in "XYZ" for d in "XYZ" if d != c)
-REVERSAL = tuple(f"reversal_{ax}" for ax in AXES)
-GRADIENT = tuple(f"thermal_gradient_{ax}" for ax in AXES)
-PERIODIC = tuple(f"periodic_{ax}" for ax in AXES)
+
+
+def _family(family: str) -> tuple[str, ...]:
+    return tuple(e.name for e in EFFECTS if e.family == family)
+
+
+ANGULAR = _family("angular")              # E<R><C>: EAX, EBX, ECX, EAY, ...
+STRAIGHTNESS = _family("straightness")    # E<D><C>: EYX, EZX, EXY, ...
+REVERSAL = _family("reversal")
+GRADIENT = _family("thermal_gradient")
+PERIODIC = _family("periodic")
 #: plausible pitches of a periodic error (docs/recordings.md section 7), mm
 PERIOD_RANGE_MM = (1.0, 200.0)
 #: identifiability of a period (docs/diagnose.md section 6): at least this many probings per cycle
@@ -273,9 +294,12 @@ def columns(design: Design, name: str, period_mm: float | None = None) -> Column
     D = design
     if name in PERIODIC:
         return periodic_columns(D, name, period_mm)
-    if D.kind == "length":
-        return _length_columns(D, name)
-    return _point_columns(D, name)
+    _needs(D, name)
+    fam = FAMILIES[BY_NAME[name].family]
+    f = fam.length if D.kind == "length" else fam.point
+    if f is None:
+        raise AssertionError(f"{name}: _needs lets no {D.kind} record through")
+    return f(D, name)
 
 
 def legendre_23(s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -481,142 +505,218 @@ def _needs(D: Design, name: str) -> None:
                                 "error; records spread in time separate them")
 
 
-def _length_columns(D: Design, name: str) -> Columns:
-    _needs(D, name)
-    na = D.na
+# -- the sensitivity columns per family: one function for length records, one for point records --
+
+def _ndu(D: Design) -> np.ndarray:
+    """n_a . (u2 - u1) of every length record (mm)."""
+    return np.einsum("ij,ij->i", D.na, D.U2 - D.U1)
+
+
+def _unit_axis(D: Design, a: int, weight: np.ndarray) -> np.ndarray:
+    """Point rows of a displacement ``weight`` along axis a."""
+    d = np.zeros((len(D.Y), 3))
+    d[:, a] = weight
+    return D.point_rows(d)
+
+
+def _scale_length(D: Design, name: str) -> Columns:
+    return Columns(name, (MILLI * _ndu(D))[:, None], [name], MILLI * D.extent_mm)
+
+
+def _scale_point(D: Design, name: str) -> Columns:
+    return Columns(name, D.point_rows(MILLI * (D.U - D.c))[:, None], [name], MILLI * D.extent_mm)
+
+
+def _scale_axis_length(D: Design, name: str) -> Columns:
+    a = AXES.index(name[-1])
     du = D.U2 - D.U1
+    return Columns(name, (MILLI * D.na[:, a] * du[:, a])[:, None], [name], MILLI * D.extent_mm)
+
+
+def _scale_axis_point(D: Design, name: str) -> Columns:
+    a = AXES.index(name[-1])
+    R = D.U - D.c
+    return Columns(name, _unit_axis(D, a, MILLI * R[:, a])[:, None], [name], MILLI * D.extent_mm)
+
+
+def _squareness_length(D: Design, name: str) -> Columns:
+    a, b = AXES.index(name[-2]), AXES.index(name[-1])   # x' = x + b_xy y: moves a by u_b
+    du = D.U2 - D.U1
+    return Columns(name, (MILLI * D.na[:, a] * du[:, b])[:, None], [name], MILLI * D.extent_mm)
+
+
+def _squareness_point(D: Design, name: str) -> Columns:
+    a, b = AXES.index(name[-2]), AXES.index(name[-1])
+    R = D.U - D.c
+    return Columns(name, _unit_axis(D, a, MILLI * R[:, b])[:, None], [name], MILLI * D.extent_mm)
+
+
+def _thermal_expansion_length(D: Design, name: str) -> Columns:
+    dT = D.T - T_REF_C
+    return Columns(name, (MILLI * dT * D.ref)[:, None], [name],
+                   MILLI * float(np.max(np.abs(dT))) * float(np.max(D.ref)))
+
+
+def _thermal_expansion_point(D: Design, name: str) -> Columns:
+    dT = D.T - T_REF_C
+    return Columns(name, D.point_rows(MILLI * dT[:, None] * (D.Y - D.c))[:, None], [name],
+                   MILLI * float(np.max(np.abs(dT))) * D.extent_mm)
+
+
+def _probe_radius_length(D: Design, name: str) -> Columns:
+    col = np.einsum("ij,ij->i", D.na, D.N2) - np.einsum("ij,ij->i", D.na, D.N1)
+    return Columns(name, col[:, None], [name], 1.0)
+
+
+def _probe_radius_point(D: Design, name: str) -> Columns:
+    return Columns(name, D.point_rows(D.N)[:, None], [name], 1.0)
+
+
+def _probe_qualification_length(D: Design, name: str) -> Columns:
+    cols, labels = [], []
+    for k in range(1, len(D.probe_ids)):
+        w = (D.k2 == k).astype(float) - (D.k1 == k).astype(float)
+        for a in range(3):
+            cols.append(D.na[:, a] * w)
+            labels.append(f"{D.probe_ids[k]}.d{AXES[a]}")
+    return Columns(name, np.column_stack(cols), labels, 1.0)
+
+
+def _probe_qualification_point(D: Design, name: str) -> Columns:
+    cols, labels = [], []
+    for k in range(1, len(D.probe_ids)):
+        for a in range(3):
+            cols.append(_unit_axis(D, a, (D.k == k).astype(float)))
+            labels.append(f"{D.probe_ids[k]}.d{AXES[a]}")
+    return Columns(name, np.column_stack(cols), labels, 1.0)
+
+
+def _angular_length(D: Design, name: str) -> Columns:
+    rot, ax = name[1], CARRIAGE_AXIS[name[2]]
+    na = D.na
+    v1, v2 = rotation_vector(rot, D.P1), rotation_vector(rot, D.P2)
+    col = MICRO * (D.U2[:, ax] * np.einsum("ij,ij->i", na, v2) - D.U1[:, ax] * np.einsum("ij,ij->i", na, v1))
+    umax = float(np.max(np.abs(np.vstack([D.U1, D.U2]))))
+    pmax = float(np.max(np.linalg.norm(np.vstack([D.P1, D.P2]), axis=1)))
+    return Columns(name, col[:, None], [name], MICRO * umax * pmax)
+
+
+def _angular_point(D: Design, name: str) -> Columns:
+    rot, ax = name[1], CARRIAGE_AXIS[name[2]]
+    v = rotation_vector(rot, D.P)
+    col = D.point_rows(MICRO * D.U[:, ax][:, None] * v)
+    umax = float(np.max(np.abs(D.U)))
+    pmax = float(np.max(np.linalg.norm(D.P, axis=1)))
+    return Columns(name, col[:, None], [name], MICRO * umax * pmax)
+
+
+def _scale_drift_length(D: Design, name: str) -> Columns:
+    h = D.t / 3600.0
+    return Columns(name, (MILLI * h * _ndu(D))[:, None], [name],
+                   MILLI * float(np.max(np.abs(h))) * D.extent_mm)
+
+
+def _scale_drift_point(D: Design, name: str) -> Columns:
+    h = D.t / 3600.0
+    return Columns(name, D.point_rows(MILLI * h[:, None] * (D.U - D.c))[:, None], [name],
+                   MILLI * float(np.max(np.abs(h))) * D.extent_mm)
+
+
+def _offset_drift_point(D: Design, name: str) -> Columns:
+    h = D.t / 3600.0
+    cols = [_unit_axis(D, a, h) for a in range(3)]
+    return Columns(name, np.column_stack(cols), [f"v{AXES[a]}" for a in range(3)],
+                   float(np.max(np.abs(h))))
+
+
+def _straightness_length(D: Design, name: str) -> Columns:
+    d = AXES.index(name[1].lower())
+    P1 = legendre_23(_travel_s(D, name[2], D.U1))
+    P2 = legendre_23(_travel_s(D, name[2], D.U2))
+    cols = [D.na[:, d] * (b - a) for a, b in zip(P1, P2)]
+    return Columns(name, np.column_stack(cols), ["c2", "c3"], 1.0)
+
+
+def _straightness_point(D: Design, name: str) -> Columns:
+    d = AXES.index(name[1].lower())
+    cols = [_unit_axis(D, d, Pk) for Pk in legendre_23(_travel_s(D, name[2], D.U))]
+    return Columns(name, np.column_stack(cols), ["c2", "c3"], 1.0)
+
+
+def _reversal_length(D: Design, name: str) -> Columns:
+    a = AXES.index(name[-1])
+    w = approach_sign(D.N2, a) - approach_sign(D.N1, a)
+    return Columns(name, (D.na[:, a] * w)[:, None], [name], 1.0)
+
+
+def _reversal_point(D: Design, name: str) -> Columns:
+    a = AXES.index(name[-1])
+    return Columns(name, _unit_axis(D, a, approach_sign(D.N, a))[:, None], [name], 1.0)
+
+
+def _probe_lobing_length(D: Design, name: str) -> Columns:
+    H1, H2 = azimuth_harmonics(D.N1), azimuth_harmonics(D.N2)
+    n1, n2 = np.einsum("ij,ij->i", D.na, D.N1), np.einsum("ij,ij->i", D.na, D.N2)
+    cols = [n2 * H2[h] * (D.k2 == k) - n1 * H1[h] * (D.k1 == k)
+            for k in range(len(D.probe_ids)) for h in ("c2", "s2", "c3", "s3", "c4", "s4")]
+    return Columns(name, np.column_stack(cols), lobing_labels(D), 1.0)
+
+
+def _probe_lobing_point(D: Design, name: str) -> Columns:
+    H = azimuth_harmonics(D.N)
+    cols = [D.point_rows(D.N * (H[h] * (D.k == k))[:, None])
+            for k in range(len(D.probe_ids)) for h in ("c2", "s2", "c3", "s3", "c4", "s4")]
+    return Columns(name, np.column_stack(cols), lobing_labels(D), 1.0)
+
+
+def _thermal_gradient_length(D: Design, name: str) -> Columns:
+    a = AXES.index(name[-1])
+    X1, X2 = D.U1 + D.P1, D.U2 + D.P2
+    xa = np.r_[X1[:, a], X2[:, a]]
+    mid = 0.5 * (X1[:, a] + X2[:, a]) - 0.5 * (xa.min() + xa.max())
+    dT = D.T - T_REF_C
     L = D.extent_mm
-    if name == "scale":
-        return Columns(name, (MILLI * np.einsum("ij,ij->i", na, du))[:, None], [name], MILLI * L)
-    if name.startswith("scale_") and name[-1] in AXES:
-        a = AXES.index(name[-1])
-        return Columns(name, (MILLI * na[:, a] * du[:, a])[:, None], [name], MILLI * L)
-    if name.startswith("squareness_"):
-        a, b = AXES.index(name[-2]), AXES.index(name[-1])   # x' = x + b_xy y: moves a by u_b
-        return Columns(name, (MILLI * na[:, a] * du[:, b])[:, None], [name], MILLI * L)
-    if name == "thermal_expansion":
-        dT = D.T - T_REF_C
-        return Columns(name, (MILLI * dT * D.ref)[:, None], [name],
-                       MILLI * float(np.max(np.abs(dT))) * float(np.max(D.ref)))
-    if name == "probe_radius":
-        col = np.einsum("ij,ij->i", na, D.N2) - np.einsum("ij,ij->i", na, D.N1)
-        return Columns(name, col[:, None], [name], 1.0)
-    if name == "probe_qualification":
-        cols, labels = [], []
-        for k in range(1, len(D.probe_ids)):
-            w = (D.k2 == k).astype(float) - (D.k1 == k).astype(float)
-            for a in range(3):
-                cols.append(na[:, a] * w)
-                labels.append(f"{D.probe_ids[k]}.d{AXES[a]}")
-        return Columns(name, np.column_stack(cols), labels, 1.0)
-    if name in ANGULAR:
-        rot, ax = name[1], CARRIAGE_AXIS[name[2]]
-        v1, v2 = rotation_vector(rot, D.P1), rotation_vector(rot, D.P2)
-        col = MICRO * (D.U2[:, ax] * np.einsum("ij,ij->i", na, v2) - D.U1[:, ax] * np.einsum("ij,ij->i", na, v1))
-        umax = float(np.max(np.abs(np.vstack([D.U1, D.U2]))))
-        pmax = float(np.max(np.linalg.norm(np.vstack([D.P1, D.P2]), axis=1)))
-        return Columns(name, col[:, None], [name], MICRO * umax * pmax)
-    if name == "scale_drift":
-        h = D.t / 3600.0
-        return Columns(name, (MILLI * h * np.einsum("ij,ij->i", na, du))[:, None], [name],
-                       MILLI * float(np.max(np.abs(h))) * L)
-    if name in STRAIGHTNESS:
-        d = AXES.index(name[1].lower())
-        P1 = legendre_23(_travel_s(D, name[2], D.U1))
-        P2 = legendre_23(_travel_s(D, name[2], D.U2))
-        cols = [na[:, d] * (b - a) for a, b in zip(P1, P2)]
-        return Columns(name, np.column_stack(cols), ["c2", "c3"], 1.0)
-    if name in REVERSAL:
-        a = AXES.index(name[-1])
-        w = approach_sign(D.N2, a) - approach_sign(D.N1, a)
-        return Columns(name, (na[:, a] * w)[:, None], [name], 1.0)
-    if name == "probe_lobing":
-        H1, H2 = azimuth_harmonics(D.N1), azimuth_harmonics(D.N2)
-        n1, n2 = np.einsum("ij,ij->i", na, D.N1), np.einsum("ij,ij->i", na, D.N2)
-        cols = [n2 * H2[h] * (D.k2 == k) - n1 * H1[h] * (D.k1 == k)
-                for k in range(len(D.probe_ids)) for h in ("c2", "s2", "c3", "s3", "c4", "s4")]
-        return Columns(name, np.column_stack(cols), lobing_labels(D), 1.0)
-    if name in GRADIENT:
-        a = AXES.index(name[-1])
-        X1, X2 = D.U1 + D.P1, D.U2 + D.P2
-        xa = np.r_[X1[:, a], X2[:, a]]
-        mid = 0.5 * (X1[:, a] + X2[:, a]) - 0.5 * (xa.min() + xa.max())
-        dT = D.T - T_REF_C
-        return Columns(name, (MILLI * MILLI * dT * D.ref * mid)[:, None], [name],
-                       MILLI * MILLI * float(np.max(np.abs(dT))) * L * L)
-    raise AssertionError(name)
+    return Columns(name, (MILLI * MILLI * dT * D.ref * mid)[:, None], [name],
+                   MILLI * MILLI * float(np.max(np.abs(dT))) * L * L)
 
 
-def _point_columns(D: Design, name: str) -> Columns:
-    _needs(D, name)
-    m = len(D.Y)
-    R = D.U - D.c            # ram positions about the centroid of the nominal points
+def _thermal_gradient_point(D: Design, name: str) -> Columns:
+    a = AXES.index(name[-1])
+    dT = D.T - T_REF_C
+    rel = D.Y - D.c
     L = D.extent_mm
+    return Columns(name, D.point_rows(MILLI * MILLI * (dT * rel[:, a])[:, None] * rel)[:, None], [name],
+                   MILLI * MILLI * float(np.max(np.abs(dT))) * L * L)
 
-    def field3(delta: np.ndarray) -> np.ndarray:
-        return D.point_rows(delta)
 
-    def unit_axis(a: int, weight: np.ndarray) -> np.ndarray:
-        d = np.zeros((m, 3))
-        d[:, a] = weight
-        return field3(d)
+@dataclass(frozen=True)
+class Sensitivity:
+    """How one family of effects moves the records: its columns for length records (None: not
+    applicable to lengths) and for point records, functions (Design, name) -> Columns."""
 
-    if name == "scale":
-        return Columns(name, field3(MILLI * R)[:, None], [name], MILLI * L)
-    if name.startswith("scale_") and name[-1] in AXES:
-        a = AXES.index(name[-1])
-        return Columns(name, unit_axis(a, MILLI * R[:, a])[:, None], [name], MILLI * L)
-    if name.startswith("squareness_"):
-        a, b = AXES.index(name[-2]), AXES.index(name[-1])
-        return Columns(name, unit_axis(a, MILLI * R[:, b])[:, None], [name], MILLI * L)
-    if name == "thermal_expansion":
-        dT = D.T - T_REF_C
-        return Columns(name, field3(MILLI * dT[:, None] * (D.Y - D.c))[:, None], [name],
-                       MILLI * float(np.max(np.abs(dT))) * L)
-    if name == "probe_radius":
-        return Columns(name, field3(D.N)[:, None], [name], 1.0)
-    if name == "probe_qualification":
-        cols, labels = [], []
-        for k in range(1, len(D.probe_ids)):
-            for a in range(3):
-                cols.append(unit_axis(a, (D.k == k).astype(float)))
-                labels.append(f"{D.probe_ids[k]}.d{AXES[a]}")
-        return Columns(name, np.column_stack(cols), labels, 1.0)
-    if name in ANGULAR:
-        rot, ax = name[1], CARRIAGE_AXIS[name[2]]
-        v = rotation_vector(rot, D.P)
-        col = field3(MICRO * D.U[:, ax][:, None] * v)
-        umax = float(np.max(np.abs(D.U)))
-        pmax = float(np.max(np.linalg.norm(D.P, axis=1)))
-        return Columns(name, col[:, None], [name], MICRO * umax * pmax)
-    if name == "scale_drift":
-        h = D.t / 3600.0
-        return Columns(name, field3(MILLI * h[:, None] * R)[:, None], [name],
-                       MILLI * float(np.max(np.abs(h))) * L)
-    if name == "offset_drift":
-        h = D.t / 3600.0
-        cols = [unit_axis(a, h) for a in range(3)]
-        return Columns(name, np.column_stack(cols), [f"v{AXES[a]}" for a in range(3)],
-                       float(np.max(np.abs(h))))
-    if name in STRAIGHTNESS:
-        d = AXES.index(name[1].lower())
-        cols = [unit_axis(d, Pk) for Pk in legendre_23(_travel_s(D, name[2], D.U))]
-        return Columns(name, np.column_stack(cols), ["c2", "c3"], 1.0)
-    if name in REVERSAL:
-        a = AXES.index(name[-1])
-        return Columns(name, unit_axis(a, approach_sign(D.N, a))[:, None], [name], 1.0)
-    if name == "probe_lobing":
-        H = azimuth_harmonics(D.N)
-        cols = [field3(D.N * (H[h] * (D.k == k))[:, None])
-                for k in range(len(D.probe_ids)) for h in ("c2", "s2", "c3", "s3", "c4", "s4")]
-        return Columns(name, np.column_stack(cols), lobing_labels(D), 1.0)
-    if name in GRADIENT:
-        a = AXES.index(name[-1])
-        dT = D.T - T_REF_C
-        rel = D.Y - D.c
-        return Columns(name, field3(MILLI * MILLI * (dT * rel[:, a])[:, None] * rel)[:, None], [name],
-                       MILLI * MILLI * float(np.max(np.abs(dT))) * L * L)
-    raise AssertionError(name)
+    length: Callable[[Design, str], Columns] | None
+    point: Callable[[Design, str], Columns]
+
+
+#: the sensitivity columns of every family of :data:`EFFECTS` (``Effect.family``); the workbook's
+#: formulas of the same families are ``generator.diagnosis.formulas.FORMULAS``, and
+#: tests/test_diagnose_effect_formulas.py compares the two cell by cell for every effect
+FAMILIES: dict[str, Sensitivity] = {
+    "scale": Sensitivity(_scale_length, _scale_point),
+    "scale_axis": Sensitivity(_scale_axis_length, _scale_axis_point),
+    "squareness": Sensitivity(_squareness_length, _squareness_point),
+    "thermal_expansion": Sensitivity(_thermal_expansion_length, _thermal_expansion_point),
+    "probe_radius": Sensitivity(_probe_radius_length, _probe_radius_point),
+    "probe_qualification": Sensitivity(_probe_qualification_length, _probe_qualification_point),
+    "angular": Sensitivity(_angular_length, _angular_point),
+    "scale_drift": Sensitivity(_scale_drift_length, _scale_drift_point),
+    "offset_drift": Sensitivity(None, _offset_drift_point),
+    "straightness": Sensitivity(_straightness_length, _straightness_point),
+    "reversal": Sensitivity(_reversal_length, _reversal_point),
+    "probe_lobing": Sensitivity(_probe_lobing_length, _probe_lobing_point),
+    "thermal_gradient": Sensitivity(_thermal_gradient_length, _thermal_gradient_point),
+    "periodic": Sensitivity(periodic_columns, periodic_columns),   # at a period: see columns()
+}
 
 
 def alignment_columns(D: Design) -> tuple[np.ndarray, list[str]]:

@@ -1,0 +1,282 @@
+"""The record sheets of the diagnosis workbook (``docs/recordings.md`` section 3): Records (length
+records: inputs, direction, ram positions, residual, the chosen effects' sensitivity columns as
+formulas of the row, :mod:`.formulas`) or Points + Coords (point records: one row per point, one
+row per coordinate with the alignment and the effects' columns), and the carriage travels on
+Inputs that the straightness and periodic columns are normalized by."""
+
+from __future__ import annotations
+
+from xlfuncs.locator import effects as fx
+from xlfuncs.locator.diagnose import Diagnosis
+
+from ..workbook.book import Book
+from ..workbook.xlref import block, cell
+from .formulas import Row, alignment_formula, length_formula, point_formula
+
+
+def display_unit(unit: str) -> str:
+    """A unit as the workbooks spell it (µm, µrad); diagnosis.json keeps the contract's um, urad (docs/recordings.md)."""
+    return unit.replace("um", "µm").replace("urad", "µrad").replace("µrµm", "µrad") if unit != "1" else unit
+
+
+def travel_cells(book: Book, diag: Diagnosis, inputs: dict, sheet: str, cols: dict[str, list[int]],
+                 n: int) -> dict[str, tuple[str, str]]:
+    """For the chosen straightness effects (docs/recordings.md section 7): the travel of their
+    carriage over the records, lo = MIN and hi = MAX of the ram coordinate columns ``cols[axis]``
+    of ``sheet`` (rows 2..n+1), on Inputs; {carriage: (lo cell, hi cell)}."""
+    periodic = [e for e in dict.fromkeys(e for e, _ in diag.sel_labels) if e in fx.PERIODIC]
+    cars = sorted({e[2] for e, _ in diag.sel_labels if e in fx.STRAIGHTNESS} | {e[-1].upper() for e in periodic})
+    if not cars:
+        return {}
+    wi = book.wb["Inputs"]
+    r = inputs["free_row"]
+    book.text(wi, r, 1, "travel of the carriages over the records (ram coordinates, mm): the straightness "
+                        "polynomials P2, P3 are of s = (2 u - lo - hi)/(hi - lo); a periodic error's phase "
+                        "is about (lo + hi)/2")
+    book.header(wi, r + 1, 1, ["carriage", "lo_mm", "hi_mm"])
+    out = {}
+    for k, car in enumerate(cars):
+        rr = r + 2 + k
+        ranges = ",".join(block(2, c, n, 1, sheet) for c in cols[car.lower()])
+        book.text(wi, rr, 1, car)
+        book.formula(wi, rr, 2, f"=MIN({ranges})")
+        book.formula(wi, rr, 3, f"=MAX({ranges})")
+        out[car] = (cell(rr, 2, "Inputs"), cell(rr, 3, "Inputs"))
+    if periodic:
+        r += 3 + len(cars)
+        book.text(wi, r, 1, "periodic errors (docs/diagnose.md section 6): the period found by the locator's "
+                            "scan (a search, not a formula) and the point (a, b) its sensitivity is linearized at")
+        book.header(wi, r + 1, 1, ["effect", "period_mm", "a0_um", "b0_um"], [
+            None, "the period of the largest drop of chi-square over the scanned grid, refined; fixed here",
+            "a of the fit with the period fixed (the refit's column for the period is the derivative at a0, b0)",
+            "b of the fit with the period fixed"])
+        for k, name in enumerate(periodic):
+            c = diag.candidates[name]
+            rr = r + 2 + k
+            book.text(wi, rr, 1, name)
+            for q, v in enumerate((c.period_mm, *c.lin_ab)):
+                book.number(wi, rr, 2 + q, float(v), fmt="0.0000", computed=True)
+            out["periodic:" + name[-1]] = tuple(cell(rr, 2 + q, "Inputs") for q in range(3))
+            inputs.setdefault("periodic", {})[name] = out["periodic:" + name[-1]]
+    return out
+
+
+
+# -- records -------------------------------------------------------------------------------------
+
+#: columns of the recordings (docs/recordings.md names them without a unit) that are in mm: their
+#: headers in the workbook carry it (x1_mm ...)
+LENGTH_MM_COLUMNS = frozenset({"x1", "y1", "z1", "x2", "y2", "z2", "p1x", "p1y", "p1z", "p2x", "p2y", "p2z"})
+POINT_MM_COLUMNS = frozenset({"x_nom", "y_nom", "z_nom", "x", "y", "z", "px", "py", "pz"})
+
+
+def shown(key: str, mm_columns) -> str:
+    """The header a person reads for column ``key``: ``x1_mm`` for a coordinate of the
+    recordings; an effect's design column ``name:label`` with its unit, µm of the record per unit
+    of the effect (``squareness_xy:squareness_xy (µm per µrad)``); other keys carry their unit
+    already (``residual_um``) or have none (``z``, ``n1x``)."""
+    if key in mm_columns:
+        return f"{key}_mm"
+    if ":" in key:
+        name = key.split(":", 1)[0]
+        unit = "µm" if name == "outlier" else display_unit(fx.BY_NAME[name].unit)
+        return f"{key} (µm per {unit})"
+    return key
+
+
+def _input_column(book: Book, ws, r0: int, c: int, values) -> None:
+    """A column of numeric input cells (styled, unlocked, validated by :meth:`Book.number`)."""
+    for k, v in enumerate(values):
+        book.number(ws, r0 + k, c, float(v), fmt="General")
+
+
+def length_records(book: Book, diag: Diagnosis, inputs: dict):
+    prep = diag.prep
+    rec, D = prep.rec, prep.design
+    ws = book.sheet("Records")
+    cols: list[str] = ["id", "x1", "y1", "z1", "x2", "y2", "z2", "reference_mm", "measured_mm"]
+    if D.N1 is not None:
+        cols += ["n1x", "n1y", "n1z", "n2x", "n2y", "n2z"]
+    cols += ["p1x", "p1y", "p1z", "p2x", "p2y", "p2z", "probe1", "probe2"]
+    if rec.temperature_C is not None:
+        cols.append("temperature_C")
+    if rec.time_s is not None:
+        cols.append("time_s")
+    if rec.group is not None:
+        cols.append("group")
+    cols += list(rec.extra)
+    derived = ["dx_mm", "dy_mm", "dz_mm", "d_mm", "nax", "nay", "naz", "ux1_mm", "uy1_mm", "uz1_mm",
+               "ux2_mm", "uy2_mm", "uz2_mm", "residual_um", "u_um", "z"]
+    chosen_cols = [f"{e}:{l}" for e, l in diag.sel_labels if e != "alignment"]
+    after = ["fitted_um", "residual_after_um", "z_after"]
+    header = cols + derived + chosen_cols + after
+    ci = {k: i + 1 for i, k in enumerate(header)}
+    notes = {"residual_um": "r = (measured - reference) * 1000: the simulation predicts 0",
+             "u_um": "standard uncertainty of the residual under the simulation: sqrt(C_aa) (Cov sheet)",
+             "z": "standardized residual r/u", "nax": "n_a = (x2 - x1)/d, the direction of the length",
+             "ux1_mm": "ram position x - p (Forbes 2025 section 5.3, multiple probes)",
+             "fitted_um": "sum of the chosen effects: row of X times b (GLS sheet)",
+             "residual_after_um": "r - fitted", "z_after": "(r - fitted)/u"}
+    book.header(ws, 1, 1, [shown(h, LENGTH_MM_COLUMNS) for h in header], [notes.get(h) for h in header])
+    P1, P2 = D.P1, D.P2
+    pid = D.probe_ids
+    data = {"x1": rec.X1_mm[:, 0], "y1": rec.X1_mm[:, 1], "z1": rec.X1_mm[:, 2],
+            "x2": rec.X2_mm[:, 0], "y2": rec.X2_mm[:, 1], "z2": rec.X2_mm[:, 2],
+            "reference_mm": rec.reference_mm, "measured_mm": rec.measured_mm,
+            "p1x": P1[:, 0], "p1y": P1[:, 1], "p1z": P1[:, 2], "p2x": P2[:, 0], "p2y": P2[:, 1], "p2z": P2[:, 2]}
+    if D.N1 is not None:
+        for e, N in (("1", rec.N1), ("2", rec.N2)):
+            for a, ax in enumerate("xyz"):
+                data[f"n{e}{ax}"] = N[:, a]
+    if rec.temperature_C is not None:
+        data["temperature_C"] = rec.temperature_C
+    if rec.time_s is not None:
+        data["time_s"] = rec.time_s
+    rows = []
+    for k, v in data.items():
+        _input_column(book, ws, 2, ci[k], v)
+    for a in range(rec.n):
+        r = a + 2
+        R = Row("Records", r, ci)
+        rows.append(R)
+        book.text(ws, r, ci["id"], rec.ids[a])
+        book.text(ws, r, ci["probe1"], pid[D.k1[a]])
+        book.text(ws, r, ci["probe2"], pid[D.k2[a]])
+        if rec.group is not None:
+            book.text(ws, r, ci["group"], rec.group[a])
+        for k, v in rec.extra.items():
+            book.text(ws, r, ci[k], v[a])
+        L = {k: cell(r, ci[k]) for k in ci}
+        for ax in "xyz":
+            book.formula(ws, r, ci[f"d{ax}_mm"], f"={L[ax + '2']}-{L[ax + '1']}")
+        book.formula(ws, r, ci["d_mm"], f"=SQRT({L['dx_mm']}^2+{L['dy_mm']}^2+{L['dz_mm']}^2)")
+        for ax in "xyz":
+            book.formula(ws, r, ci[f"na{ax}"], f"={L['d' + ax + '_mm']}/{L['d_mm']}")
+            for e in "12":
+                book.formula(ws, r, ci[f"u{ax}{e}_mm"], f"={L[ax + e]}-{L['p' + e + ax]}")
+        book.formula(ws, r, ci["residual_um"], f"=({L['measured_mm']}-{L['reference_mm']})*1000")
+    obs = {"sheet": "Records", "rows": [R.row for R in rows], "ci": ci, "chosen_cols": chosen_cols,
+           "first_X": ci[chosen_cols[0]] if chosen_cols else None, "n_align": 0, "row_of_obs": rows}
+    travel = travel_cells(book, diag, inputs, "Records",
+                           {ax: [ci[f"u{ax}1_mm"], ci[f"u{ax}2_mm"]] for ax in "xyz"}, rec.n)
+    # the middle of the probed positions along each axis (thermal gradient, section 7)
+    pos = {ax: ",".join(block(2, ci[f"{ax}{e}"], rec.n, 1, "Records") for e in "12") for ax in "xyz"}
+    travel.update({f"pos_{ax}": (f"MIN({r})", f"MAX({r})") for ax, r in pos.items()})
+    for q, label in enumerate(chosen_cols):
+        name, par = label.split(":", 1)
+        for a, R in enumerate(rows):
+            # an outlier left out (docs/recordings.md section 7): its own mean-shift column, 1 on its row
+            f = (1.0 if rec.ids[a] == par else 0.0) if name == "outlier" else \
+                length_formula(name, par, R, inputs["probe_cells"], travel)
+            _value_or_formula(book, ws, R.row, ci[label], f)
+    ws.freeze_panes = "B2"
+    return rows, obs
+
+
+def _value_or_formula(book: Book, ws, r: int, c: int, f: str | float) -> None:
+    if isinstance(f, str):
+        book.formula(ws, r, c, f, fmt="0.000000E+00")
+    else:
+        ws.cell(row=r, column=c).value = float(f)
+
+
+
+def point_records(book: Book, diag: Diagnosis, inputs: dict):
+    prep = diag.prep
+    rec, D = prep.rec, prep.design
+    ws = book.sheet("Points")
+    cols = ["id", "x_nom", "y_nom", "z_nom", "x", "y", "z"]
+    if rec.N is not None:
+        cols += ["nx", "ny", "nz"]
+    cols += ["px", "py", "pz", "probe"]
+    if rec.temperature_C is not None:
+        cols.append("temperature_C")
+    if rec.time_s is not None:
+        cols.append("time_s")
+    if rec.group is not None:
+        cols.append("group")
+    cols += list(rec.extra)
+    derived = ["yx_mm", "yy_mm", "yz_mm", "ux_mm", "uy_mm", "uz_mm"]
+    header = cols + derived
+    ci = {k: i + 1 for i, k in enumerate(header)}
+    notes = {"yx_mm": "nominal point in machine coordinates y = R0 x_nom + t0 (Inputs)",
+             "ux_mm": "ram position y - p"}
+    book.header(ws, 1, 1, [shown(h, POINT_MM_COLUMNS) for h in header], [notes.get(h) for h in header])
+    data = {"x_nom": rec.X_nom_mm[:, 0], "y_nom": rec.X_nom_mm[:, 1], "z_nom": rec.X_nom_mm[:, 2],
+            "x": rec.X_mm[:, 0], "y": rec.X_mm[:, 1], "z": rec.X_mm[:, 2],
+            "px": D.P[:, 0], "py": D.P[:, 1], "pz": D.P[:, 2]}
+    if rec.N is not None:
+        for a, ax in enumerate("xyz"):
+            data[f"n{ax}"] = rec.N[:, a]
+    if rec.temperature_C is not None:
+        data["temperature_C"] = rec.temperature_C
+    if rec.time_s is not None:
+        data["time_s"] = rec.time_s
+    R0, t0 = inputs["R0"], inputs["t0"]
+    prow = []
+    for k, v in data.items():
+        _input_column(book, ws, 2, ci[k], v)
+    for i in range(rec.n):
+        r = i + 2
+        R = Row("Points", r, ci)
+        prow.append(R)
+        book.text(ws, r, ci["id"], rec.ids[i])
+        book.text(ws, r, ci["probe"], D.probe_ids[D.k[i]])
+        if rec.group is not None:
+            book.text(ws, r, ci["group"], rec.group[i])
+        for k, v in rec.extra.items():
+            book.text(ws, r, ci[k], v[i])
+        L = {k: cell(r, ci[k]) for k in ci}
+        for a, ax in enumerate("xyz"):
+            book.formula(ws, r, ci[f"y{ax}_mm"],
+                         f"={R0.cell(a, 0)}*{L['x_nom']}+{R0.cell(a, 1)}*{L['y_nom']}+{R0.cell(a, 2)}*{L['z_nom']}"
+                         f"+{t0.cell(a, 0)}")
+            book.formula(ws, r, ci[f"u{ax}_mm"], f"={L['y' + ax + '_mm']}-{L['p' + ax]}")
+    ws.freeze_panes = "B2"
+    # centroid of the nominal points on Inputs
+    wi = book.wb["Inputs"]
+    crow = inputs["c_row"]
+    centroid = {}
+    for a, ax in enumerate("xyz"):
+        book.text(wi, crow, 1 + 2 * a, f"c{ax}_mm")
+        book.formula(wi, crow, 2 + 2 * a, f"=AVERAGE({block(2, ci[f'y{ax}_mm'], rec.n, 1, 'Points')})")
+        centroid[ax] = cell(crow, 2 + 2 * a, "Inputs")
+    # one row per coordinate
+    wc = book.sheet("Coords")
+    dims = D.dims
+    al = [l for e, l in diag.sel_labels if e == "alignment"]
+    chosen_cols = [f"{e}:{l}" for e, l in diag.sel_labels if e != "alignment"]
+    header = ["point", "axis", "residual_um", "u_um", "z"] + al + chosen_cols + \
+             ["fitted_um", "residual_after_um", "z_after", "baseline_um", "residual_before_um"]
+    cc = {k: i + 1 for i, k in enumerate(header)}
+    book.header(wc, 1, 1, [shown(h, ()) for h in header], [
+        None, None, "r = (x - y) * 1000 (y: nominal in machine coordinates)",
+        "standard uncertainty of the residual after the baseline alignment: sqrt(C_qq - a_q Ma^-1 a_q')",
+        "(r - baseline)/u", *["alignment (nuisance): translation µm, small rotation µrad about the centroid"] * len(al),
+        *[None] * len(chosen_cols), "row of X (effects) times b", "r - alignment - fitted",
+        "(r - alignment - fitted)/u", "alignment of the baseline fit (alignment columns times b0)",
+        "r - baseline"])
+    travel = travel_cells(book, diag, inputs, "Points", {ax: [ci[f"u{ax}_mm"]] for ax in "xyz"}, rec.n)
+    rows = []
+    for i in range(rec.n):
+        P = prow[i]
+        for a in range(dims):
+            r = 2 + dims * i + a
+            ax = "xyz"[a]
+            R = Row("Coords", r, cc)
+            rows.append(R)
+            book.text(wc, r, cc["point"], rec.ids[i])
+            book.text(wc, r, cc["axis"], ax)
+            book.formula(wc, r, cc["residual_um"], f"=({P[ax]}-{P['y' + ax + '_mm']})*1000")
+            for lab in al:
+                _value_or_formula(book, wc, r, cc[lab], alignment_formula(lab, a, P, centroid))
+            for label in chosen_cols:
+                name, par = label.split(":", 1)
+                f = (1.0 if par == f"{rec.ids[i]}.{ax}" else 0.0) if name == "outlier" else \
+                    point_formula(name, par, a, P, centroid, inputs["probe_cells"], travel)
+                _value_or_formula(book, wc, r, cc[label], f)
+    wc.freeze_panes = "C2"
+    obs = {"sheet": "Coords", "rows": [R.row for R in rows], "ci": cc, "chosen_cols": chosen_cols,
+           "first_X": cc[al[0]] if al else cc.get(chosen_cols[0]) if chosen_cols else None,
+           "n_align": len(al), "row_of_obs": rows}
+    return rows, obs
