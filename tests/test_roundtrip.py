@@ -29,7 +29,7 @@ from conftest import EXAMPLES, close
 from generator import templates
 from generator.cli import build_task, main
 from generator.jobs import job
-from generator.read_cli import read_to_files
+from generator.reader import read_to_files
 from generator.workbook.recalc import read_cached, results_rows, soffice
 
 SOURCES = templates.sources()

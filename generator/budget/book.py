@@ -24,7 +24,7 @@ from openpyxl.styles import Alignment
 from xlfuncs import budget as bd
 from xlfuncs import dof
 
-from ..workbook.book import FMT_SCI, HEADER_FONT, Book, Formula
+from ..workbook.book import FMT_SCI, HEADER_FONT, Book, BookAdditions, Formula
 from ..workbook.xlref import block, cell
 from .task import MODEL_TEXT, TYPE_A_INPUT, distance_name
 
@@ -767,7 +767,8 @@ def _instructions(book: Book, task) -> None:
         *task.notes)
 
 
-def write(task, evaluated: list, path: Path, type_a: dict[str, dict] | None = None) -> dict[str, CharCells]:
+def write(task, evaluated: list, path: Path, type_a: dict[str, dict] | None = None,
+          additions: BookAdditions | None = None) -> dict[str, CharCells]:
     """Write the workbook to ``path``; return where each characteristic's cells are.  ``type_a``:
     the type A repeatabilities of ``[[decision.tolerances]]`` per characteristic
     (:func:`generator.budget.job.type_a`)."""
@@ -793,5 +794,5 @@ def write(task, evaluated: list, path: Path, type_a: dict[str, dict] | None = No
                  ["characteristic (task file)", "formula variant used (x cross, . dot product)",
                   "value of the characteristic, mm", "standard uncertainty u_c (u_POS), µm",
                   "expanded uncertainty U = k u, µm"])
-    book.save(path)
+    book.save(path, additions)
     return layout

@@ -46,7 +46,7 @@ from xlfuncs import pointcloud as pc
 from .. import __version__
 from ..pointcloud.large_book import LIVE, addin_ranges, write_xlwings_conf
 from ..pointcloud.vx_sheets import FACTOR_TITLES, explain_inputs, write_inputs, write_point_cloud_model, write_points
-from ..workbook.book import FMT_SCI, Book, Formula
+from ..workbook.book import FMT_SCI, Book, BookAdditions, Formula
 from ..workbook.cache import FEATURE_NOT_APPLICABLE
 from ..workbook.xlref import Block, block, cell
 from .task import FIT_CURRENT, FIT_STALE, KIND, STALE_STEP, Task
@@ -69,7 +69,7 @@ SMALL = FMT_SCI
 
 
 def write_feature_book(task: Task, results: dict, path, fit, method: str, *,
-                       native_max_points: int | None = None):
+                       native_max_points: int | None = None, additions: BookAdditions | None = None):
     """The workbook of a fitted feature: ``fit`` = (fit, per-factor V_A) of the task and
     ``method`` the name of the core function that computed V_A (both from
     :mod:`generator.feature.job`: ``fitted``, ``propagation_method``)."""
@@ -101,7 +101,7 @@ def write_feature_book(task: Task, results: dict, path, fit, method: str, *,
     _write_results(book, f, rows)
     if not native:
         write_xlwings_conf(book)
-    book.save(path)
+    book.save(path, additions)
 
 
 #: the Results columns: the contract's parameter, value, u (in the parameter's unit, docs/cli.md),
