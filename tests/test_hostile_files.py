@@ -175,7 +175,7 @@ def test_ctrl_c_landing_where_python_ignores_exceptions_still_interrupts(tmp_pat
     # cmmwb delivers it again, so the command ends as interrupted, without a traceback
     script = textwrap.dedent("""
         import sys, time, types
-        from generator.cli import main as cli
+        from generator.cli import program as cli
         sys.unraisablehook = cli._quiet_unraisable
         cli._catch_sigint()
         try:

@@ -292,8 +292,8 @@ def test_commands_and_kinds_are_static_lists_not_names_imported_at_run_time():
 
 def test_every_command_module_is_in_the_static_list():
     """A command module left out of COMMANDS would be a command that silently is not there."""
-    tree = ast.parse((ROOT / "generator" / "cli" / "main.py").read_text(encoding="utf-8"))
+    tree = ast.parse((ROOT / "generator" / "cli" / "program.py").read_text(encoding="utf-8"))
     listed = next([e.id for e in node.value.elts] for node in tree.body
                   if isinstance(node, ast.Assign) and getattr(node.targets[0], "id", None) == "COMMANDS")
-    modules = {p.stem for p in (ROOT / "generator" / "cli").glob("*.py")} - {"__init__", "main", "common"}
+    modules = {p.stem for p in (ROOT / "generator" / "cli").glob("*.py")} - {"__init__", "program", "common"}
     assert sorted(listed) == sorted(modules)
