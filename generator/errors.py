@@ -1,5 +1,12 @@
 """User-facing input errors: one clear message naming the file and the line, key, sheet or cell."""
 
+from __future__ import annotations
+
+from contextlib import contextmanager
+from typing import Iterator
+
+from xlfuncs.errors import ModelError
+
 
 class InputError(Exception):
     """Bad input. ``str(err)`` is the one-line message the CLI prints; exit status 2."""
@@ -13,6 +20,17 @@ class InputError(Exception):
     def __str__(self) -> str:
         loc = ", ".join(str(x) for x in (self.file, self.where) if x)
         return f"{loc}: {self.message}" if loc else self.message
+
+
+@contextmanager
+def model_errors_named(file=None, where: str | None = None) -> Iterator[None]:
+    """A :class:`~xlfuncs.errors.ModelError` of the core inside the block becomes an
+    :class:`InputError` with its message, naming ``file`` and ``where`` (the traceback of the core
+    is dropped: the message says what is wrong)."""
+    try:
+        yield
+    except ModelError as e:
+        raise InputError(str(e), file=file, where=where) from None
 
 
 #: what an errno means for someone whose output could not be written

@@ -1,32 +1,22 @@
-"""The task kinds and the modules that handle them (load, compute, write_book, write_plots)."""
+"""The task kinds and their job modules (the contract: :class:`generator.taskkind.TaskKind`)."""
 
 from __future__ import annotations
 
-import importlib
-from types import ModuleType
+from .budget import job as budget
+from .characteristic import job as characteristic
+from .feature import job as feature
+from .pointcloud import job as pointcloud
+from .taskkind import TaskKind
 
-JOB_MODULES = {
-    "pointcloud": "generator.pointcloud.job",
-    "budget": "generator.budget.job",
-    "feature": "generator.feature.job",
-    "characteristic": "generator.characteristic.job",
+#: kind name (``[task] kind``) -> its job module, in the order ``cmmwb demo`` builds them
+JOBS: dict[str, TaskKind] = {
+    "pointcloud": pointcloud,
+    "budget": budget,
+    "feature": feature,
+    "characteristic": characteristic,
 }
 
 
-def job(kind: str) -> ModuleType:
+def job(kind: str) -> TaskKind:
     """The job module of a task kind."""
-    return importlib.import_module(JOB_MODULES[kind])
-
-
-def available() -> list[str]:
-    """Kinds whose job module is present in this installation."""
-    out = []
-    for kind in JOB_MODULES:
-        try:
-            job(kind)
-        except ModuleNotFoundError as e:
-            if e.name != JOB_MODULES[kind]:   # present, but something it needs is missing: say so
-                raise
-            continue
-        out.append(kind)
-    return out
+    return JOBS[kind]

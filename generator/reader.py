@@ -32,13 +32,12 @@ import tempfile
 import tomllib
 from pathlib import Path
 
-from xlfuncs.errors import ModelError
-
 from . import __version__
 from .decision import read_back as read_decision
-from .errors import InputError
-from .jobs import available, job
+from .errors import InputError, model_errors_named
+from .jobs import job
 from .taskfile import KINDS
+from .workbook.atomic import write_texts
 from .workbook.readback import Cells, ReadTask
 from .workbook.tasksheet import TASK_INFO_FORMAT, TASK_SHEET
 
@@ -77,8 +76,6 @@ def task_info(cells: Cells) -> dict:
     kind = info.get("kind")
     if kind not in KINDS:
         raise InputError(f"unknown task kind {kind!r}", file=path, where=f"sheet {TASK_SHEET}")
-    if kind not in available():
-        raise InputError(f"task kind {kind!r} is not available in this installation", file=path)
     if not isinstance(info.get("doc"), dict) or not isinstance(info.get("name"), str):
         raise InputError("the task information is damaged (no task)", file=path, where=f"sheet {TASK_SHEET}")
     snap = info.get("inputs")
@@ -141,14 +138,13 @@ def validate(rt: ReadTask, book: Path, toml_name: str = "task.toml") -> None:
             raise InputError(f"the task information is damaged ({type(e).__name__})", file=book,
                              where=f"sheet {TASK_SHEET}") from None
         toml.write_text(text, encoding="utf-8")
-        try:
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore", RuntimeWarning)
-                mod.compute(mod.load(toml, tomllib.loads(text)))
-        except InputError as e:
-            raise _traced(e, rt, book, tmp) from None
-        except ModelError as e:
-            raise InputError(str(e), file=book) from None
+        with model_errors_named(file=book):
+            try:
+                with warnings.catch_warnings():
+                    warnings.simplefilter("ignore", RuntimeWarning)
+                    mod.compute(mod.load(toml, tomllib.loads(text)))
+            except InputError as e:
+                raise _traced(e, rt, book, tmp) from None
 
 
 def _traced(e: InputError, rt: ReadTask, book: Path, tmp: Path) -> InputError:
@@ -166,6 +162,32 @@ def _traced(e: InputError, rt: ReadTask, book: Path, tmp: Path) -> InputError:
                 break
     loc = f"{src} ({where})" if src else (f"{where} (as read from the workbook)" if where else None)
     return InputError(e.message, file=book, where=loc)
+
+
+def read_to_files(book: Path, out: Path, *, force: bool = False) -> list[Path]:
+    """Read ``book`` and write the task file ``out`` (and its points table); return the paths."""
+    book, out = Path(book), Path(out)
+    if not book.exists():
+        raise InputError("no such file", file=book)
+    if out.suffix.lower() != ".toml":
+        raise InputError("the task file must end in .toml", file=out)
+    rt = read_workbook(book, points_file=f"{out.stem}_points.csv")
+    validate(rt, book, out.name)
+    targets = {out: task_text(rt, book), **{out.parent / n: t for n, t in rt.files.items()}}
+    if not force:
+        for path in targets:
+            if path.exists():
+                raise InputError("exists already (use --force to overwrite)", file=path)
+    try:
+        out.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise InputError(f"cannot create the folder: {e.strerror}", file=out.parent) from None
+    try:
+        # the points table first: a task file never refers to a table that is not there
+        write_texts(dict(sorted(targets.items(), key=lambda t: t[0] == out)))
+    except OSError as e:
+        raise InputError(f"cannot write: {e.strerror}", file=out) from None
+    return list(targets)
 
 
 def task_text(rt: ReadTask, book: Path) -> str:

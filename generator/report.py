@@ -15,7 +15,6 @@
 from __future__ import annotations
 
 import datetime as _dt
-import hashlib
 import math
 import textwrap
 import os
@@ -28,6 +27,7 @@ from . import __version__
 from .decision import BONUS_CONDITIONS, column, margin_label, symbol
 from .errors import InputError
 from .taskfile import check_keys
+from .workbook.atomic import sha256
 from .workbook.book import HEADER_FONT, TITLE_FONT, Book
 from .workbook.xlref import cell, quote_sheet
 
@@ -36,14 +36,6 @@ REPORT_KEYS = ("lab", "operator", "cmm", "artefact", "job_id", "notes")
 #: at most this many characteristics on the one-page Summary (the rest: see Results)
 MAX_ROWS = 24
 TEXT_WIDTH = 92               #: characters per line of the text beside a label (columns B-D)
-
-
-def sha256(path: Path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as fh:
-        for chunk in iter(lambda: fh.read(1 << 20), b""):
-            h.update(chunk)
-    return h.hexdigest()
 
 
 def _files_of(doc, out: list[str]) -> None:

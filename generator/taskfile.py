@@ -19,11 +19,10 @@ import numpy as np
 
 from xlfuncs.csvtable import TableError
 from xlfuncs.csvtable import read_table as read_csv_table
-from xlfuncs.errors import ModelError
 from xlfuncs.limits import PLAUSIBLE, coordinate_problem, plausibility_problem
 from xlfuncs.pointcloud import Parameters, PointCloud, Probe
 
-from .errors import InputError
+from .errors import InputError, model_errors_named
 from .workbook.guarded import MAX_BYTES, read_text
 
 KINDS = ("pointcloud", "budget", "feature", "characteristic")
@@ -367,10 +366,8 @@ def read_parameters(path: Path, doc: dict) -> Parameters:
     tbl = table(path, doc, "parameters", required=False)
     check_keys(path, tbl, "parameters", set(PARAMETER_KEYS))
     values = {k: number(path, tbl, "parameters", k, 0.0, lo=0.0) for k in PARAMETER_KEYS}
-    try:
+    with model_errors_named(file=path, where="[parameters]"):
         return Parameters(**values)
-    except ModelError as e:
-        raise InputError(str(e), file=path, where="[parameters]") from None
 
 
 #: what a missing probe offset means (a warning, docs/input_limits.md "Plausible values")
@@ -621,11 +618,9 @@ def read_point_cloud(path: Path, doc: dict) -> tuple[PointCloud, Parameters, Poi
                              file=path, where="[points] file")
         tablep = read_points_csv(csv_path, probes)
     index = {p.id: k for k, p in enumerate(probes)}
-    try:
+    with model_errors_named(file=path, where="[[probes]]"):
         for p in probes:
             p.resolved(params)
         cloud = PointCloud(tablep.X_mm, tablep.N, np.array([index[p] for p in tablep.probe_ids]),
                            probes, tablep.labels)
-    except ModelError as e:
-        raise InputError(str(e), file=path, where="[[probes]]") from None
     return cloud, params, tablep

@@ -24,7 +24,7 @@ import tempfile
 import zipfile
 from pathlib import Path
 
-from .jobs import available, job
+from .jobs import JOBS, job
 from .workbook.tasksheet import TASK_SHEET
 from .workbook.atomic import replacing
 
@@ -38,7 +38,7 @@ _DATES = re.compile(rb"(<dcterms:(?:created|modified)[^>]*>)[^<]*(</dcterms:(?:c
 def sources() -> dict[str, tuple[str, Path | None]]:
     """Template file name -> (kind, example task file, or None for the kind's NEW_TASK)."""
     out: dict[str, tuple[str, Path | None]] = {}
-    for kind in available():
+    for kind in JOBS:
         out[f"{kind}_template.xlsx"] = (kind, None)
         for example in job(kind).EXAMPLES:
             out[f"examples/{Path(example).stem}.xlsx"] = (kind, EXAMPLES_DIR / example)
@@ -72,7 +72,7 @@ def build_one(kind: str, example: Path | None, target: Path) -> Path:
             task = tmp / "task" / f"{kind}_template.toml"
             task.parent.mkdir()
             task.write_text(mod.NEW_TASK, encoding="utf-8")
-            for name, text in getattr(mod, "NEW_TASK_FILES", {}).items():
+            for name, text in mod.NEW_TASK_FILES.items():
                 (task.parent / name).write_text(text, encoding="utf-8")
         else:
             task = example

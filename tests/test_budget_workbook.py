@@ -400,35 +400,3 @@ def test_cli_exit_status_2_names_file_and_characteristic(tmp_path):
 def test_datum_models_need_a_datum_system():
     bad(lambda d: d.pop("datum_system"), "needs a \\[datum_system\\]",
         "[[characteristics]] #1 key 'model'")
-
-
-def test_read_book_gives_back_the_task_with_the_users_edits(knuckle, edited, tmp_path):
-    """`cmmwb read`: the workbook's named inputs and structure back into a task that builds to
-    the same results (here the edited workbook: S4, E, A_um and a TED changed)."""
-    path, task, results, layout = knuckle
-    doc = budget_job.read_book(path)
-    assert budget_job.compute(budget_job.load(KNUCKLE, doc)) == results
-    out, eresults, _ = edited
-    edoc = budget_job.read_book(out)
-    assert edoc["points"]["S4"] == [0.01, 90.5, 61.2] and edoc["mpe"]["A_um"] == 2.5
-    assert edoc["characteristics"][1]["ted_mm"] == [45.004, 26]
-    tomli_w = pytest.importorskip("tomli_w")
-    again = tmp_path / "again.toml"
-    again.write_text(tomli_w.dumps(edoc), encoding="utf-8")
-    reread = budget_job.compute(budget_job.load(again, tomllib.loads(again.read_text())))
-    # the edited workbook's variants were "auto" again: same or lower u than the pinned ones
-    for a, b in zip(reread["characteristics"], eresults["characteristics"]):
-        assert a["value_mm"] == pytest.approx(b["value_mm"], rel=1e-12, abs=1e-12)
-        assert a["u_um"] <= b["u_um"] * (1 + 1e-12)
-
-
-def test_read_book_names_a_bad_cell(knuckle, tmp_path):
-    path, *_ = knuckle
-    wb = openpyxl.load_workbook(path)
-    (sheet, coord), = wb.defined_names["S2_z_mm"].destinations
-    wb[sheet][coord.replace("$", "")].value = "abc"
-    bad_book = tmp_path / "bad.xlsx"
-    wb.save(bad_book)
-    with pytest.raises(InputError, match="S2_z_mm must be a finite number") as e:
-        budget_job.read_book(bad_book)
-    assert e.value.where == f"sheet Inputs cell {coord.replace('$', '')}"

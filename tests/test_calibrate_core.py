@@ -102,9 +102,9 @@ def test_with_several_probe_offsets_on_a_ball_plate_PQ_and_ET_are_estimated():
 
 @pytest.mark.parametrize("planted,seed", [({"squareness_xy": 9.0}, 3), ({"EBX": 150.0}, 5)])
 def test_the_demo_data_reproduce_the_simulations_hyper_parameters_within_u(planted, seed):
-    """The two cases of `cmmwb demo` (generator/diagnosis/cli.py demo): with the named effect as a
+    """The two cases of `cmmwb demo` (generator/diagnosis/run.py demo): with the named effect as a
     fixed effect, every estimated hyper-parameter lies within one u of the value simulated."""
-    from generator.diagnosis.cli import DEMO_PROBES
+    from generator.diagnosis.run import DEMO_PROBES
 
     rec = sm.simulate(sm.iso10360(DEMO_PROBES), MPE1, planted, seed=seed, temperature_C=20.0)
     prep = dg.prepare(rec, dg.Model(MPE1, DEMO_PROBES, True), False)

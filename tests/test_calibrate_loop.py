@@ -6,9 +6,9 @@ agree with their JSON in three engines."""
 import pytest
 
 from conftest import ENGINES, close, recalc
-from generator.calibration.cli import run_calibrate
+from generator.calibration.run import run_calibrate
 from generator.cli import build_task
-from generator.diagnosis.cli import load_model
+from generator.diagnosis.run import load_model
 from generator.workbook.recalc import results_rows
 from xlfuncs import pointcloud as pc
 from xlfuncs.locator import simulate as sm
@@ -61,7 +61,7 @@ def loop(tmp_path_factory):
     step = sm.simulate(sm.layout("stepgauge", probes), model.params, {}, seed=5)
     write_recordings(iso, tmp / "iso.csv")
     write_recordings(step, tmp / "step.csv")
-    from generator.calibration.cli import parse_mpe
+    from generator.calibration.run import parse_mpe
     from generator.taskfile import read_toml
 
     mpe = parse_mpe(None, read_toml(tmp / "task.toml"), probes)

@@ -160,7 +160,7 @@ def test_a_k_typed_in_the_decision_sheet_goes_back_to_the_task_file(plate, tmp_p
     [decision] k = 3; an untouched book writes no [decision]."""
     import tomllib
 
-    from generator.read_cli import read_to_files
+    from generator.reader import read_to_files
 
     _, book = plate
     same = read_to_files(book, tmp_path / "same" / "task.toml")

@@ -114,7 +114,7 @@ def test_a_tolerance_typed_in_the_workbook_goes_back_to_the_task_file(built, tmp
     back, and that task builds with it (the zone, not the value, changes)."""
     import tomllib
 
-    from generator.read_cli import read_to_files
+    from generator.reader import read_to_files
 
     results, book = built
     wb = openpyxl.load_workbook(book)

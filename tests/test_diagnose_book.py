@@ -8,7 +8,7 @@ import pytest
 
 from conftest import ENGINES, close, recalc
 from generator.diagnosis import book as diagnose_book
-from generator.diagnosis.cli import run_diagnose
+from generator.diagnosis.run import run_diagnose
 from generator.workbook.recalc import results_rows
 from xlfuncs.locator import diagnose as dg
 from xlfuncs.locator import effects as fx

@@ -6,7 +6,7 @@ import sys
 
 import pytest
 
-from generator.diagnosis.cli import demo
+from generator.diagnosis.run import demo
 
 
 def run(*args, cwd):

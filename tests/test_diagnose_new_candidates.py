@@ -108,7 +108,7 @@ def test_a_reversal_in_lengths_probed_from_both_sides():
 
 
 def test_simulate_takes_a_straightness_as_two_coefficients(tmp_path):
-    from generator.diagnosis.cli import parse_effect
+    from generator.cli.simulate import parse_effect
     from generator.errors import InputError
 
     assert parse_effect("EYX=2,-1.5", PAIR) == ("EYX", [2.0, -1.5])
@@ -267,7 +267,7 @@ def test_null_step_gauges_do_not_name_a_periodic_error():
 
 
 def test_simulate_takes_a_periodic_error_as_a_b_and_period(tmp_path):
-    from generator.diagnosis.cli import parse_effect
+    from generator.cli.simulate import parse_effect
     from generator.errors import InputError
 
     assert parse_effect("periodic_y=0.5,-0.2,40", PAIR) == ("periodic_y", [0.5, -0.2, 40.0])

@@ -103,7 +103,7 @@ def test_the_workbook_of_a_structured_diagnosis_agrees_with_its_json(tmp_path, m
     rank of C as a number; both engines reproduce chi-square, dof and estimates of the JSON."""
     from conftest import close, recalc
     from generator.diagnosis import book as diagnose_book
-    from generator.diagnosis.cli import run_diagnose
+    from generator.diagnosis.run import run_diagnose
     from generator.workbook.recalc import results_rows
     from test_diagnose_book import expected_rows
     from xlfuncs.locator.recordings import write_recordings

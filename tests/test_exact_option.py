@@ -89,7 +89,7 @@ def point_records(tmp_path, monkeypatch):
     path = tmp_path / "scan.csv"
     write_recordings(rec, path)
     task = tmp_path / "machine.toml"
-    from generator.diagnosis.cli import task_toml
+    from generator.diagnosis.run import task_toml
 
     task.write_text(task_toml(MPE1, PAIR, "machine", "MPE1 with two probes"))
     return path, task

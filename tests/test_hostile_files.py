@@ -18,7 +18,7 @@ import numpy as np
 import openpyxl
 import pytest
 
-from generator.build import Staging
+from generator.workbook.atomic import Staging
 from generator.cli import main
 from generator.errors import InputError
 from generator.workbook.guarded import read_bytes
@@ -175,7 +175,7 @@ def test_ctrl_c_landing_where_python_ignores_exceptions_still_interrupts(tmp_pat
     # cmmwb delivers it again, so the command ends as interrupted, without a traceback
     script = textwrap.dedent("""
         import sys, time, types
-        from generator import cli
+        from generator.cli import program as cli
         sys.unraisablehook = cli._quiet_unraisable
         cli._catch_sigint()
         try:

@@ -35,7 +35,7 @@ def test_every_package_in_the_tree_is_installed():
 # Built from the source text with `ast` only (nothing is imported): every Import/ImportFrom of a
 # module of `generator` or `xlfuncs`, relative or absolute, at module level or inside a function,
 # and every string constant that is exactly a module's dotted name (what importlib.import_module
-# is given, as in generator/jobs.py), so that a dynamic import is a dependency too.
+# would be given), so that a dynamic import is a dependency too.
 
 import ast  # noqa: E402
 
@@ -240,46 +240,60 @@ def test_xlfuncs_imports_neither_generator_nor_openpyxl():
     assert not bad, bad
 
 
-def _job_modules() -> dict[str, str]:
-    """``JOB_MODULES`` of generator/jobs.py, read from the source."""
+def _registered_job_modules() -> dict[str, str]:
+    """The registry ``JOBS`` of generator/jobs.py, read from the source: kind -> the module its
+    entry is bound to (``from .budget import job as budget``)."""
     tree = ast.parse((ROOT / "generator" / "jobs.py").read_text(encoding="utf-8"))
+    bound = {}
     for node in tree.body:
-        if isinstance(node, ast.Assign) and getattr(node.targets[0], "id", None) == "JOB_MODULES":
-            return ast.literal_eval(node.value)
-    raise AssertionError("generator/jobs.py has no JOB_MODULES")
+        if isinstance(node, ast.ImportFrom) and node.level == 1:
+            for alias in node.names:
+                bound[alias.asname or alias.name] = f"generator.{node.module}.{alias.name}"
+    for node in tree.body:
+        target = node.target if isinstance(node, ast.AnnAssign) else \
+            node.targets[0] if isinstance(node, ast.Assign) else None
+        if getattr(target, "id", None) == "JOBS":
+            assert isinstance(node.value, ast.Dict), "JOBS is a literal dict"
+            return {ast.literal_eval(k): bound[v.id] for k, v in zip(node.value.keys, node.value.values)}
+    raise AssertionError("generator/jobs.py has no JOBS")
 
 
 def test_each_task_kind_has_its_own_package_with_its_job():
     for kind in TASK_KINDS:
         folder = ROOT / "generator" / kind
         assert (folder / "__init__.py").is_file(), folder
-    for kind in ("pointcloud", "budget", "feature"):
+    for kind in ("pointcloud", "budget", "feature", "characteristic"):
         assert (ROOT / "generator" / kind / "job.py").is_file(), kind
-    assert (ROOT / "generator" / "diagnosis" / "cli.py").is_file()
-    for module in _job_modules().values():
+    assert (ROOT / "generator" / "diagnosis" / "run.py").is_file()
+    registered = _registered_job_modules()
+    assert registered, "no task kind registered"
+    for kind, module in registered.items():
         kind_package = module.split(".")[1]
-        assert kind_package in TASK_KINDS and module.endswith(".job"), module
+        assert kind_package == kind and kind in TASK_KINDS and module.endswith(".job"), module
         assert (ROOT / Path(*module.split("."))).with_suffix(".py").is_file(), module
 
 
-def test_a_subcommand_whose_dependency_is_missing_is_an_error_not_a_silent_absence(monkeypatch):
-    """A non-editable install without xlfuncs.locator once dropped `cmmwb diagnose` without a
-    word; a module that is there but cannot import what it needs must say so."""
-    import importlib
+def _cli_sources() -> list[Path]:
+    return [ROOT / "generator" / "jobs.py", *sorted((ROOT / "generator" / "cli").glob("*.py"))]
 
-    from generator import cli
 
-    real = importlib.import_module
+def test_commands_and_kinds_are_static_lists_not_names_imported_at_run_time():
+    """No module of the command line or the kind registry imports by string (importlib,
+    __import__): every command and every kind is an import the graph above sees."""
+    for path in _cli_sources():
+        tree = ast.parse(path.read_text(encoding="utf-8"))
+        for node in ast.walk(tree):
+            if isinstance(node, (ast.Import, ast.ImportFrom)):
+                names = [a.name for a in node.names] + [getattr(node, "module", None) or ""]
+                assert "importlib" not in names, f"{path.relative_to(ROOT)}:{node.lineno}"
+            if isinstance(node, ast.Name):
+                assert node.id not in ("__import__", "import_module"), f"{path.relative_to(ROOT)}:{node.lineno}"
 
-    def broken(name, *a, **k):
-        if name == "generator.diagnosis.cli":
-            raise ModuleNotFoundError("No module named 'xlfuncs.locator'", name="xlfuncs.locator")
-        return real(name, *a, **k)
 
-    monkeypatch.setattr(importlib, "import_module", broken)
-    try:
-        cli.parser()
-    except ModuleNotFoundError as e:
-        assert e.name == "xlfuncs.locator"
-    else:
-        raise AssertionError("the missing dependency was swallowed")
+def test_every_command_module_is_in_the_static_list():
+    """A command module left out of COMMANDS would be a command that silently is not there."""
+    tree = ast.parse((ROOT / "generator" / "cli" / "program.py").read_text(encoding="utf-8"))
+    listed = next([e.id for e in node.value.elts] for node in tree.body
+                  if isinstance(node, ast.Assign) and getattr(node.targets[0], "id", None) == "COMMANDS")
+    modules = {p.stem for p in (ROOT / "generator" / "cli").glob("*.py")} - {"__init__", "program", "common"}
+    assert sorted(listed) == sorted(modules)

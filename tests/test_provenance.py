@@ -17,7 +17,8 @@ import pytest
 import tomli_w
 
 from generator import __version__
-from generator.build import Staging, build_task
+from generator.build import build_task
+from generator.workbook.atomic import Staging
 from generator.errors import InputError
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "generator" / "examples"

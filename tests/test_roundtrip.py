@@ -29,7 +29,7 @@ from conftest import EXAMPLES, close
 from generator import templates
 from generator.cli import build_task, main
 from generator.jobs import job
-from generator.read_cli import read_to_files
+from generator.reader import read_to_files
 from generator.workbook.recalc import read_cached, results_rows, soffice
 
 SOURCES = templates.sources()
@@ -44,7 +44,7 @@ def source_task(kind: str, source: Path | None, folder: Path) -> Path:
         mod = job(kind)
         path = folder / f"{kind}_task.toml"
         path.write_text(mod.NEW_TASK, encoding="utf-8")
-        for name, text in getattr(mod, "NEW_TASK_FILES", {}).items():
+        for name, text in mod.NEW_TASK_FILES.items():
             (folder / name).write_text(text, encoding="utf-8")
         return path
     doc = tomllib.loads(source.read_text(encoding="utf-8"))

@@ -28,7 +28,7 @@ def expected_results(kind, source, tmp_path):
     if source is None:
         source = tmp_path / "task.toml"
         source.write_text(mod.NEW_TASK, encoding="utf-8")
-        for name, text in getattr(mod, "NEW_TASK_FILES", {}).items():
+        for name, text in mod.NEW_TASK_FILES.items():
             (tmp_path / name).write_text(text, encoding="utf-8")
     return mod.compute(mod.load(source, read_toml(source)))
 

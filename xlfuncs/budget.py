@@ -67,7 +67,6 @@ EPS_REL = 1e-12
 
 AXES = ("x", "y", "z")
 
-MODELS = ("point_point", "point_line", "point_plane", "line_line", "datum_distance", "position")
 DATUMS = ("primary", "secondary", "tertiary")
 
 #: structural kinds of a variant (the formula skeleton a workbook writer has to lay out)

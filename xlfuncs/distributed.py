@@ -29,15 +29,6 @@ from .errors import ModelError
 ENV = "CMMWB_SCHEDULER"
 
 
-def dask_available() -> bool:
-    try:
-        import dask  # noqa: F401
-        import distributed  # noqa: F401
-    except ImportError:
-        return False
-    return True
-
-
 class DaskBackend:
     """Block tasks on Dask (see the module docstring).  Use as a context manager or call
     :meth:`close` to shut down a cluster it started."""

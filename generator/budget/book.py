@@ -25,7 +25,7 @@ from openpyxl.styles import Alignment
 
 from xlfuncs import budget as bd
 
-from ..workbook.book import HEADER_FONT, Book, Formula
+from ..workbook.book import HEADER_FONT, Book, BookAdditions, Formula
 from ..workbook.xlref import block, cell
 from .block import (C_INPUT, DOF_HEADER, FMT_U, NU_EFF_NOTE, BudgetCells, CharCells, coord, nu_eff_formula,
                     type_a_cells, write_variant)
@@ -441,7 +441,8 @@ def _instructions(book: Book, task) -> None:
         *task.notes)
 
 
-def write(task, evaluated: list, path: Path, type_a: dict[str, dict] | None = None) -> dict[str, CharCells]:
+def write(task, evaluated: list, path: Path, type_a: dict[str, dict] | None = None,
+          additions: BookAdditions | None = None) -> dict[str, CharCells]:
     """Write the workbook to ``path``; return where each characteristic's cells are.  ``type_a``:
     the type A repeatabilities of ``[[decision.tolerances]]`` per characteristic
     (:func:`generator.budget.job.type_a`)."""
@@ -467,5 +468,5 @@ def write(task, evaluated: list, path: Path, type_a: dict[str, dict] | None = No
                  ["characteristic (task file)", "formula variant used (x cross, . dot product)",
                   "value of the characteristic, mm", "standard uncertainty u_c (u_POS), µm",
                   "expanded uncertainty U = k u, µm"])
-    book.save(path)
+    book.save(path, additions)
     return layout

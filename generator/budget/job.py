@@ -22,8 +22,10 @@ from xlfuncs.errors import ModelError
 from xlfuncs.limits import coordinate_problem
 
 from .. import __version__
-from ..errors import InputError
+from ..errors import InputError, model_errors_named
 from ..taskfile import COMMON_TABLES, check_keys, number, table, task_kind_and_name, text_list
+from ..taskkind import always_exact
+from ..workbook.book import BookAdditions
 from ..workbook.xlref import check_name
 from .task import MODEL_KEYS, TYPE_A_INPUT, Characteristic, Task, distance_name
 
@@ -33,6 +35,10 @@ EXAMPLES_DIR = Path(__file__).resolve().parents[1] / "examples"
 
 #: the commented steering-knuckle task written by ``cmmwb new budget``
 NEW_TASK: str = (EXAMPLES_DIR / "knuckle.toml").read_text(encoding="utf-8")
+#: the task names no table beside it (its points are in the TOML)
+NEW_TASK_FILES: dict[str, str] = {}
+#: the task-kind contract's hook (generator.taskkind): a budget is exact at every size
+force_exact = always_exact
 
 RESULT_COLUMNS = ["name", "variant", "value_mm", "u_um", "U_um"]
 
@@ -105,10 +111,8 @@ def _read_datum_system(path: Path, doc: dict, points: dict) -> bd.DatumSystem | 
     tertiary = None
     if "tertiary" in tbl:
         tertiary = _point_names(path, tbl["tertiary"], 1, "[datum_system] tertiary", points)
-    try:
+    with model_errors_named(path, "[datum_system]"):
         return bd.DatumSystem(primary, secondary, tertiary)
-    except ModelError as e:
-        raise _err(path, "[datum_system]", str(e)) from None
 
 
 def _read_characteristic(path: Path, n: int, raw, points: dict, ds) -> Characteristic:
@@ -338,99 +342,12 @@ def compute(task: Task) -> dict:
     return out
 
 
-# -- reading a workbook back (for `cmmwb read`) ----------------------------------------------------
-
-def read_book(path: Path) -> dict:
-    """The task (a dict ready for ``tomli_w``) of a budget workbook a user edited: MPE, points and
-    TEDs from the named input cells, the structure from the 'Inputs' sheet.  Bad cells raise
-    InputError naming the sheet and cell."""
-    import json
-
-    import openpyxl
-
-    path = Path(path)
-    try:
-        raw = openpyxl.load_workbook(path)
-        cached = openpyxl.load_workbook(path, data_only=True)
-    except Exception as e:  # not a workbook at all
-        raise InputError(f"cannot open the workbook ({type(e).__name__})", file=path) from None
-    if "Inputs" not in raw.sheetnames:
-        raise InputError("no sheet named 'Inputs': not a cmmwb budget workbook", file=path,
-                         where="sheet Inputs")
-    ws = raw["Inputs"]
-
-    def named(name: str) -> float:
-        dn = raw.defined_names.get(name)
-        if dn is None:
-            raise InputError(f"the defined name {name!r} is missing", file=path)
-        (sheet, coord), = dn.destinations
-        coord = coord.replace("$", "")
-        value = cached[sheet][coord].value
-        if value is None:
-            value = raw[sheet][coord].value
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-            raise InputError(f"{name} must be a finite number, got {value!r}", file=path,
-                             where=f"sheet {sheet} cell {coord}")
-        return float(value)
-
-    def text_json(r: int, what: str):
-        try:
-            return json.loads(str(ws.cell(row=r, column=5).value))
-        except (TypeError, ValueError):
-            raise InputError(f"{what} is not valid JSON", file=path,
-                             where=f"sheet Inputs cell E{r}") from None
-
-    def find(marker: str, start: int) -> int | None:
-        for r in range(start, ws.max_row + 1):
-            if ws.cell(row=r, column=1).value == marker:
-                return r
-        return None
-
-    def col_a(r: int):
-        v = ws.cell(row=r, column=1).value
-        return v if isinstance(v, str) and v else None
-
-    r_task, r_points = find("task_name", 1), find("point", 1)
-    if r_task is None or r_points is None:
-        raise InputError("the 'Inputs' sheet has no 'task_name' or 'point' row: not a cmmwb "
-                         "budget workbook", file=path, where="sheet Inputs")
-    doc: dict = {"task": {"kind": KIND, "name": str(ws.cell(row=r_task, column=2).value)}}
-    notes = text_json(r_task, "the task notes")
-    if notes:
-        doc["task"]["notes"] = notes
-    doc["mpe"] = {k: named(k) for k in ("A_um", "B_mm", "b", "k")}
-    points = {}
-    r = r_points + 1
-    while col_a(r):
-        points[col_a(r)] = [named(f"{col_a(r)}_{ax}_mm") for ax in bd.AXES]
-        r += 1
-    doc["points"] = points
-    r_ds = find("datum_system", r)
-    if r_ds is not None:
-        doc["datum_system"] = text_json(r_ds, "the datum system")
-    r_chars = find("name", r)
-    if r_chars is None:
-        raise InputError("the 'Inputs' sheet has no characteristics table", file=path,
-                         where="sheet Inputs")
-    chars = []
-    r = r_chars + 1
-    while col_a(r):
-        entry = {"name": col_a(r), "model": ws.cell(row=r, column=2).value}
-        entry.update(text_json(r, f"the definition of {entry['name']}"))
-        if entry["model"] == "position":
-            entry["ted_mm"] = [named(f"{entry['name']}_ted{i}_mm") for i in (1, 2)]
-        chars.append(entry)
-        r += 1
-    doc["characteristics"] = chars
-    return doc
-
-
 # -- outputs ----------------------------------------------------------------------------------------
 
-def write_book(task: Task, results: dict, path: Path) -> None:
+def write_book(task: Task, results: dict, path: Path, additions: BookAdditions | None = None) -> None:
     from .book import write
 
-    write(task, evaluate(task), path, type_a=type_a(results))
+    write(task, evaluate(task), path, type_a=type_a(results), additions=additions)
 
 
 def write_plots(task: Task, results: dict, out_dir: Path) -> list[Path]:

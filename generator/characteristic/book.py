@@ -18,7 +18,7 @@ from xlfuncs import characteristics as ch
 
 from .. import __version__
 from ..pointcloud.vx_sheets import explain_inputs, write_inputs, write_points
-from ..workbook.book import Book, Formula
+from ..workbook.book import Book, BookAdditions, Formula
 from ..workbook.xlref import Block, cell
 
 FMT_MM = "0.000000"
@@ -48,7 +48,7 @@ CHAR_NOTES = [
     "the points that decide a form value or zone (the active set of its sensitivity)"]
 
 
-def write_characteristic_book(task, results: dict, path, jf, res, V) -> None:
+def write_characteristic_book(task, results: dict, path, jf, res, V, additions: BookAdditions | None = None) -> None:
     book = Book("characteristic", task.name, f"Characteristics of a drawing — {task.name}")
     _instructions(book, task, jf, res)
     _, probe_rows = write_inputs(book, task.params, task.cloud)
@@ -65,7 +65,7 @@ def write_characteristic_book(task, results: dict, path, jf, res, V) -> None:
     book.results(["name", "type", "value", "unit", "u", "u_unit"], rows,
                  notes=[None, None, "measured value in 'unit'", "mm or deg",
                         "standard uncertainty in u_unit", "um or urad"])
-    book.save(path)
+    book.save(path, additions)
 
 
 def _instructions(book: Book, task, jf, res) -> None:

@@ -32,15 +32,19 @@ from pathlib import Path
 from xlfuncs import characteristics as ch
 from xlfuncs import features as ft
 from xlfuncs import pointcloud as pc
-from xlfuncs.errors import ModelError
 
 from .. import __version__
-from ..errors import InputError
+from ..errors import InputError, model_errors_named
 from ..taskfile import (COMMON_TABLES, check_keys, number, read_point_cloud, string, table, task_kind_and_name,
                         text_list, vector3)
+from ..taskkind import always_exact, no_type_a
+from ..workbook.book import BookAdditions
 
 KIND = "characteristic"
 EXAMPLES = ["characteristic_plate.toml"]
+#: the task-kind contract's hooks (generator.taskkind): exact at every size, no type A inputs
+force_exact = always_exact
+add_type_a = no_type_a
 
 FEATURE_KEYS = {"name", "type", "ids", "id_prefix", "circle_plane", "axis_hint"}
 FRAME_KEYS = {"name", "primary", "secondary", "tertiary"}
@@ -159,10 +163,8 @@ def load(path: Path, doc: dict) -> Task:
     pts = table(path, doc, "points")
     task = Task(name, notes, cloud, params, feats, frames, chars, Path(path),
                 pts.get("file") if isinstance(pts.get("file"), str) else None)
-    try:
+    with model_errors_named(file=path):
         fitted(task)
-    except ModelError as e:
-        raise InputError(str(e), file=path) from None
     return task
 
 
@@ -209,11 +211,11 @@ def compute(task: Task) -> dict:
             "characteristics": rows}
 
 
-def write_book(task: Task, results: dict, path: Path) -> None:
+def write_book(task: Task, results: dict, path: Path, additions: BookAdditions | None = None) -> None:
     from .book import write_characteristic_book
 
     jf, res, V = fitted(task)
-    write_characteristic_book(task, results, path, jf, res, V)
+    write_characteristic_book(task, results, path, jf, res, V, additions)
 
 
 def write_plots(task: Task, results: dict, out_dir: Path) -> list[Path]:

@@ -51,7 +51,7 @@ from openpyxl.styles import Alignment
 from .. import __version__
 from ..pointcloud.large_book import LIVE, write_xlwings_conf
 from ..pointcloud.vx_sheets import explain_inputs, write_inputs, write_point_cloud_model, write_points
-from ..workbook.book import FMT_SCI, Book, Formula
+from ..workbook.book import FMT_SCI, Book, BookAdditions, Formula
 from ..workbook.cache import FEATURE_NOT_APPLICABLE
 from ..workbook.xlref import Block, cell
 from .fit_sheets import feature_label, gn_step_block, write_fit, write_G, write_H, write_jacobian, write_local
@@ -74,7 +74,7 @@ FEATURE_NATIVE_MAX_POINTS = 100
 
 
 def write_feature_book(task: Task, results: dict, path, fit, method: str, *,
-                       native_max_points: int | None = None):
+                       native_max_points: int | None = None, additions: BookAdditions | None = None):
     """The workbook of a fitted feature: ``fit`` = (fit, per-factor V_A) of the task and
     ``method`` the name of the core function that computed V_A (both from
     :mod:`generator.feature.job`: ``fitted``, ``propagation_method``)."""
@@ -106,7 +106,7 @@ def write_feature_book(task: Task, results: dict, path, fit, method: str, *,
     _write_results(book, f, rows)
     if not native:
         write_xlwings_conf(book)
-    book.save(path)
+    book.save(path, additions)
 
 
 #: the Results columns: the contract's parameter, value, u (in the parameter's unit, docs/cli.md),

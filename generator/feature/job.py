@@ -28,13 +28,14 @@ from xlfuncs import features as ft
 from xlfuncs.distributed import get_backend
 from xlfuncs import partial as pa
 from xlfuncs import pointcloud as pc
-from xlfuncs.errors import ModelError
 from xlfuncs.limits import MAX_COORDINATE_MM, coordinate_problem
 
 from .. import __version__
-from ..errors import InputError
+from ..errors import InputError, model_errors_named
 from ..taskfile import (COMMON_TABLES, check_keys, number, read_parameters, read_point_cloud, read_probes, text_list,
                        string, table, task_kind_and_name, vector3)
+from ..taskkind import no_type_a
+from ..workbook.book import BookAdditions
 from .task import KIND, Planning, Task, fit_state
 
 EXAMPLES = [
@@ -51,6 +52,10 @@ EXAMPLES = [
     "feature_table8_sphere_nine.toml",
     "feature_plane_face.toml",
 ]
+#: the task-kind contract (generator.taskkind): the starter task samples its points ([sampling]),
+#: no table beside it; no type A inputs
+NEW_TASK_FILES: dict[str, str] = {}
+add_type_a = no_type_a
 
 CIRCLE_PLANE_CHOICES = ("xy", "yz", "zx", "space")
 CIRCLE_PLANE_NORMALS = {"xy": (0, 0, 1), "yz": (1, 0, 0), "zx": (0, 1, 0)}
@@ -268,14 +273,12 @@ def _read_sampling(path, doc, element, circle_plane, params, probes):
     if probe_id not in ids:
         raise InputError(f"unknown probe {probe_id!r} (the task defines {', '.join(ids)})",
                          file=path, where="[sampling] probe")
-    try:
+    with model_errors_named(file=path, where="[sampling]"):
         smp = pa.sample(pattern, **kw, **g_core)
         for p in probes:
             p.resolved(params)
         cloud = pc.PointCloud(smp.X_mm, smp.N, np.full(smp.m, ids.index(probe_id)), probes,
                               smp.labels)
-    except ModelError as e:
-        raise InputError(str(e), file=path, where="[sampling]") from None
     info = {"pattern": pattern, **{k: v for k, v in kw.items()}, **g, "probe": probe_id}
     return info, cloud
 
@@ -333,10 +336,8 @@ def _read_planning(path, doc, element, circle_plane, sampling, m) -> Planning:
 
 
 def _safe_rows(path, plan: Planning):
-    try:
+    with model_errors_named(file=path, where="[planning]"):
         return plan.rows()
-    except ModelError as e:
-        raise InputError(str(e), file=path, where="[planning]") from None
 
 
 # -- computing -----------------------------------------------------------------------------
@@ -389,22 +390,18 @@ def propagation_method(m: int, requested: str = "auto") -> str:
 def fitted(task: Task):
     """The fit and the per-factor V_A (cached on the task)."""
     if task._fit is None:
-        try:
+        with model_errors_named(file=task.path, where=task.source):
             f = ft.fit(task.element, task.cloud.X_mm, weights=task.weights,
                        normals=task.cloud.N, axis_hint=task.axis_hint,
                        circle_plane=task.circle_plane if task.element == "circle" else "xy",
                        reference_mm=task.reference_mm, max_iter=task.max_iter)
-        except ModelError as e:
-            raise InputError(f"{e}", file=task.path, where=task.source) from None
-        try:
+        with model_errors_named(file=task.path, where="[parameters]"):
             if task.cloud.m <= DENSE_MAX_POINTS:
                 task._unc = ft.propagate(f, pc.V_X_components(task.cloud, task.params))
             else:  # V_X would not fit in memory: G V_X G^T in row blocks (xlfuncs.blocked)
                 task._unc = bl.propagate_cloud(f, task.cloud, task.params, backend=get_backend(),
                                                progress=bl.ProgressBar(f"V_A of {task.cloud.m} points"),
                                                method=va_method(task.cloud.m, task.va_method))
-        except ModelError as e:
-            raise InputError(str(e), file=task.path, where="[parameters]") from None
         task._fit = f
     return task._fit, task._unc
 
@@ -482,11 +479,11 @@ def planning_results(task: Task) -> dict:
 
 # -- outputs ---------------------------------------------------------------------------------
 
-def write_book(task: Task, results: dict, path: Path) -> None:
+def write_book(task: Task, results: dict, path: Path, additions: BookAdditions | None = None) -> None:
     from .book import write_feature_book
 
     fit = fitted(task)
-    write_feature_book(task, results, path, fit, propagation_method(fit[0].m, task.va_method))
+    write_feature_book(task, results, path, fit, propagation_method(fit[0].m, task.va_method), additions=additions)
 
 
 def write_plots(task: Task, results: dict, out_dir: Path) -> list[Path]:

@@ -14,12 +14,12 @@ import numpy as np
 from xlfuncs import blocked as bl
 from xlfuncs import pointcloud as pc
 from xlfuncs.distributed import get_backend
-from xlfuncs.errors import ModelError
 
 from .. import __version__
-from ..errors import InputError
+from ..errors import InputError, model_errors_named
 from ..taskfile import COMMON_TABLES, check_keys, number, read_point_cloud, string, table, task_kind_and_name, text_list
-from ..workbook.book import Book
+from ..taskkind import always_exact, no_type_a
+from ..workbook.book import Book, BookAdditions
 from ..workbook.xlref import Block, block, cell
 from .book import (KIND, MPE_GRID_POINTS, RESULT_COLUMNS, budget_chart, extra_inputs, results_rows,
                    write_mpe)
@@ -27,6 +27,9 @@ from .vx_sheets import NATIVE_MAX_POINTS, explain_inputs, point_block, write_poi
 
 EXAMPLES = ["stepgauge_I_MPE1.toml", "stepgauge_I_MPE2.toml",
             "stepgauge_II_MPE1.toml", "stepgauge_II_MPE2.toml"]
+#: the task-kind contract's hooks (generator.taskkind): exact at every size, no type A inputs
+force_exact = always_exact
+add_type_a = no_type_a
 
 
 @dataclass
@@ -103,20 +106,16 @@ def load(path: Path, doc: dict) -> Task:
     if not pairs:
         raise InputError("no distances to evaluate (one point only?)", file=path, where="[points]")
     pairs_arr = np.array(pairs, dtype=int)
-    try:
+    with model_errors_named(file=path, where="[[distances]]"):
         pc.check_pairs(cloud, pairs_arr)
-    except ModelError as e:
-        raise InputError(str(e), file=path, where="[[distances]]") from None
     return Task(path, name, cloud, params, pairs_arr, groups, K, mpe, list(notes))
 
 
 def compute(task: Task) -> dict:
     pairs = None if task.all_pairs else task.pairs  # None: the row-block path, no index arrays
-    try:
+    with model_errors_named(file=task.path, where="[points]"):
         r = bl.distance_components(task.cloud, task.params, pairs, backend=get_backend(),
                                    progress=bl.ProgressBar(f"{len(task.pairs)} distances"))
-    except ModelError as e:
-        raise InputError(str(e), file=task.path, where="[points]") from None
     labels = task.cloud.labels
     out = {"name": task.name, "kind": KIND, "version": __version__, "distances": []}
     for q, (i, j) in enumerate(task.pairs):
@@ -142,12 +141,12 @@ def compute(task: Task) -> dict:
 
 # -- workbook ----------------------------------------------------------------------------------
 
-def write_book(task: Task, results: dict, path: Path) -> None:
+def write_book(task: Task, results: dict, path: Path, additions: BookAdditions | None = None) -> None:
     if task.cloud.m > NATIVE_MAX_POINTS:
         # beyond the native V_X sheets: GP blocks as values + Excel add-in formulas
         from .large_book import write_large_book
 
-        write_large_book(task, results, path)
+        write_large_book(task, results, path, additions)
         return
     book = Book(KIND, task.name, f"Point-cloud uncertainty of distances — {task.name}")
     _instructions(book, task)
@@ -157,7 +156,7 @@ def write_book(task: Task, results: dict, path: Path) -> None:
         write_mpe(book, task)
     budget_chart(book, book.wb["Budget"], task, budget)
     book.results(RESULT_COLUMNS, results_rows(task, budget))
-    book.save(path)
+    book.save(path, additions)
 
 
 def _instructions(book: Book, task: Task) -> None:

@@ -36,7 +36,7 @@ from xlfuncs import pointcloud as pc
 
 from .. import __version__
 from ..errors import InputError
-from ..workbook.book import FMT_SCI, VALUE_FILL, Book
+from ..workbook.book import FMT_SCI, VALUE_FILL, Book, BookAdditions
 from ..workbook.xlref import Block, block, cell
 from .book import KIND, RESULT_COLUMNS, budget_chart, extra_inputs, results_rows, write_mpe
 from .vx_sheets import NATIVE_MAX_POINTS, explain_inputs, write_inputs, write_points
@@ -57,7 +57,7 @@ BUDGET_COLUMNS = ["from", "to", "group", "d_mm", "u_um", "U_um", "u_R_um", "u_PQ
 C = {name: k + 1 for k, name in enumerate(BUDGET_COLUMNS)}
 
 
-def write_large_book(task, results: dict, path: Path) -> None:
+def write_large_book(task, results: dict, path: Path, additions: BookAdditions | None = None) -> None:
     """Write the workbook of a ``pointcloud`` task with more than NATIVE_MAX_POINTS points."""
     m, n = task.cloud.m, len(task.pairs)
     if m > MAX_BOOK_POINTS:
@@ -82,7 +82,7 @@ def write_large_book(task, results: dict, path: Path) -> None:
     budget_chart(book, book.wb["Budget"], task, first)   # after MPE: the chart draws its MPE line
     book.results(RESULT_COLUMNS, results_rows(task, first))
     write_xlwings_conf(book)
-    book.save(path)
+    book.save(path, additions)
 
 
 def addin_ranges(m: int, probe_rows: dict) -> tuple[str, str, str]:

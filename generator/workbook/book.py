@@ -9,11 +9,9 @@ from __future__ import annotations
 
 import math
 import textwrap
-from contextlib import contextmanager
-from contextvars import ContextVar
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Iterable, Iterator, Sequence
+from typing import Callable, Iterable, Sequence
 
 from openpyxl import Workbook
 from openpyxl.comments import Comment
@@ -43,7 +41,6 @@ NUMBER_FORMAT = "0.000000"
 FMT_MM = "0.0000"          # lengths and coordinates in mm (0.1 µm resolution)
 FMT_COORD = "0.0#####"     # measured coordinates in mm: as entered, to 1 nm (General showed 1E-16)
 FMT_UM = "0.0000"          # uncertainties in µm (3-4 significant digits at 0.1-10 µm)
-FMT_SENS = "0.0000"        # sensitivities (dimensionless)
 #: quantities spanning decades (matrix entries, p-values); an exact zero (and the -0 a product
 #: of zeros gives in LibreOffice) prints as 0, not as -0.000E+00
 FMT_SCI = "0.000E+00;-0.000E+00;0"
@@ -51,34 +48,18 @@ FMT_SCI = "0.000E+00;-0.000E+00;0"
 PARA_WIDTH = 95
 RESULTS = "Results"
 INSTRUCTIONS = "Instructions"
-#: the task description :meth:`Book.save` stores when the writer did not call task_info itself
-#: (set by ``generator.build.build_task`` around ``write_book`` with :func:`describing`)
-_TASK_INFO: ContextVar[dict | None] = ContextVar("cmmwb_task_info", default=None)
-#: sheets the build adds to every book of the task (Decision, Summary): ``writer(book)`` called by
-#: :meth:`Book.save` before the layout is finished (set with :func:`adding_sheets`)
-_EXTRA_SHEETS: ContextVar[tuple] = ContextVar("cmmwb_extra_sheets", default=())
 
 
-@contextmanager
-def describing(info: dict) -> Iterator[None]:
-    """Every :class:`Book` of kind ``info["kind"]`` saved inside this block stores ``info``
-    (see :meth:`Book.task_info`)."""
-    token = _TASK_INFO.set(info)
-    try:
-        yield
-    finally:
-        _TASK_INFO.reset(token)
+@dataclass(frozen=True)
+class BookAdditions:
+    """What a build adds to the workbook of its task, given to the kind's ``write_book`` and by it
+    to :meth:`Book.save`: ``info``, the task description stored on the hidden sheet ``_task`` (see
+    :meth:`Book.task_info`; ignored when the writer stored its own), and ``sheets``, writers
+    ``writer(book)`` of the sheets every book of a build gets (Decision, Summary), called in
+    order before the column widths and print setup are finished."""
 
-
-@contextmanager
-def adding_sheets(kind: str, *writers) -> Iterator[None]:
-    """Every :class:`Book` of ``kind`` saved inside this block gets the sheets ``writer(book)``
-    adds (in order), written before the column widths and print setup are finished."""
-    token = _EXTRA_SHEETS.set((kind, writers))
-    try:
-        yield
-    finally:
-        _EXTRA_SHEETS.reset(token)
+    info: dict | None = None
+    sheets: tuple[Callable[["Book"], None], ...] = ()
 
 
 def _finite(value: float, what: str) -> float:
@@ -492,17 +473,17 @@ class Book:
         self._task_info = dict(info)
 
     # -- saving --------------------------------------------------------------------------------
-    def save(self, path: Path) -> Path:
-        """Write the workbook atomically (temporary file in the same folder, then rename)."""
+    def save(self, path: Path, additions: BookAdditions | None = None) -> Path:
+        """Write the workbook atomically (temporary file in the same folder, then rename), with
+        the ``additions`` of the build (:class:`BookAdditions`)."""
         path = Path(path)
-        extra = _EXTRA_SHEETS.get()
-        if extra and extra[0] == self.kind:
-            for writer in extra[1]:
-                writer(self)
+        additions = additions or BookAdditions()
+        for writer in additions.sheets:
+            writer(self)
         self._flush_validations()
         self._finish_layout()
-        info = self._task_info if self._task_info is not None else _TASK_INFO.get()
-        if info is not None and info.get("kind") == self.kind:
+        info = self._task_info if self._task_info is not None else additions.info
+        if info is not None:
             write_task_sheet(self, info)
         self.wb.move_sheet(INSTRUCTIONS, offset=-self.wb.sheetnames.index(INSTRUCTIONS))
         self.wb.active = 0

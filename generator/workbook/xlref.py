@@ -109,11 +109,6 @@ def check_name(name: str) -> str:
     return name
 
 
-def neg(expr: str) -> str:
-    """Negation that survives Excel's precedence (``-x^2`` would be ``(+x)^2``)."""
-    return f"-({expr})"
-
-
 def fn(name: str, *args: str) -> str:
     """A function call ``NAME(a, b, ...)`` (no leading ``=``)."""
     return f"{name}({','.join(args)})"

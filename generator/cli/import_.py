@@ -4,9 +4,11 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from .common import add_command
 
-def cmd_import(args) -> int:
-    from .importers import run_import
+
+def run(args) -> int:
+    from ..importers import run_import
 
     files, report = run_import(Path(args.file), Path(args.out), features=args.feature, kind=args.kind,
                                normals=args.normals, force=args.force)
@@ -18,8 +20,6 @@ def cmd_import(args) -> int:
 
 
 def register(sub) -> None:
-    from .commands import add_command
-
     s = add_command(sub, "import", "QIF measured points (or Q-DAS AQDEF values) -> task file + points CSV",
                     "Reads the measured points of a QIF results file (ISO 23952: points, normals, probe "
                     "and nominal where given) into a pointcloud or feature task with its points table, "
@@ -44,4 +44,4 @@ def register(sub) -> None:
                    help="point normals from the file (default), or from the measured element when the "
                         "file has none (stated in the task notes)")
     s.add_argument("--force", action="store_true", help="overwrite existing output files (default: refuse)")
-    s.set_defaults(func=cmd_import)
+    s.set_defaults(func=run)

@@ -1,5 +1,5 @@
-"""What the ``cmmwb`` command line and the modules that add subcommands to it share
-(:mod:`generator.cli` imports those modules; they import this one, never :mod:`generator.cli`).
+"""What the command modules of :mod:`generator.cli` share: a subcommand with its description and
+examples (:func:`add_command`); the modules import this one, never :mod:`generator.cli.program`.
 """
 
 from __future__ import annotations

@@ -6,11 +6,12 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from .errors import InputError
+from ..errors import InputError
+from .common import add_command
 
 
 def cmd_build_oxt(args) -> int:
-    from .oxt import build_oxt
+    from ..oxt import build_oxt
 
     out = Path(args.out)
     if out.suffix.lower() != ".oxt":
@@ -28,7 +29,7 @@ def cmd_relink(args) -> int:
     import shutil
     import subprocess
 
-    from .oxt import SOURCES
+    from ..oxt import SOURCES
 
     book, out = Path(args.book), Path(args.out)
     if not book.is_file():
@@ -55,8 +56,6 @@ def cmd_relink(args) -> int:
 
 
 def register(sub) -> None:
-    from .commands import add_command
-
     s = add_command(sub, "addin", "the spreadsheet add-ins (see docs/addins.md)",
                     "The optional add-ins that compute the Gaussian-process blocks of large workbooks: "
                     "the LibreOffice Calc extension and the relinking of a large workbook so its "

@@ -1,4 +1,5 @@
-"""``cmmwb calibrate RECORDINGS.csv [more] --task TASK.toml --out DIR`` (docs/calibrate.md).
+"""The calibration behind ``cmmwb calibrate RECORDINGS.csv [more] --task TASK.toml --out DIR``
+(docs/calibrate.md; the command is :mod:`generator.cli.calibrate`).
 
 Reads the recordings (docs/recordings.md), lets the locator name the systematic effects
 (``diagnose`` with the task's model; ``--effects none`` skips it), estimates the hyper-parameters
@@ -28,66 +29,16 @@ from xlfuncs.locator import effects as fx
 from xlfuncs import pointcloud as pc
 from xlfuncs.errors import ModelError
 from xlfuncs.locator.report import effect_estimates
-from xlfuncs.locator.recordings import RecordingsError, parse_recordings, write_recordings
+from xlfuncs.locator.recordings import RecordingsError, write_recordings
 
 from .. import __version__
-from ..errors import InputError
-from ..diagnosis.cli import load_model
+from ..errors import InputError, model_errors_named
+from ..diagnosis.run import read_recordings
+from ..workbook.atomic import Staging
 
 #: the u(d) grid and the MPE check use the pointcloud workbook's grid (the MPE sheet is shared)
 GRID_POINTS = 101
 DEFAULT_L_MAX_MM = 1000.0
-
-
-def register(sub) -> None:
-    from ..commands import add_command
-
-    s = add_command(sub, "calibrate", "the six factors' hyper-parameters from recordings (REML)",
-                    "Restricted maximum likelihood of the Forbes 2025 hyper-parameters (sigma_R_um, sigma_S_ppm, "
-                    "..., lambda_P) from the machine's own recordings (ISO 10360-2 lengths, step gauges, ball "
-                    "plates: docs/recordings.md), with the effects the locator names as fixed effects; the "
-                    "covariance of the estimates, what the records cannot identify and what would, the MPE "
-                    "check of the fitted model, and the effects fed back as compensation or as an influence "
-                    "factor (docs/calibrate.md).",
-                    ("cmmwb calibrate iso.csv stepgauge.csv --task machine.toml --out cal",
-                     "cmmwb calibrate iso.csv --task machine.toml --mpe 1.5,333 --out cal",
-                     "cmmwb calibrate plate.csv --task machine.toml --feedback factor --out cal"))
-    s.add_argument("recordings", nargs="+", metavar="RECORDINGS.csv",
-                   help="recordings CSV files (lengths or points); each is an independent session")
-    s.add_argument("--task", metavar="TASK.toml",
-                   help="task file: its [parameters] are the starting values, its [[probes]] the probes, its "
-                        "[mpe] the MPE statement checked")
-    s.add_argument("--sigma-um", type=float, metavar="S",
-                   help="instead of --task: start from a model with only repeatability sigma_R_um = S (µm)")
-    s.add_argument("--out", required=True, metavar="DIR", help="output folder (created if missing)")
-    s.add_argument("--effects", default="auto", metavar="auto|none|NAME[,NAME]",
-                   help="systematic effects estimated jointly as fixed effects: 'auto' those the locator names "
-                        "(diagnose with the task's model), 'none', or a list of effect names of "
-                        "docs/recordings.md section 4 (default: auto)")
-    s.add_argument("--feedback", default="compensate", choices=("compensate", "factor", "none"),
-                   help="how the effects enter the fitted task: compensated coordinates (the factor keeps the "
-                        "corrections' u), an additional influence factor, or not at all (default: compensate)")
-    s.add_argument("--mpe", default=None, metavar="A,B[,K]",
-                   help="MPE statement E = A + L/B (A in µm, B in mm) and coverage factor K (default 2) for the "
-                        "check; default: the task's [mpe]")
-    s.add_argument("--start", default="task", choices=("task", "mpe1"),
-                   help="starting values: the task's [parameters] (a zero there leaves the factor out), or "
-                        "Forbes 2025 Table 3 MPE1 for every factor (default: task)")
-    s.add_argument("--alpha", type=float, default=0.01, help="significance level of the locator (default: 0.01)")
-    s.add_argument("--no-workbook", action="store_true", help="skip the workbook (default: write it)")
-    s.add_argument("--force", action="store_true",
-                   help="replace outputs edited since cmmwb wrote them, keeping a backup (default: refuse)")
-    s.set_defaults(func=cmd_calibrate)
-
-
-def read_recordings(path: Path):
-    from ..workbook.guarded import read_text
-
-    text = read_text(path, "recordings")
-    try:
-        return parse_recordings(text)
-    except RecordingsError as e:
-        raise InputError(e.message, file=path, where=e.where) from None
 
 
 def parse_mpe(text: str | None, doc: dict | None, probes) -> dict | None:
@@ -136,7 +87,6 @@ def run_calibrate(paths: list[Path], model: dg.Model, out_dir: Path, *, task_pat
                   mpe: dict | None = None, alpha: float = 0.01, workbook: bool = True, force: bool = False,
                   profiles: bool = True) -> tuple[dict, list[Path]]:
     """Calibrate from ``paths`` into ``out_dir`` (all or nothing); returns the JSON and the files."""
-    from ..build import Staging
     from ..taskfile import read_toml
 
     if not (0.0 < alpha < 1.0):
@@ -151,33 +101,30 @@ def run_calibrate(paths: list[Path], model: dg.Model, out_dir: Path, *, task_pat
             raise InputError(f"two recordings files named {stem!r}: give distinct file names", file=path)
         names[stem] = path
         rec = read_recordings(path)
-        try:
-            prep = dg.prepare(rec, model, False)
-            if prep.r_um.shape[0] > cb.DENSE_MAX_OBS:
-                raise ModelError(f"{prep.r_um.shape[0]} observations: calibrate uses the dense record "
-                                 f"covariance, at most {cb.DENSE_MAX_OBS} per file (split the file)")
-            chosen, diag = [], None
-            if effects == "auto":
-                diag = dg.diagnose_prepared(prep, alpha)
-                chosen = list(diag.chosen)
-                X, labels = diag.X_sel, list(diag.sel_labels)
-            elif effects == "none":
-                X, labels = _effect_columns(prep, [], path)
-            else:
-                chosen = [e.strip() for e in effects.split(",") if e.strip()]
-                X, labels = _effect_columns(prep, chosen, path)
-            s = cb.RecordSet(stem, prep, X, [f"{a} {b}" for a, b in labels], cb.record_covariance(prep))
-        except RecordingsError as e:
-            raise InputError(e.message, file=path, where=e.where) from None
-        except ModelError as e:
-            raise InputError(str(e), file=path) from None
+        with model_errors_named(path):
+            try:
+                prep = dg.prepare(rec, model, False)
+                if prep.r_um.shape[0] > cb.DENSE_MAX_OBS:
+                    raise ModelError(f"{prep.r_um.shape[0]} observations: calibrate uses the dense record "
+                                     f"covariance, at most {cb.DENSE_MAX_OBS} per file (split the file)")
+                chosen, diag = [], None
+                if effects == "auto":
+                    diag = dg.diagnose_prepared(prep, alpha)
+                    chosen = list(diag.chosen)
+                    X, labels = diag.X_sel, list(diag.sel_labels)
+                elif effects == "none":
+                    X, labels = _effect_columns(prep, [], path)
+                else:
+                    chosen = [e.strip() for e in effects.split(",") if e.strip()]
+                    X, labels = _effect_columns(prep, chosen, path)
+                s = cb.RecordSet(stem, prep, X, [f"{a} {b}" for a, b in labels], cb.record_covariance(prep))
+            except RecordingsError as e:     # a ModelError too, named by the recordings' line
+                raise InputError(e.message, file=path, where=e.where) from None
         sets.append(s)
         per_file.append({"path": path, "rec": rec, "prep": prep, "diag": diag, "chosen": chosen,
                          "labels": labels})
-    try:
+    with model_errors_named(task_label or paths[0]):
         cal = cb.calibrate(sets, model.params)
-    except ModelError as e:
-        raise InputError(str(e), file=task_label or paths[0]) from None
 
     # -- the effects at the fitted model, fed back ---------------------------------------------
     findings, effect_rows = [], []
@@ -196,13 +143,11 @@ def run_calibrate(paths: list[Path], model: dg.Model, out_dir: Path, *, task_pat
             effect_rows.append({"file": s.name, "name": name, "unit": unit,
                                 "labels": [f["labels"][j][1] for j in idx], "estimate": est, "u": u,
                                 "locator": effect_estimates(f["diag"], name) if f["diag"] is not None else None})
-    try:
+    with model_errors_named(where="--feedback"):
         if feedback == "none" or not findings:
             final, changes, notes = cal.params, [], []
         else:
             final, changes, notes = cp.feed_back(cal.params, findings, feedback)
-    except ModelError as e:
-        raise InputError(str(e), where="--feedback") from None
 
     # -- chi2 of the records before (task) and after (fitted task, compensated records) ---------
     chi2 = {"before": 0.0, "dof_before": 0, "after": 0.0, "dof_after": 0}
@@ -344,26 +289,3 @@ def fitted_toml(doc: dict | None, params: pc.Parameters, result: dict) -> str:
         doc["task"]["notes"] = notes
     head = [f"# {note}"] + [f"# {n}" for n in result["notes"]]
     return "\n".join(head) + "\n" + tomli_w.dumps(doc)
-
-
-def cmd_calibrate(args) -> int:
-    model, label = load_model(args.task, args.sigma_um)
-    if args.start == "mpe1":
-        from ..diagnosis.cli import MPE1
-
-        model = replace(model, params=pc.Parameters(**MPE1))
-        label += " (starting values: Forbes 2025 Table 3 MPE1)"
-    task_path = Path(args.task) if args.task else None
-    doc = None
-    if task_path is not None:
-        from ..taskfile import read_toml
-
-        doc = read_toml(task_path)
-    mpe = parse_mpe(args.mpe, doc, model.probes)
-    result, files = run_calibrate([Path(p) for p in args.recordings], model, Path(args.out), task_path=task_path,
-                                  task_label=label, effects=args.effects, feedback=args.feedback, mpe=mpe,
-                                  alpha=args.alpha, workbook=not args.no_workbook, force=args.force)
-    print(result["summary"])
-    for f in files:
-        print(f"  -> {f}")
-    return 0
