@@ -92,12 +92,15 @@ def _relink_and_recalc(book: Path, ext, out_json: Path, *settings: str, relink: 
 @pytest.mark.libreoffice
 @pytest.mark.parametrize("extra_points", [130, 1880])  # m = 250 and the m = 2000 book of the docs
 def test_live_addin_sheet_follows_an_edited_input_in_libreoffice(tmp_path, installed_extension, extra_points):
-    from test_large_workbook import evaluate_addin_formulas, write_large_task
     import openpyxl
-    from conftest import close
-    from generator.pointcloud import large_book
+
     from generator.cli import build_task
+    from generator.pointcloud import large_book
     from generator.pointcloud.vx_sheets import NATIVE_MAX_POINTS
+
+    from tests.helpers import close
+    from tests.helpers.addin import evaluate_addin_formulas
+    from tests.helpers.tasks import write_large_task
 
     m = NATIVE_MAX_POINTS + extra_points
     build_task(write_large_task(tmp_path, m, "plate"), tmp_path / "out", plots=False)
@@ -125,18 +128,20 @@ def test_live_addin_sheet_follows_an_edited_input_in_libreoffice(tmp_path, insta
 
 
 def _small_large_book(folder: Path) -> Path:
-    from test_large_workbook import write_large_task
     from generator.cli import build_task
     from generator.pointcloud.vx_sheets import NATIVE_MAX_POINTS
+
+    from tests.helpers.tasks import write_large_task
     build_task(write_large_task(folder, NATIVE_MAX_POINTS + 10, "plate"), folder / "out", plots=False)
     return folder / "out" / "plate.xlsx"
 
 
 @pytest.mark.libreoffice
 def test_relink_saves_an_ods_whose_live_addin_computes_on_opening(tmp_path, installed_extension):
-    from test_large_workbook import evaluate_addin_formulas
-    from conftest import close
     from generator.pointcloud import large_book
+
+    from tests.helpers import close
+    from tests.helpers.addin import evaluate_addin_formulas
     cache, profile = installed_extension
     book = _small_large_book(tmp_path)
     ods = tmp_path / "plate.ods"
@@ -168,11 +173,14 @@ def test_relink_without_the_extension_names_the_problem_and_writes_nothing(tmp_p
 def test_live_addin_of_a_feature_workbook_computes_in_libreoffice(tmp_path, installed_extension):
     """The large feature workbook (120-point bore, protected sheets, optional arguments): every
     Live_addin cell after an edit of sigma_ET_um equals the core for the edited inputs."""
-    from test_large_feature_workbook import evaluate_live, write_bore_task
     import openpyxl
-    from conftest import close
-    from generator.pointcloud import large_book
+
     from generator.cli import build_task
+    from generator.pointcloud import large_book
+
+    from tests.helpers import close
+    from tests.helpers.addin import evaluate_live
+    from tests.helpers.tasks import write_bore_task
 
     build_task(write_bore_task(tmp_path), tmp_path / "out", plots=False)
     book = tmp_path / "out" / "bore120.xlsx"

@@ -5,7 +5,6 @@ Excel would pass (lists of rows, text ids, numbers), they give the numbers of th
 import numpy as np
 import pytest
 
-from conftest import EXAMPLES
 from generator.pointcloud import job
 from generator.taskfile import read_toml
 from xlfuncs import blocked as bl
@@ -14,7 +13,8 @@ from xlfuncs import pointcloud as pc
 from xlfuncs import udf
 from xlfuncs.errors import ModelError
 
-from test_blocked import PARAMS, PROBES, random_cloud, rel_err, sphere_cloud
+from tests.helpers import EXAMPLES
+from tests.helpers.clouds import PARAMS, PROBES, random_cloud, rel_err, sphere_cloud
 
 
 def point_rows(cloud: pc.PointCloud, idx=None) -> list[list]:

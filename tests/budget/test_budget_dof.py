@@ -18,11 +18,12 @@ from pathlib import Path
 import pytest
 import tomli_w
 
-from conftest import close
 from generator.budget import book as budget_book
 from generator.build import build_task
 from generator.workbook.recalc import recalculate
 from xlfuncs import dof
+
+from tests.helpers import close
 
 KNUCKLE = Path(budget_book.__file__).parents[1] / "examples" / "knuckle.toml"
 

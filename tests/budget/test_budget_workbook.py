@@ -17,12 +17,19 @@ from pathlib import Path
 import openpyxl
 import pytest
 
-from conftest import close
-from generator.budget import book as budget_book, job as budget_job
+from generator.budget import book as budget_book
+from generator.budget import job as budget_job
 from generator.errors import InputError
 from generator.workbook.recalc import recalculate, results_rows
 
-from test_budget_core import TABLE9, TABLES, assert_printed, numerical_gradient, reference_value
+from tests.helpers import close
+from tests.helpers.budget import (
+    TABLE9,
+    TABLES,
+    assert_printed,
+    numerical_gradient,
+    reference_value,
+)
 
 KNUCKLE = Path(budget_job.__file__).parents[1] / "examples" / "knuckle.toml"
 

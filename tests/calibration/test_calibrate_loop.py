@@ -5,7 +5,6 @@ agree with their JSON in three engines."""
 
 import pytest
 
-from conftest import ENGINES, close, recalc
 from generator.calibration.cli import run_calibrate
 from generator.cli import build_task
 from generator.diagnosis.cli import load_model
@@ -13,6 +12,8 @@ from generator.workbook.recalc import results_rows
 from xlfuncs import pointcloud as pc
 from xlfuncs.locator import simulate as sm
 from xlfuncs.locator.recordings import write_recordings
+
+from tests.helpers import ENGINES, close, recalc
 
 TASK = """[task]
 kind = "pointcloud"

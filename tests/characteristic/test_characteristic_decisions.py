@@ -9,15 +9,16 @@ cells, recomputed by `formulas` and by LibreOffice, equal the core's (relative 1
 
 from __future__ import annotations
 
-import pytest
 import openpyxl
+import pytest
 
-from conftest import EXAMPLES
 from generator import decision
 from generator.errors import InputError
 from generator.workbook.recalc import recalculate
-from test_decision_workbook import assert_engine_agrees, at, build, cached
 from xlfuncs import conformity as cf
+
+from tests.helpers import EXAMPLES
+from tests.helpers.decision import assert_engine_agrees, at, build, cached
 
 PLATE = EXAMPLES / "characteristic_plate.toml"
 

@@ -7,9 +7,10 @@ import json
 import openpyxl
 import pytest
 
-from conftest import ENGINES, EXAMPLES, REL, close
 from generator.build import build_task
 from generator.workbook.recalc import recalculate, results_rows
+
+from tests.helpers import ENGINES, EXAMPLES, REL, close
 
 KEYS = ("value", "u", "tolerance_mm", "bonus_mm", "zone_mm", "margin_mm", "u_margin_um")
 

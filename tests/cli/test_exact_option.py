@@ -8,15 +8,14 @@ import json
 
 import pytest
 
-from generator.feature import job as feature_job
 from generator.cli import build_task, main
-from xlfuncs.locator import diagnose as dg
+from generator.feature import job as feature_job
 from xlfuncs.locator import model as locator_model
 from xlfuncs.locator import simulate as sm
 from xlfuncs.locator.recordings import write_recordings
 
-from test_diagnose_core import MPE1, PAIR
-from test_large_feature_workbook import write_bore_task
+from tests.helpers.clouds import MPE1, PAIR
+from tests.helpers.tasks import write_bore_task
 
 
 @pytest.fixture

@@ -12,8 +12,9 @@ from pathlib import Path
 
 import pytest
 
-HERE = Path(__file__).resolve().parent
-sys.path.insert(0, str(HERE / "bad_files"))
+from tests.helpers import BAD_FILES
+
+sys.path.insert(0, str(BAD_FILES))
 from make_bad_files import POINTCLOUD_CSV, POINTCLOUD_TASK  # noqa: E402
 
 

@@ -6,7 +6,7 @@ import numpy as np
 
 from xlfuncs import pointcloud as pc
 
-from test_blocked import PARAMS, PROBES, random_cloud
+from tests.helpers.clouds import PARAMS, PROBES, random_cloud
 
 REL = 1e-10
 

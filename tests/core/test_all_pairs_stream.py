@@ -8,7 +8,7 @@ import pytest
 from xlfuncs import pointcloud as pc
 from xlfuncs.errors import DegenerateGeometryError
 
-from test_blocked import PARAMS, random_cloud
+from tests.helpers.clouds import PARAMS, random_cloud
 
 
 @pytest.mark.parametrize("block", [7, 1000, pc.PAIR_BLOCK])

@@ -9,8 +9,6 @@ test says so.
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 import pytest
 

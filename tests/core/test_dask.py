@@ -11,7 +11,7 @@ from xlfuncs import pointcloud as pc
 distributed = pytest.importorskip("distributed")
 from xlfuncs.distributed import DaskBackend, get_backend  # noqa: E402
 
-from test_blocked import PARAMS, random_cloud, sphere_cloud  # noqa: E402
+from tests.helpers.clouds import PARAMS, random_cloud, sphere_cloud  # noqa: E402
 
 
 @pytest.fixture(scope="module")
@@ -81,7 +81,8 @@ def test_diagnose_of_length_records_on_a_dask_cluster_equals_the_local_path(clus
     on two worker processes: chi-square, candidates, estimates and u as on one process."""
     from xlfuncs.locator import diagnose as dg
     from xlfuncs.locator import simulate as sm
-    from test_diagnose_core import MPE1, PAIR
+
+    from tests.helpers.clouds import MPE1, PAIR
 
     rec = sm.simulate(sm.iso10360(PAIR, repeats=2), MPE1, {"scale": 3.0}, seed=3)
     model = dg.Model(MPE1, PAIR, True)

@@ -146,7 +146,8 @@ def refit(kind, p0, Y, w):
         J = np.empty(r.shape + (p.shape[1],))
         for j in range(p.shape[1]):
             h = 1e-6 * max(1.0, abs(p0[j]))
-            e = np.zeros(p.shape[1]); e[j] = h
+            e = np.zeros(p.shape[1])
+            e[j] = h
             J[..., j] = (residuals(kind, p + e, Y) - residuals(kind, p - e, Y)) * wr / (2 * h)
         step = -np.linalg.solve(np.einsum("mqi,mqj->mij", J, J),
                                 np.einsum("mqi,mq->mi", J, r)[..., None])[..., 0]
@@ -295,7 +296,8 @@ def test_weights_equal_to_inverse_sigma_give_the_maximum_likelihood_variance():
 def test_a_zero_weight_removes_the_point():
     rng = np.random.default_rng(13)
     X, N, _, kw = random_points("sphere", rng, 12)
-    w = np.ones(12); w[4] = 0.0
+    w = np.ones(12)
+    w[4] = 0.0
     fw = features.fit("sphere", X, weights=w)
     fr = features.fit("sphere", np.delete(X, 4, axis=0))
     G = features.G_A_X(fw)
@@ -323,7 +325,8 @@ def test_jacobian_is_the_derivative_of_the_distance():
         f = features.fit(element, X, normals=N, **kw)
         for j in range(f.n):
             h = 1e-6
-            e = np.zeros(f.n); e[j] = h
+            e = np.zeros(f.n)
+            e[j] = h
             res = []
             for sgn in (1, -1):
                 o, R, sh = features._update(f.kind, f.origin_mm, f.R, f.shape, sgn * e)
@@ -413,7 +416,8 @@ def test_iteration_limit_is_reported():
 def test_bad_inputs_are_named():
     with pytest.raises(ModelError, match="unknown feature type 'torus'"):
         features.fit("torus", np.zeros((5, 3)))
-    X = np.eye(4, 3); X[1, 2] = np.nan
+    X = np.eye(4, 3)
+    X[1, 2] = np.nan
     with pytest.raises(ModelError, match="finite"):
         features.fit("sphere", X)
     with pytest.raises(ModelError, match="circle plane"):

@@ -13,7 +13,7 @@ from xlfuncs import lowrank as lr
 from xlfuncs import pointcloud as pc
 from xlfuncs.errors import ModelError
 
-from test_blocked import PARAMS, PROBES, rel_err, sphere_cloud
+from tests.helpers.clouds import PARAMS, PROBES, rel_err, sphere_cloud
 
 GP = ("ET", "ER", "P")
 
@@ -112,9 +112,10 @@ def test_an_unknown_method_is_a_model_error():
 def test_the_feature_job_reports_the_approximation_and_exact_is_one_setting_away(tmp_path, monkeypatch):
     """Above LOWRANK_MIN_POINTS (lowered here) the feature results carry "approximation";
     CMMWB_VA_METHOD=exact gives the exact numbers, which agree to the stated bound."""
-    from generator.feature import job as feature_job
     from generator.cli import build_task
-    from test_large_feature_workbook import write_bore_task
+    from generator.feature import job as feature_job
+
+    from tests.helpers.tasks import write_bore_task
 
     monkeypatch.setattr(feature_job, "DENSE_MAX_POINTS", 50)
     monkeypatch.setattr(feature_job, "LOWRANK_MIN_POINTS", 100)

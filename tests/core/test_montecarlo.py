@@ -5,7 +5,6 @@ fitted features the Monte Carlo u agrees with the direct (law of propagation) u.
 import numpy as np
 import pytest
 
-from conftest import EXAMPLES
 from generator.pointcloud import job
 from generator.taskfile import read_toml
 from xlfuncs import blocked as bl
@@ -14,7 +13,8 @@ from xlfuncs import montecarlo as mc
 from xlfuncs import pointcloud as pc
 from xlfuncs.errors import ModelError
 
-from test_blocked import PARAMS, PROBES, random_cloud, rel_err, sphere_cloud
+from tests.helpers import EXAMPLES
+from tests.helpers.clouds import PARAMS, PROBES, random_cloud, rel_err, sphere_cloud
 
 
 def test_the_drawn_factors_follow_V_X_exactly():

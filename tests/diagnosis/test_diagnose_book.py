@@ -6,22 +6,17 @@ import json
 
 import pytest
 
-from conftest import ENGINES, close, recalc
 from generator.diagnosis import book as diagnose_book
 from generator.diagnosis.cli import run_diagnose
 from generator.workbook.recalc import results_rows
-from xlfuncs.locator import diagnose as dg
-from xlfuncs.locator import effects as fx
 from xlfuncs import pointcloud as pc
+from xlfuncs.locator import diagnose as dg
 from xlfuncs.locator import simulate as sm
 from xlfuncs.locator.recordings import write_recordings
 
-MPE1 = pc.Parameters(sigma_R_um=0.20, sigma_S_ppm=0.7, sigma_Sa_ppm=0.7, sigma_Q_ppm=0.7, sigma_PQ_um=0.20,
-                     sigma_ET_um=0.2, lambda_ET_mm=200.0, sigma_ER_urad=4.0, lambda_ER_mm=400.0,
-                     sigma_P0_um=0.10, sigma_P_um=0.10, lambda_P=0.5)
-ONE = (pc.Probe("P1", (0.0, 0.0, -50.0)),)
-PAIR = (pc.Probe("P1", (0.0, 20.0, -30.0)), pc.Probe("P2", (0.0, -20.0, -30.0)))
-THREE = (pc.Probe("P1", (0.0, 0.0, -50.0)), pc.Probe("P2", (150.0, 0.0, -50.0)), pc.Probe("P3", (0.0, 150.0, -50.0)))
+from tests.helpers import ENGINES, close, recalc
+from tests.helpers.clouds import MPE1, ONE, PAIR, THREE
+from tests.helpers.locator import expected_rows
 
 CASES = {
     # name: (layout, kwargs, probes, planted, temperature, effects that must be chosen)
@@ -107,36 +102,6 @@ def books(tmp_path_factory):
     finally:
         mp.undo()
     return out
-
-
-def expected_rows(result):
-    exp = {k: result[k] for k in ("chi2_before", "dof_before", "p_before", "chi2_after", "dof_after",
-                                  "rms_before_um", "rms_after_um", "p_after")}
-    exp["p_targeted"] = result["p_targeted"] if result["p_targeted"] is not None else 1.0
-    unc = {}
-    if result["noise_scale"]:
-        exp["noise_scale"], unc["noise_scale"] = result["noise_scale"]["estimate"], result["noise_scale"]["u"]
-    for o in result["outliers"] or []:
-        if isinstance(o["estimate_um"], list):        # a point: one mean shift per coordinate
-            for a, v, u in zip(o["axes"], o["estimate_um"], o["u_um"]):
-                exp[f"outlier {o['id']}.{a}"], unc[f"outlier {o['id']}.{a}"] = v, u
-        else:
-            exp[f"outlier {o['id']}"], unc[f"outlier {o['id']}"] = o["estimate_um"], o["u_um"]
-    for e in result["effects"]:
-        if isinstance(e["estimate"], list):
-            labels = ([f"{pp['probe']}.d{a}" for pp in e["per_probe"] for a in "xyz"]
-                      if e["name"] == "probe_qualification" else ["c2", "c3"] if e["name"] in fx.STRAIGHTNESS
-                      else [f"{p}.{h}" for p in ("P1", "P2") for h in ("c2", "s2", "c3", "s3", "c4", "s4")]
-                      if e["name"] == "probe_lobing" else ["a", "b"] if e["name"] in fx.PERIODIC
-                      else [f"v{a}" for a in "xyz"])
-            for lab, v, u in zip(labels, e["estimate"], e["u"]):
-                if v is not None:
-                    exp[f"{e['name']} {lab}"], unc[f"{e['name']} {lab}"] = v, u
-            if e["name"] in fx.PERIODIC:
-                exp[f"{e['name']} period_mm"], unc[f"{e['name']} period_mm"] = e["period_mm"], e["u_period_mm"]
-        else:
-            exp[e["name"]], unc[e["name"]] = e["estimate"], e["u"]
-    return exp, unc
 
 
 @pytest.mark.parametrize("engine", ENGINES)

@@ -8,149 +8,26 @@ from __future__ import annotations
 
 import json
 import math
-import textwrap
 from pathlib import Path
 
 import numpy as np
 import openpyxl
 import pytest
 
-from conftest import ENGINES, EXAMPLES
-from generator.feature import book as feature_book, job as feature_job
 from generator.cli import build_task, main
 from generator.errors import InputError
-from generator.workbook.recalc import recalculate, results_rows
+from generator.feature import book as feature_book
+from generator.feature import job as feature_job
 from generator.taskfile import read_toml
+from generator.workbook.recalc import recalculate, results_rows
 from xlfuncs.pointcloud import FACTORS
+
+from tests.helpers import ENGINES, EXAMPLES
+from tests.helpers.tasks import SHIPPED, SMALL_TASKS, feature_task_path
 
 REL = 1e-9
 
-FULL_MODEL = """
-[parameters]
-sigma_R_um = 0.3
-sigma_S_ppm = 1.0
-sigma_Sa_ppm = 0.8
-sigma_Q_ppm = 0.9
-sigma_PQ_um = 0.25
-sigma_ET_um = 0.3
-lambda_ET_mm = 150
-sigma_ER_urad = 5.0
-lambda_ER_mm = 300
-sigma_P0_um = 0.1
-sigma_P_um = 0.15
-lambda_P = 0.6
-
-[[probes]]
-id = "P1"
-offset_mm = [0.0, 0.0, -50.0]
-"""
-
-#: small tasks for the element types the shipped examples do not cover cheaply
-SMALL_TASKS = {
-    "line_space": """
-        [task]
-        kind = "feature"
-        name = "line_space"
-        [feature]
-        type = "line"
-        [sampling]
-        pattern = "line_segment"
-        center_mm = [120.0, -40.0, 60.0]
-        axis = [1.0, 2.0, 0.5]
-        half_length_mm = 40.0
-        n_points = 8
-        [planning]
-        sweep = "half_length_mm"
-        values = [10, 40, 100]
-    """,
-    "circle_space": """
-        [task]
-        kind = "feature"
-        name = "circle_space"
-        [feature]
-        type = "circle"
-        circle_plane = "space"
-        [sampling]
-        pattern = "circle_arc"
-        center_mm = [80.0, 30.0, -20.0]
-        axis = [0.3, -0.2, 1.0]
-        r0_mm = 20.0
-        arc_deg = 200.0
-        n_points = 10
-        [planning]
-        sweep = "arc_deg"
-        values = [360, 180, 90]
-    """,
-    "cylinder_small": """
-        [task]
-        kind = "feature"
-        name = "cylinder_small"
-        [feature]
-        type = "cylinder"
-        [sampling]
-        pattern = "cylinder_patch"
-        center_mm = [-50.0, 120.0, 10.0]
-        axis = [0.0, 1.0, 0.1]
-        r0_mm = 15.0
-        arc_deg = 240.0
-        half_height_mm = 25.0
-        n_theta = 6
-        n_z = 3
-        [planning]
-        sweep = "arc_deg"
-        values = [360, 240, 90]
-    """,
-    "cone_small": """
-        [task]
-        kind = "feature"
-        name = "cone_small"
-        [feature]
-        type = "cone"
-        reference_mm = [10.0, 20.0, 30.0]
-        [sampling]
-        pattern = "cone_patch"
-        center_mm = [10.0, 20.0, 30.0]
-        axis = [0.0, 0.0, 1.0]
-        r0_mm = 30.0
-        phi_deg = 25.0
-        arc_deg = 300.0
-        half_height_mm = 15.0
-        n_theta = 6
-        n_z = 3
-        [planning]
-        sweep = "phi_deg"
-        values = [0, 25, 60]
-    """,
-    "sphere_patch": """
-        [task]
-        kind = "feature"
-        name = "sphere_patch"
-        [feature]
-        type = "sphere"
-        [sampling]
-        pattern = "sphere_patch"
-        center_mm = [0.0, 50.0, 100.0]
-        r0_mm = 12.0
-        theta_deg = [-60.0, 120.0]
-        phi_range_deg = [-10.0, 70.0]
-        n_theta = 4
-        n_phi = 3
-        [planning]
-    """,
-}
-
-#: shipped examples that are cheap to recalculate (planning patterns not covered above)
-SHIPPED = ["feature_plane_face.toml", "feature_table1_circle_arc.toml",
-           "feature_table8_sphere_nine.toml", "feature_table8_sphere_six.toml"]
 CASES = list(SMALL_TASKS) + SHIPPED
-
-
-def task_path(case: str, tmp: Path) -> Path:
-    if case in SMALL_TASKS:
-        p = tmp / f"{case}.toml"
-        p.write_text(textwrap.dedent(SMALL_TASKS[case]) + FULL_MODEL)
-        return p
-    return EXAMPLES / case
 
 
 @pytest.fixture(scope="module")
@@ -158,7 +35,7 @@ def built(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("features")
     out = {}
     for case in CASES:
-        results, files = build_task(task_path(case, tmp), tmp / "out", plots=False)
+        results, files = build_task(feature_task_path(case, tmp), tmp / "out", plots=False)
         book = next(f for f in files if f.suffix == ".xlsx")
         on_disk = json.loads(book.with_suffix(".json").read_text())
         out[case] = (on_disk, book)
@@ -288,7 +165,7 @@ def test_above_the_native_limit_the_heavy_blocks_are_labelled_values(tmp_path, e
 
 def test_the_workbook_is_live(tmp_path):
     """Doubling sigma_R_um on 'Inputs' doubles u_R of every parameter (formulas engine)."""
-    p = task_path("line_space", tmp_path)
+    p = feature_task_path("line_space", tmp_path)
     res, files = build_task(p, tmp_path / "out", plots=False)
     book = next(f for f in files if f.suffix == ".xlsx")
     wb = openpyxl.load_workbook(book)

@@ -16,75 +16,21 @@ from pathlib import Path
 import numpy as np
 import openpyxl
 import pytest
-from openpyxl.utils import get_column_letter, range_boundaries
+from openpyxl.utils import get_column_letter
 from openpyxl.worksheet.formula import ArrayFormula
 
-from conftest import ENGINES, close, recalc
-from generator.feature import book as feature_book, job as feature_job
-from generator.pointcloud import large_book
 from generator.cli import build_task
+from generator.feature import book as feature_book
+from generator.feature import job as feature_job
+from generator.pointcloud import large_book
 from generator.workbook.recalc import results_rows
-from xlfuncs import udf
 from xlfuncs.pointcloud import FACTORS
 
-from test_features_workbook import task_path
-from test_large_workbook import _split_args
+from tests.helpers import ENGINES, close, recalc
+from tests.helpers.addin import evaluate_live
+from tests.helpers.tasks import feature_task_path, write_bore_task
 
-M = 120
 GREY = ("PQ", "S", "ET", "ER", "P")          # the factors whose V_A are values on 'V_A'
-
-
-def write_bore_task(folder: Path, name: str = "bore120") -> Path:
-    rng = np.random.default_rng(7)
-    tilt = 0.1
-    rows = ["id,x,y,z,nx,ny,nz,probe"]
-    for q, (z, t) in enumerate((z, t) for z in np.linspace(-20, 20, 5)
-                               for t in np.linspace(0, 2 * np.pi, 24, endpoint=False)):
-        r = 25 + rng.normal(0, 0.002)                   # 2 µm form error
-        c, s = np.cos(t), np.sin(t)
-        X = (100 + r * c, 50 + r * s * np.cos(tilt) - z * np.sin(tilt), -30 + r * s * np.sin(tilt) + z * np.cos(tilt))
-        N = (c, s * np.cos(tilt), s * np.sin(tilt))
-        rows.append(",".join([f"B{q + 1}", *(f"{v:.12g}" for v in (*X, *N)), "P1" if q % 2 else "P2"]))
-    assert len(rows) == M + 1 and M > feature_book.FEATURE_NATIVE_MAX_POINTS
-    (folder / f"{name}.csv").write_text("\n".join(rows) + "\n")
-    path = folder / f"{name}.toml"
-    path.write_text(f'''[task]
-kind = "feature"
-name = "{name}"
-
-[feature]
-type = "cylinder"
-axis_hint = [0, -0.1, 1]
-reference_mm = [100, 50, -30]
-weights = {{ B3 = 0.5, B7 = 0 }}
-
-[points]
-file = "{name}.csv"
-
-[parameters]
-sigma_R_um = 0.3
-sigma_S_ppm = 1.0
-sigma_Sa_ppm = 0.8
-sigma_Q_ppm = 0.9
-sigma_PQ_um = 0.25
-sigma_ET_um = 0.3
-lambda_ET_mm = 150
-sigma_ER_urad = 5.0
-lambda_ER_mm = 300
-sigma_P0_um = 0.1
-sigma_P_um = 0.15
-lambda_P = 0.6
-
-[[probes]]
-id = "P1"
-offset_mm = [0.0, 0.0, -50.0]
-
-[[probes]]
-id = "P2"
-offset_mm = [30.0, 10.0, -40.0]
-sigma_PQ_um = 0.3
-''')
-    return path
 
 
 @pytest.fixture(scope="module")
@@ -121,54 +67,6 @@ def block_values(cells: dict, row: int, column: int, n_rows: int, n_cols: int) -
 
 
 # -- evaluating the add-in formulas as Excel would (xlwings passes the ranges' values) ---------
-
-_UDF = re.compile(r"^=(?P<name>cmm_[a-z_]+)\((?P<args>.*)\)$")
-_PAPER = re.compile(r"^=MMULT\(TRANSPOSE\((?P<T>[^)]+)\),MMULT\((?P<V>[^,]+),(?P=T)\)\)\*1E\+12$")
-
-
-def evaluate_live(book: Path, values: dict) -> dict:
-    """{cell: value} of every array formula on 'Live_addin': the add-in calls by calling the
-    function of xlfuncs.udf with the recalculated values of the ranges they name, then the
-    MMULT formulas over those results (numpy)."""
-    ws = openpyxl.load_workbook(book)[large_book.LIVE]
-    own = {c.coordinate: c.value for row in ws.iter_rows() for c in row
-           if isinstance(c.value, (int, float))}                  # fit options: constants
-
-    def rng(ref: str, live: dict) -> list[list]:
-        sheet, addr = ref.rsplit("!", 1) if "!" in ref else (large_book.LIVE, ref)
-        cells = {**own, **live} if sheet == large_book.LIVE else values[sheet]
-        c0, r0, c1, r1 = range_boundaries(addr.replace("$", ""))
-        return [[cells.get(f"{get_column_letter(c)}{r}") for c in range(c0, c1 + 1)]
-                for r in range(r0, r1 + 1)]
-
-    def put(out: dict, target: str, result) -> None:
-        c0, r0, c1, r1 = range_boundaries(target)
-        result = np.asarray(result, dtype=object)
-        assert result.shape == (r1 - r0 + 1, c1 - c0 + 1), target
-        for dr in range(result.shape[0]):
-            for dc in range(result.shape[1]):
-                out[f"{get_column_letter(c0 + dc)}{r0 + dr}"] = result[dr, dc]
-
-    formulas = [c.value for row in ws.iter_rows() for c in row if isinstance(c.value, ArrayFormula)]
-    out: dict = {}
-    for f in formulas:
-        m = _UDF.match(f.text)
-        if m:
-            args = [a[1:-1] if a.startswith('"') else rng(a, out) for a in _split_args(m["args"])]
-            put(out, f.ref, udf.UDFS[m["name"]](*args))
-    for f in formulas:
-        m = _PAPER.match(f.text)
-        if m:
-            T = np.array(rng(m["T"], out), dtype=float)
-            put(out, f.ref, T.T @ np.array(rng(m["V"], out), dtype=float) @ T * 1e12)
-    assert len(out) == sum(np.prod(_shape(f.ref)) for f in formulas), "a formula not evaluated"
-    return out
-
-
-def _shape(ref: str) -> tuple[int, int]:
-    c0, r0, c1, r1 = range_boundaries(ref)
-    return r1 - r0 + 1, c1 - c0 + 1
-
 
 def assert_addin_formulas_reproduce_the_values(book: Path, values: dict, results: dict) -> None:
     live = evaluate_live(book, values)
@@ -307,7 +205,7 @@ def test_every_element_type_has_live_formulas_that_reproduce_its_values(tmp_path
     """The paper-parameter blocks T^T V_A T rely on T having orthonormal columns; this holds for
     every element (small tasks built as if above the native limit; `formulas` engine, ~2 s each)."""
     monkeypatch.setattr(feature_book, "FEATURE_NATIVE_MAX_POINTS", 0)
-    results, files = build_task(task_path(case, tmp_path), tmp_path / "out", plots=False)
+    results, files = build_task(feature_task_path(case, tmp_path), tmp_path / "out", plots=False)
     book = next(f for f in files if f.suffix == ".xlsx")
     values = recalc(book, "formulas")
     assert_results_match_json(values, results)

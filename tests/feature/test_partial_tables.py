@@ -13,8 +13,9 @@ import math
 import numpy as np
 import pytest
 
-from conftest import EXAMPLES, printed
 from xlfuncs import features, partial
+
+from tests.helpers import EXAMPLES, printed
 
 # ---- the printed tables -------------------------------------------------------------------
 

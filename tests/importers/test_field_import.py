@@ -14,7 +14,9 @@ from generator.cli import main
 from generator.errors import InputError
 from generator.importers import qif, run_import
 
-SAMPLE = Path(__file__).parent / "data" / "qif" / "QIF_PTS_SAMPLE.QIF"
+from tests.helpers import DATA
+
+SAMPLE = DATA / "qif" / "QIF_PTS_SAMPLE.QIF"
 CIRCLE1_NOMINAL = ("""      <CircleFeatureNominal id="259">
         <FeatureDefinitionId>258</FeatureDefinitionId>
         <Location>-33.05 -4.35 -1.309995069701</Location>

@@ -4,7 +4,6 @@ a clear message for the point coordinates they lack."""
 
 import json
 import tomllib
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -13,7 +12,9 @@ from generator.cli import build_task, main
 from generator.errors import InputError
 from generator.importers import qif, run_import
 
-SAMPLE = Path(__file__).parent / "data" / "qif" / "QIF_PTS_SAMPLE.QIF"
+from tests.helpers import DATA
+
+SAMPLE = DATA / "qif" / "QIF_PTS_SAMPLE.QIF"
 
 
 def test_qif_sample_lists_its_features_with_points():

@@ -4,7 +4,6 @@ values and the file's own pass/fail; their u from a documented simulated measure
 back as combinedUncertainty; the QIF 3.0 community sample's flatness reproduced from its points
 by the minimum zone."""
 
-from pathlib import Path
 from xml.etree import ElementTree as ET
 
 import numpy as np
@@ -16,7 +15,9 @@ from generator.importers import qif_characteristics as qc
 from generator.importers import qif_simulation as qs
 from xlfuncs import characteristics as ch
 
-DATA = Path(__file__).parent / "data" / "qif"
+from tests.helpers import ROOT
+
+DATA = ROOT / "tests" / "data" / "qif"
 NIST = DATA / "nist_sms_plate_results.qif"
 SAMPLE = DATA / "QIF_PTS_SAMPLE.QIF"
 

@@ -15,14 +15,15 @@ it.
 """
 
 from collections import Counter
-from pathlib import Path
 from xml.etree import ElementTree as ET
 
 import pytest
 
 from generator.importers import run_import
 
-DATA = Path(__file__).parent / "data" / "qif"
+from tests.helpers import ROOT
+
+DATA = ROOT / "tests" / "data" / "qif"
 NIST = DATA / "nist_sms_plate_results.qif"
 SAMPLE = DATA / "QIF_PTS_SAMPLE.QIF"
 QIF3_XSD = DATA / "schemas" / "3.0" / "QIFApplications" / "QIFDocument.xsd"

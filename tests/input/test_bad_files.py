@@ -18,8 +18,10 @@ from generator.cli import main
 from generator.errors import InputError
 from generator.workbook.safe_xlsx import MAX_UNCOMPRESSED_BYTES, check
 
-HERE = Path(__file__).resolve().parent
-CORPUS = HERE / "bad_files"
+from tests.helpers import BAD_FILES
+from tests.helpers.files import assert_clear_failure
+
+CORPUS = BAD_FILES
 sys.path.insert(0, str(CORPUS))
 from make_bad_files import CASES, POINTCLOUD_CSV, POINTCLOUD_TASK  # noqa: E402
 
@@ -28,15 +30,6 @@ def run_cli(capsys, *args) -> tuple[int, str]:
     code = main(list(args))
     err = capsys.readouterr().err.strip()
     return code, err
-
-
-def assert_clear_failure(code: int, err: str, file_name: str, words: list[str]) -> None:
-    assert code == 2, err
-    assert len(err.splitlines()) == 1, err
-    assert "Traceback" not in err and "internal error" not in err, err
-    assert err.startswith("cmmwb: error: ") and file_name in err, err
-    for w in words:
-        assert w in err, f"{w!r} not in: {err}"
 
 
 def test_the_corpus_has_at_least_30_bad_files_and_each_has_a_case():

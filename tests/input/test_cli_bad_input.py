@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from pointcloud_tasks import write_random_task
+from tests.helpers.tasks import write_random_task
 
 
 def run(*args, cwd=None):

@@ -7,21 +7,22 @@ from __future__ import annotations
 
 import json
 import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 from generator.cli import main
-from xlfuncs.csvtable import TableError, read_table
-from xlfuncs.locator.recordings import parse_recordings, write_recordings
 from xlfuncs import pointcloud as pc
+from xlfuncs.csvtable import TableError, read_table
 from xlfuncs.locator import simulate as sm
+from xlfuncs.locator.recordings import parse_recordings, write_recordings
 
-HERE = Path(__file__).resolve().parent
-sys.path.insert(0, str(HERE / "bad_files"))
+from tests.helpers import BAD_FILES
+
+sys.path.insert(0, str(BAD_FILES))
 from make_bad_files import POINTCLOUD_CSV, POINTCLOUD_TASK  # noqa: E402
-from test_bad_files import assert_clear_failure  # noqa: E402
+
+from tests.helpers.files import assert_clear_failure  # noqa: E402
 
 #: the plain points table with one coordinate that has decimals, to see a decimal comma read right
 PLAIN = POINTCLOUD_CSV.replace("B,100,0,0", "B,100.25,0,0")

@@ -17,10 +17,12 @@ import pytest
 
 from generator.cli import main
 
-HERE = Path(__file__).resolve().parent
-sys.path.insert(0, str(HERE / "bad_files"))
+from tests.helpers import BAD_FILES, DATA
+
+sys.path.insert(0, str(BAD_FILES))
 from make_bad_files import POINTCLOUD_CSV, POINTCLOUD_TASK  # noqa: E402
-from test_bad_files import assert_clear_failure  # noqa: E402
+
+from tests.helpers.files import assert_clear_failure  # noqa: E402
 
 
 def run_cli(capsys, *args) -> tuple[int, str]:
@@ -174,7 +176,7 @@ def test_a_full_disk_while_importing_names_the_file_being_written(tmp_path, caps
     file, not the hidden temporary file beside it."""
     from pathlib import Path as _Path
 
-    sample = HERE / "data" / "qif" / "QIF_PTS_SAMPLE.QIF"
+    sample = DATA / "qif" / "QIF_PTS_SAMPLE.QIF"
     real_write = _Path.write_text
 
     def no_space(self, *a, **k):

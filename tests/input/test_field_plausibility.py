@@ -8,16 +8,15 @@ from __future__ import annotations
 import json
 import re
 import sys
-from pathlib import Path
 
 import pytest
 
 from generator.cli import main
 from xlfuncs.limits import PLAUSIBLE, plausibility_problem
 
-HERE = Path(__file__).resolve().parent
-ROOT = HERE.parent
-sys.path.insert(0, str(HERE / "bad_files"))
+from tests.helpers import BAD_FILES, ROOT
+
+sys.path.insert(0, str(BAD_FILES))
 from make_bad_files import POINTCLOUD_CSV, POINTCLOUD_TASK  # noqa: E402
 
 

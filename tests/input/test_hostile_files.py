@@ -23,11 +23,13 @@ from generator.cli import main
 from generator.errors import InputError
 from generator.workbook.guarded import read_bytes
 
-HERE = Path(__file__).resolve().parent
-sys.path.insert(0, str(HERE / "bad_files"))
+from tests.helpers import BAD_FILES
+
+sys.path.insert(0, str(BAD_FILES))
 from hostile import CASES, LENGTH_RECORDS  # noqa: E402
 from make_bad_files import POINTCLOUD_CSV, POINTCLOUD_TASK  # noqa: E402
-from test_bad_files import assert_clear_failure  # noqa: E402
+
+from tests.helpers.files import assert_clear_failure  # noqa: E402
 
 
 def run_cli(capsys, *args) -> tuple[int, str, str]:
@@ -313,8 +315,9 @@ def test_200000_point_records_fit_on_the_structured_path_but_not_dense():
 
 def test_an_external_hyperlink_is_not_refused(tmp_path):
     """Hyperlinks open nothing by themselves: a workbook with one (to any address) passes."""
-    from generator.workbook.safe_xlsx import check
     from hostile import book, parts
+
+    from generator.workbook.safe_xlsx import check
 
     p = parts()
     p["xl/worksheets/_rels/sheet1.xml.rels"] = (

@@ -1,7 +1,7 @@
 """Property (issue 12): whatever bytes the task file or the points table hold, reading them gives
 either a valid task or an InputError (one message, exit status 2) -- never another exception.
 The files are fuzzed at the reader level (no workbook is written), so many examples run fast;
-tests/test_build_property.py covers whole builds."""
+tests/input/test_build_property.py covers whole builds."""
 
 from __future__ import annotations
 
@@ -15,7 +15,9 @@ from hypothesis import strategies as st
 from generator.build import load_task
 from generator.errors import InputError
 
-sys.path.insert(0, str(Path(__file__).resolve().parent / "bad_files"))
+from tests.helpers import BAD_FILES
+
+sys.path.insert(0, str(BAD_FILES))
 from make_bad_files import POINTCLOUD_CSV, POINTCLOUD_TASK  # noqa: E402
 
 FUZZ = settings(max_examples=120, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])

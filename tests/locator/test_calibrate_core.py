@@ -7,17 +7,12 @@ import numpy as np
 import pytest
 
 from xlfuncs import calibrate as cb
-from xlfuncs.locator import diagnose as dg
 from xlfuncs import pointcloud as pc
+from xlfuncs.locator import diagnose as dg
 from xlfuncs.locator import simulate as sm
 from xlfuncs.locator.model import length_covariance
 
-MPE1 = pc.Parameters(sigma_R_um=0.20, sigma_S_ppm=0.7, sigma_Sa_ppm=0.7, sigma_Q_ppm=0.7, sigma_PQ_um=0.20,
-                     sigma_ET_um=0.2, lambda_ET_mm=200.0, sigma_ER_urad=4.0, lambda_ER_mm=400.0,
-                     sigma_P0_um=0.10, sigma_P_um=0.10, lambda_P=0.5)
-ONE = (pc.Probe("P1", (0.0, 0.0, -50.0)),)
-THREE = (pc.Probe("P1", (0.0, 0.0, -50.0)), pc.Probe("P2", (150.0, 0.0, -50.0)), pc.Probe("P3", (0.0, 150.0, -50.0)))
-PAIR = (pc.Probe("P1", (0.0, 20.0, -30.0)), pc.Probe("P2", (0.0, -20.0, -30.0)))
+from tests.helpers.clouds import MPE1, ONE, PAIR, THREE
 
 
 def prepared(layout, probes, planted=None, seed=1, **kw):

@@ -8,8 +8,8 @@ import numpy as np
 from xlfuncs.locator import diagnose as dg
 from xlfuncs.locator import simulate as sm
 
-from test_diagnose_core import MPE1
-from test_diagnose_second import ONE, iso, u_effect
+from tests.helpers.clouds import MPE1, ONE
+from tests.helpers.locator import iso, u_effect
 
 
 def bumped(seed: int, height_um: float = 6.0, width_mm: float = 150.0):

@@ -11,7 +11,7 @@ from xlfuncs.locator import diagnose as dg
 from xlfuncs.locator import effects as fx
 from xlfuncs.locator import simulate as sm
 
-from test_diagnose_book import MPE1, ONE, PAIR
+from tests.helpers.clouds import MPE1, ONE, PAIR
 
 
 def planted_delta(L, planted: dict) -> np.ndarray:

@@ -1,14 +1,13 @@
 """A small run of the rate benchmark (bench/diagnose_benchmark.py --quick 20): 20 data sets with a
 concealed planted effect (the first edition's scenarios, spread over every concealment), 20 null
-sets, 2 aliased designs; the second edition's candidates: tests/test_diagnose_new_candidates.py.  The full
+sets, 2 aliased designs; the second edition's candidates: tests/locator/test_diagnose_new_candidates.py.  The full
 benchmark (about 500 sets) writes bench/results/diagnose_rates.md."""
 
 import importlib.util
 import json
 import sys
-from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
+from tests.helpers import ROOT
 
 
 def test_quick_benchmark_names_the_planted_effects_and_stays_quiet_on_noise(tmp_path):

@@ -7,7 +7,12 @@ import sys
 import numpy as np
 import pytest
 
-from xlfuncs.locator.recordings import LengthRecords, PointRecords, RecordingsError, parse_recordings
+from xlfuncs.locator.recordings import (
+    LengthRecords,
+    PointRecords,
+    RecordingsError,
+    parse_recordings,
+)
 
 LENGTHS = """# an ISO 10360-2 style test, two records
 # second comment line

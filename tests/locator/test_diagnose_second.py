@@ -9,24 +9,13 @@ import numpy as np
 import pytest
 
 from xlfuncs.locator import diagnose as dg
-from xlfuncs import pointcloud as pc
 from xlfuncs.locator import simulate as sm
 
-from test_diagnose_core import MPE1, PAIR
+from tests.helpers.clouds import MPE1, PAIR
+from tests.helpers.locator import iso, u_effect
 
-ONE = (pc.Probe("P1", (0.0, 0.0, -50.0)),)
 SIGMAS = ("sigma_R_um", "sigma_S_ppm", "sigma_Sa_ppm", "sigma_Q_ppm", "sigma_PQ_um", "sigma_ET_um",
           "sigma_ER_urad", "sigma_P0_um", "sigma_P_um")
-
-
-def iso(repeats: int = 3):
-    return sm.layout("iso10360", ONE, repeats=repeats), dg.Model(MPE1, ONE, True)
-
-
-def u_effect(L, model, name: str) -> float:
-    prep = dg.prepare(sm.simulate(L, MPE1, {}, seed=0), model)
-    cov, _ = dg.effect_covariance(prep, name)
-    return math.sqrt(cov[0, 0])
 
 
 # -- the F tail used when the scale of the covariance is estimated ------------------------------

@@ -9,11 +9,10 @@ import pytest
 
 from xlfuncs.locator import diagnose as dg
 from xlfuncs.locator import model as locator_model
-from xlfuncs import pointcloud as pc
 from xlfuncs.locator import simulate as sm
 
-from conftest import ENGINES
-from test_diagnose_core import MPE1, PAIR
+from tests.helpers import ENGINES
+from tests.helpers.clouds import MPE1, PAIR
 
 REL = 1e-8
 
@@ -101,12 +100,13 @@ def test_large_point_records_choose_the_structured_path_by_themselves():
 def test_the_workbook_of_a_structured_diagnosis_agrees_with_its_json(tmp_path, monkeypatch, engine):
     """The whitened GLS sheet holds the structured whitener's coordinates (fewer than n) and the
     rank of C as a number; both engines reproduce chi-square, dof and estimates of the JSON."""
-    from conftest import close, recalc
     from generator.diagnosis import book as diagnose_book
     from generator.diagnosis.cli import run_diagnose
     from generator.workbook.recalc import results_rows
-    from test_diagnose_book import expected_rows
     from xlfuncs.locator.recordings import write_recordings
+
+    from tests.helpers import close, recalc
+    from tests.helpers.locator import expected_rows
 
     monkeypatch.setattr(locator_model, "STRUCTURED_MIN_OBS", 0)
     monkeypatch.setattr(diagnose_book, "NATIVE_MAX_OBS", 20)

@@ -6,13 +6,13 @@ itself (C v, C^-1 v, log det C) equals the dense G V_X G^T."""
 import numpy as np
 import pytest
 
+from xlfuncs.errors import ModelError
 from xlfuncs.locator import diagnose as dg
+from xlfuncs.locator import model as locator_model
 from xlfuncs.locator import simulate as sm
 from xlfuncs.locator import structured_lengths as sl
-from xlfuncs.errors import ModelError
-from xlfuncs.locator import model as locator_model
 
-from test_diagnose_core import MPE1, PAIR
+from tests.helpers.clouds import MPE1, PAIR
 
 REL = 1e-8
 

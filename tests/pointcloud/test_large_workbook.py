@@ -7,129 +7,23 @@ import json
 import re
 from pathlib import Path
 
-import numpy as np
 import openpyxl
 import pytest
-from openpyxl.utils import range_boundaries
-from openpyxl.worksheet.formula import ArrayFormula
 
-from conftest import close, recalc
-from generator.pointcloud import large_book
 from generator.cli import build_task
 from generator.errors import InputError
-from generator.workbook.recalc import results_rows
+from generator.pointcloud import large_book
 from generator.pointcloud.vx_sheets import NATIVE_MAX_POINTS
-from pointcloud_tasks import ALL_FACTORS
-from xlfuncs import udf
+from generator.workbook.recalc import results_rows
+
+from tests.helpers import close, recalc
+from tests.helpers.addin import evaluate_addin_formulas
+from tests.helpers.tasks import write_large_task
 
 FACTORS = ("R", "PQ", "S", "ET", "ER", "P")
 
 
-def write_large_task(folder: Path, m: int, name: str, *, star: bool = True, labels=None, seed: int = 5,
-                     mpe: bool = True, distances: tuple = ()) -> Path:
-    """m points on a plate 800 x 800 x 200 mm probed with three probes; distances from the first
-    point to every other (``star``) plus one more, the given (from, to) ``distances``, or every
-    pair."""
-    rng = np.random.default_rng(seed)
-    X = rng.uniform(-400, 400, (m, 3))
-    X[:, 2] *= 0.25
-    N = rng.normal(size=(m, 3))
-    N /= np.linalg.norm(N, axis=1)[:, None]
-    labels = labels or [f"F{i + 1}" for i in range(m)]
-    rows = ["id,x,y,z,nx,ny,nz,probe"] + [
-        ",".join([labels[i], *(f"{v:.17g}" for v in X[i]), *(f"{v:.17g}" for v in N[i]), f"P{i % 3 + 1}"])
-        for i in range(m)]
-    (folder / f"{name}.csv").write_text("\n".join(rows) + "\n")
-    params = "\n".join(f"{k} = {v}" for k, v in ALL_FACTORS.items())
-    dist = (f'[[distances]]\nfrom = "{labels[0]}"\nto = "*"\ngroup = "star"\n\n'
-            f'[[distances]]\nfrom = "{labels[1]}"\nto = "{labels[2]}"\n') if star else ""
-    dist += "".join(f'[[distances]]\nfrom = "{a}"\nto = "{b}"\n\n' for a, b in distances)
-    mpe_txt = "[mpe]\nA_um = 1.5\nB_mm = 400\nK = 2\n" if mpe else ""
-    path = folder / f"{name}.toml"
-    path.write_text(f'''[task]
-kind = "pointcloud"
-name = "{name}"
-
-{mpe_txt}
-[parameters]
-{params}
-
-[[probes]]
-id = "P1"
-offset_mm = [0, 0, -50]
-
-[[probes]]
-id = "P2"
-offset_mm = [20, 40, -30]
-sigma_PQ_um = 0.3
-sigma_P0_um = 0.05
-
-[[probes]]
-id = "P3"
-offset_mm = [-30, 0, -10]
-lambda_P = 0.8
-
-[points]
-file = "{name}.csv"
-
-{dist}''')
-    return path
-
-
 # -- evaluating the add-in formulas as Excel would (xlwings passes the ranges' values) ---------
-
-_CALL = re.compile(r"^=(?P<name>[A-Za-z_][A-Za-z0-9_]*)\((?P<args>.*)\)$")
-
-
-def _split_args(text: str) -> list[str]:
-    args, depth, quoted, cur = [], 0, False, ""
-    for ch in text:
-        if ch == '"':
-            quoted = not quoted
-        elif not quoted and ch == "(":
-            depth += 1
-        elif not quoted and ch == ")":
-            depth -= 1
-        if ch == "," and depth == 0 and not quoted:
-            args.append(cur)
-            cur = ""
-        else:
-            cur += ch
-    return args + [cur]
-
-
-def _range_values(values: dict, ref: str) -> list[list]:
-    sheet, addr = ref.rsplit("!", 1)
-    sheet = sheet.strip("'").replace("''", "'")
-    c0, r0, c1, r1 = range_boundaries(addr.replace("$", ""))
-    cells = values[sheet]
-    from openpyxl.utils import get_column_letter
-    return [[cells.get(f"{get_column_letter(c)}{r}") for c in range(c0, c1 + 1)] for r in range(r0, r1 + 1)]
-
-
-def evaluate_addin_formulas(book: Path, values: dict, sheet: str = large_book.LIVE) -> dict:
-    """{cell: value} of every add-in array formula on ``sheet``, computed by calling the
-    function of xlfuncs.udf with the (recalculated) values of the ranges it names."""
-    wb = openpyxl.load_workbook(book)
-    out = {}
-    for row in wb[sheet].iter_rows():
-        for c in row:
-            if not isinstance(c.value, ArrayFormula):
-                continue
-            m = _CALL.match(c.value.text)
-            assert m, c.value.text
-            fn = udf.UDFS[m.group("name").lower()]
-            args = []
-            for a in _split_args(m.group("args")):
-                args.append(a[1:-1] if a.startswith('"') else _range_values(values, a))
-            result = np.asarray(fn(*args))
-            c0, r0, c1, r1 = range_boundaries(c.value.ref)
-            assert result.shape == (r1 - r0 + 1, c1 - c0 + 1)
-            for dr in range(result.shape[0]):
-                for dc in range(result.shape[1]):
-                    out[wb[sheet].cell(row=r0 + dr, column=c0 + dc).coordinate] = float(result[dr, dc])
-    return out
-
 
 def assert_results_match_json(values: dict, results: dict) -> None:
     rows = results_rows(values)

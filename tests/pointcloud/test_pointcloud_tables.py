@@ -5,8 +5,9 @@ import json
 
 import pytest
 
-from conftest import EXAMPLES, printed
 from generator.cli import build_task
+
+from tests.helpers import EXAMPLES, printed
 
 FACTORS = ("R", "PQ", "S", "ET", "ER", "P")
 ROWS = [("L1", "R1"), ("L1", "L2"), ("L1", "L26"), ("L1", "R26")]
@@ -62,6 +63,7 @@ def test_mpe2_parameters_violate_the_mpe_above_about_885_mm(built):
     chk = built["I", "MPE2"]["mpe_check"]
     assert printed(chk["C_max"], 1.02) and chk["d_at_max_mm"] == 1000.0 and not chk["conforms"]
     import numpy as np
+
     from xlfuncs import pointcloud as pc
 
     p = pc.Parameters(**built["I", "MPE2"]["mpe_check"]["conforming_parameters"]).scaled(1 / chk["C_max"])

@@ -6,10 +6,11 @@ import json
 import openpyxl
 import pytest
 
-from conftest import ENGINES, EXAMPLES, close, recalc
 from generator.cli import build_task
 from generator.workbook.recalc import results_rows
-from pointcloud_tasks import write_random_task
+
+from tests.helpers import ENGINES, EXAMPLES, close, recalc
+from tests.helpers.tasks import write_random_task
 
 FACTORS = ("R", "PQ", "S", "ET", "ER", "P")
 

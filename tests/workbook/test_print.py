@@ -17,7 +17,7 @@ from generator.budget import book as budget_book
 from generator.cli import main
 from generator.workbook.recalc import soffice
 
-EXAMPLES = Path(__file__).resolve().parent.parent / "generator" / "examples"
+from tests.helpers import EXAMPLES
 
 #: page goals of issue 11 (A4)
 PAGE_GOALS = {"stepgauge": 40, "knuckle": 20, "cylinder_bore": 40, "diagnosis": 30}

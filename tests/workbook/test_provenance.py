@@ -20,7 +20,7 @@ from generator import __version__
 from generator.build import Staging, build_task
 from generator.errors import InputError
 
-EXAMPLES = Path(__file__).resolve().parents[1] / "generator" / "examples"
+from tests.helpers import EXAMPLES, ROOT
 
 
 def sha(p: Path) -> str:
@@ -147,7 +147,7 @@ def test_build_pdf_then_build_without_pdf_leaves_no_old_pdf(tmp_path):
     """The issue's case: `build --pdf`, then `build --force` without --pdf (through the CLI)."""
     task = copy_task(tmp_path, "knuckle.toml")
     out = tmp_path / "out"
-    cmd = [str(Path(__file__).resolve().parents[1] / ".venv" / "bin" / "cmmwb"), "build", str(task), "--out", str(out)]
+    cmd = [str(ROOT / ".venv" / "bin" / "cmmwb"), "build", str(task), "--out", str(out)]
     subprocess.run(cmd + ["--pdf", "--no-plots"], check=True, capture_output=True)
     pdf = out / "knuckle.pdf"
     assert pdf.exists() and "knuckle.pdf" in manifest(out)["files"]

@@ -15,7 +15,6 @@ from pathlib import Path
 import openpyxl
 import pytest
 
-from conftest import EXAMPLES
 from generator.build import build_task
 from generator.errors import InputError
 from generator.feature import book as feature_book
@@ -24,6 +23,8 @@ from generator.taskfile import key_line
 from generator.workbook import plots
 from generator.workbook.book import CM_PER_CHAR, FMT_SCI
 from generator.workbook.recalc import recalculate, results_rows
+
+from tests.helpers import EXAMPLES
 
 CMMWB = [sys.executable, "-m", "generator"]
 
@@ -215,9 +216,11 @@ def test_without_an_excess_the_summary_gives_the_delta_chi2_of_the_targeted_test
     """chi2/dof 1.24 on 105 lengths, the omnibus test passes, the targeted one fires: the effect
     is worth more than the whole excess, which '100 % of the excess' (or 33 % each of three)
     misrepresented."""
-    from test_diagnose_second import MPE1, iso, u_effect
     from xlfuncs.locator import diagnose as dg
     from xlfuncs.locator import simulate as sm
+
+    from tests.helpers.clouds import MPE1
+    from tests.helpers.locator import iso, u_effect
 
     L, model = iso()
     rec = sm.simulate(L, MPE1, {"squareness_xy": 5.5 * u_effect(L, model, "squareness_xy")}, seed=7)
@@ -231,9 +234,11 @@ def test_without_an_excess_the_summary_gives_the_delta_chi2_of_the_targeted_test
 
 
 def test_with_an_excess_the_summary_gives_the_share_it_explains():
-    from test_diagnose_second import MPE1, iso, u_effect
     from xlfuncs.locator import diagnose as dg
     from xlfuncs.locator import simulate as sm
+
+    from tests.helpers.clouds import MPE1
+    from tests.helpers.locator import iso, u_effect
 
     L, model = iso()
     rec = sm.simulate(L, MPE1, {"squareness_xy": 5.5 * u_effect(L, model, "squareness_xy")}, seed=10)

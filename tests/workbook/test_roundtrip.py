@@ -25,12 +25,13 @@ import openpyxl
 import pytest
 import tomli_w
 
-from conftest import EXAMPLES, close
 from generator import templates
 from generator.cli import build_task, main
 from generator.jobs import job
 from generator.read_cli import read_to_files
 from generator.workbook.recalc import read_cached, results_rows, soffice
+
+from tests.helpers import EXAMPLES, close
 
 SOURCES = templates.sources()
 
@@ -363,7 +364,7 @@ def test_cache_all_gives_every_formula_cell_a_value(tmp_path, small_task):
 def test_labels_that_look_like_formulas_come_back_in_the_task_file_not_a_csv(tmp_path):
     """A CSV opened in a spreadsheet would turn `=SUM(A1)` into a formula: `read` keeps such
     points in the task file (`[points] rows`), and the rebuild gives the same results."""
-    from pointcloud_tasks import write_random_task
+    from tests.helpers.tasks import write_random_task
 
     task = write_random_task(tmp_path, 5, m=5, probes=2, labels=["=SUM(A1)", "+1", "-2", "@x", "Q5"], mpe=False)
     first, book = build(task, tmp_path / "b1")

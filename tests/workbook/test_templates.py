@@ -11,10 +11,10 @@ import pytest
 from openpyxl.worksheet.formula import ArrayFormula
 
 from generator import templates
-from generator.workbook.book import DEFAULT_FILL, INPUT_FILL
-from generator.reader import TASK_SHEET
-from generator.workbook.cache import results_table
 from generator.jobs import job
+from generator.reader import TASK_SHEET
+from generator.workbook.book import DEFAULT_FILL, INPUT_FILL
+from generator.workbook.cache import results_table
 from generator.workbook.recalc import read_cached, results_rows
 
 SOURCES = templates.sources()
