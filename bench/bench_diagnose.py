@@ -29,8 +29,8 @@ sys.path.insert(0, str(ROOT))
 
 import numpy as np  # noqa: E402
 
-from xlfuncs.locator import diagnose as dg  # noqa: E402
 from xlfuncs import pointcloud as pc  # noqa: E402
+from xlfuncs.locator import diagnose as dg  # noqa: E402
 from xlfuncs.locator import simulate as sm  # noqa: E402
 from xlfuncs.locator.recordings import read_recordings, write_recordings  # noqa: E402
 

@@ -52,9 +52,9 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from xlfuncs import pointcloud as pc  # noqa: E402
 from xlfuncs.locator import diagnose as dg  # noqa: E402
 from xlfuncs.locator import effects as fx  # noqa: E402
-from xlfuncs import pointcloud as pc  # noqa: E402
 from xlfuncs.locator import simulate as sm  # noqa: E402
 
 MPE1 = pc.Parameters(sigma_R_um=0.20, sigma_S_ppm=0.7, sigma_Sa_ppm=0.7, sigma_Q_ppm=0.7, sigma_PQ_um=0.20,

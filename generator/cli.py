@@ -265,7 +265,7 @@ EXIT_CLOSED_PIPE = 141
 def main(argv: list[str] | None = None) -> int:
     try:
         args = parser().parse_args(argv)
-    except SystemExit as e:      # --help, --version, a usage error: printed by argparse
+    except SystemExit:      # --help, --version, a usage error: printed by argparse
         if _stdout_flushed():
             raise
         return EXIT_CLOSED_PIPE

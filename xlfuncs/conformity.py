@@ -128,7 +128,9 @@ class Tolerance:
 
     @property
     def mid_mm(self) -> float | None:
-        return 0.5 * (self.lsl_mm + self.usl_mm) if self.two_sided else None
+        if self.lsl_mm is None or self.usl_mm is None:
+            return None
+        return 0.5 * (self.lsl_mm + self.usl_mm)
 
 
 @dataclass(frozen=True)
@@ -278,6 +280,6 @@ def decide(value_mm: float, u_um: float, tolerance: Tolerance, rule: DecisionRul
 
 def measurement_capability_index(tolerance: Tolerance, u_um: float) -> float:
     """C_m = (T_U - T_L) / (4 u) (JCGM 106:2012, 7.6 eq. (15)); two-sided intervals only."""
-    if not tolerance.two_sided:
+    if tolerance.lsl_mm is None or tolerance.usl_mm is None:      # not two-sided
         raise ModelError("the measurement capability index needs a two-sided tolerance interval")
     return (tolerance.usl_mm - tolerance.lsl_mm) * UM_PER_MM / (4.0 * float(u_um))
