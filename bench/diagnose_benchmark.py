@@ -84,7 +84,7 @@ class Scenario:
 
 def scenarios(second_edition: bool = True) -> list[Scenario]:
     """Every effect scenario; ``second_edition=False``: the first edition's only (the quick run,
-    whose new-candidate counterparts are tests/test_diagnose_new_candidates.py)."""
+    whose new-candidate counterparts are tests/locator/test_diagnose_new_candidates.py)."""
     S = []
     iso1 = dict(layout="iso10360", probes=ONE)
     iso3 = dict(layout="iso10360", probes=THREE)
