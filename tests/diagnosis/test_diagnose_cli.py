@@ -1,17 +1,12 @@
 """`cmmwb simulate` and `cmmwb diagnose` end to end, and the demonstration of `cmmwb demo`."""
 
 import json
-import subprocess
-import sys
 
 import pytest
 
 from generator.diagnosis.cli import demo
 
-
-def run(*args, cwd):
-    return subprocess.run([sys.executable, "-m", "generator", *args], capture_output=True, text=True, cwd=cwd)
-
+from tests.helpers import run_cmmwb as run
 
 TASK = """[task]
 kind = "pointcloud"

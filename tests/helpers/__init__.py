@@ -15,8 +15,11 @@ and the printed-precision check.  Themed helpers live beside this module:
 from __future__ import annotations
 
 import math
+import subprocess
+import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from generator.workbook.recalc import recalculate
@@ -47,3 +50,14 @@ def printed(value: float, table_value: float, decimals: int = 2) -> bool:
 
 def recalc(path: Path, engine: str):
     return recalculate(path, engine)
+
+
+def max_rel_diff(a, b) -> float:
+    """The largest elementwise |a - b| / |b| (arrays or numbers)."""
+    a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+    return float(np.max(np.abs(a - b) / np.maximum(np.abs(b), 1e-300)))
+
+
+def run_cmmwb(*args, cwd=None) -> subprocess.CompletedProcess:
+    """``python -m generator ARGS`` in a fresh process (the command line as a user runs it)."""
+    return subprocess.run([sys.executable, "-m", "generator", *args], capture_output=True, text=True, cwd=cwd)

@@ -1,17 +1,12 @@
 """Bad input: exit status 2, one message naming the file and line or key, no traceback, and an
 output folder that holds nothing from the failed run."""
 
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
 
+from tests.helpers import run_cmmwb as run
 from tests.helpers.tasks import write_random_task
-
-
-def run(*args, cwd=None):
-    return subprocess.run([sys.executable, "-m", "generator", *args], capture_output=True, text=True, cwd=cwd)
 
 
 def break_file(path: Path, old: str, new: str) -> None:

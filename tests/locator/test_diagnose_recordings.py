@@ -1,8 +1,6 @@
 """Recordings (docs/recordings.md section 1): what is read, and bad input that gets one
 clear message naming the file, line and column, exit status 2 and nothing in the output folder."""
 
-import subprocess
-import sys
 
 import numpy as np
 import pytest
@@ -13,6 +11,8 @@ from xlfuncs.locator.recordings import (
     RecordingsError,
     parse_recordings,
 )
+
+from tests.helpers import run_cmmwb as run
 
 LENGTHS = """# an ISO 10360-2 style test, two records
 # second comment line
@@ -94,10 +94,6 @@ offset_mm = [0.0, 0.0, -50.0]
 id = "P2"
 offset_mm = [0.0, 0.0, -80.0]
 """
-
-
-def run(*args, cwd):
-    return subprocess.run([sys.executable, "-m", "generator", *args], capture_output=True, text=True, cwd=cwd)
 
 
 CLI_BAD = {

@@ -12,14 +12,10 @@ from xlfuncs.locator import model as locator_model
 from xlfuncs.locator import simulate as sm
 from xlfuncs.locator import structured_lengths as sl
 
+from tests.helpers import max_rel_diff as rel
 from tests.helpers.clouds import MPE1, PAIR
 
 REL = 1e-8
-
-
-def rel(a, b) -> float:
-    a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
-    return float(np.max(np.abs(a - b) / np.maximum(np.abs(b), 1e-300)))
 
 
 MODEL = dg.Model(MPE1, PAIR, True)
