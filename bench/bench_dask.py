@@ -36,11 +36,11 @@ def main(argv: list[str]) -> int:
     import distributed
 
     from xlfuncs import blocked as bl
-    from xlfuncs.locator import diagnose as dg
     from xlfuncs import features as ft
     from xlfuncs import pointcloud as pc
-    from xlfuncs.locator import simulate as sm
     from xlfuncs.distributed import DaskBackend
+    from xlfuncs.locator import diagnose as dg
+    from xlfuncs.locator import simulate as sm
 
     n, m = 20_000, 100_000
     for a in argv:

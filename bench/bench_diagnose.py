@@ -29,12 +29,12 @@ sys.path.insert(0, str(ROOT))
 
 import numpy as np  # noqa: E402
 
-from xlfuncs.locator import diagnose as dg  # noqa: E402
 from xlfuncs import pointcloud as pc  # noqa: E402
+from xlfuncs.locator import diagnose as dg  # noqa: E402
 from xlfuncs.locator import simulate as sm  # noqa: E402
 from xlfuncs.locator.recordings import read_recordings, write_recordings  # noqa: E402
-
 from xlfuncs.model import MPE1  # noqa: E402  (Forbes 2025 Table 3)
+
 PROBES = (pc.Probe("P1", (0.0, 0.0, -50.0)), pc.Probe("P2", (150.0, 0.0, -50.0)), pc.Probe("P3", (0.0, 150.0, -50.0)))
 
 

@@ -26,7 +26,6 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from xlfuncs import features, partial, pointcloud  # noqa: E402
-
 from xlfuncs.model import MPE1 as PARAMS  # noqa: E402  (Forbes 2025 Table 3)
 
 

@@ -82,10 +82,9 @@ from xlfuncs.distributed import DaskBackend
 with DaskBackend() as BACKEND:
 """ + textwrap.indent(textwrap.dedent(PROPAGATE), "    "),
     "large_book_m2000": """
-        import sys, time, tempfile
+        import time, tempfile
         from pathlib import Path
-        sys.path.insert(0, "tests")
-        from test_large_workbook import write_large_task
+        from tests.helpers.tasks import write_large_task
         from generator.cli import build_task
         from generator.workbook.recalc import recalculate, results_rows
         tmp = Path(tempfile.mkdtemp())

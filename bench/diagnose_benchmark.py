@@ -52,12 +52,12 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from xlfuncs import pointcloud as pc  # noqa: E402
 from xlfuncs.locator import diagnose as dg  # noqa: E402
 from xlfuncs.locator import effects as fx  # noqa: E402
-from xlfuncs import pointcloud as pc  # noqa: E402
 from xlfuncs.locator import simulate as sm  # noqa: E402
-
 from xlfuncs.model import MPE1  # noqa: E402  (Forbes 2025 Table 3)
+
 SNR_LO, SNR_HI = 10.0, 13.0
 MASK_FACTOR = 3.0
 ALPHA = 0.01
@@ -82,7 +82,7 @@ class Scenario:
 
 def scenarios(second_edition: bool = True) -> list[Scenario]:
     """Every effect scenario; ``second_edition=False``: the first edition's only (the quick run,
-    whose new-candidate counterparts are tests/test_diagnose_new_candidates.py)."""
+    whose new-candidate counterparts are tests/locator/test_diagnose_new_candidates.py)."""
     S = []
     iso1 = dict(layout="iso10360", probes=ONE)
     iso3 = dict(layout="iso10360", probes=THREE)

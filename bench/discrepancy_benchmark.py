@@ -39,7 +39,7 @@ from xlfuncs.locator import effects as fx  # noqa: E402
 from xlfuncs.locator import simulate as sm  # noqa: E402
 
 sys.path.insert(0, str(ROOT / "bench"))
-from diagnose_benchmark import MPE1, ONE, ALPHA  # noqa: E402
+from diagnose_benchmark import ALPHA, MPE1, ONE  # noqa: E402
 
 LAYOUTS = ("iso10360", "stepgauge", "ballplate")
 KINDS = ("bump", "sinusoid", "step")
@@ -115,6 +115,7 @@ def library_match(diag, r0_um, steps: int = 3) -> tuple[bool, float]:
     catch less than about half the time, so even a perfect locator could not call the named answer
     wrong.  Returns (matched, noncentrality left)."""
     from scipy.stats import chi2 as chi2_dist
+
     from xlfuncs.locator.linalg import orth, project_out
 
     prep, W = diag.prep, diag.whitener

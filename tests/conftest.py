@@ -1,15 +1,15 @@
-"""Shared test helpers: the three-engine comparison and the example tasks."""
+"""pytest hooks of the whole suite: one BLAS thread per xdist worker, the ``numerics`` marker
+(``NUMERIC_MODULES``), LibreOffice tests skipped where LibreOffice is missing.  What tests share
+(paths, the three-engine comparison, writers of tasks) is in ``tests/helpers/``."""
 
 from __future__ import annotations
 
-import math
 import os
-from pathlib import Path
 
 import numpy  # noqa: F401  (loads OpenBLAS, so that its threads can be limited below)
 import pytest
 
-from generator.workbook.recalc import recalculate, soffice
+from generator.workbook.recalc import soffice
 
 if os.environ.get("PYTEST_XDIST_WORKER"):
     # the suite runs as `-n 2` workers on a 2-core machine: one BLAS thread each, or the two
@@ -17,11 +17,6 @@ if os.environ.get("PYTEST_XDIST_WORKER"):
     from threadpoolctl import threadpool_limits
 
     threadpool_limits(1)
-
-EXAMPLES = Path(__file__).resolve().parents[1] / "generator" / "examples"
-ENGINES = ["formulas", pytest.param("libreoffice", marks=pytest.mark.libreoffice)]
-REL = 1e-9
-
 
 #: Test modules whose assertions compare computed numbers: CI runs them (without LibreOffice) a
 #: second time under other OpenBLAS kernels (OPENBLAS_CORETYPE=Haswell, =SkylakeX), because
@@ -64,20 +59,3 @@ def pytest_collection_modifyitems(config, items):
         if "libreoffice" in item.keywords:
             item.add_marker(skip)
 
-
-def close(a, b, rel: float = REL, floor: float = 1e-12) -> bool:
-    """Relative agreement; ``floor`` (µm) absorbs rounding noise of exactly-zero components."""
-    if not isinstance(a, (int, float)) or not isinstance(b, (int, float)):
-        return False
-    if not (math.isfinite(a) and math.isfinite(b)):
-        return False
-    return abs(a - b) <= rel * max(abs(a), abs(b)) + floor
-
-
-def printed(value: float, table_value: float, decimals: int = 2) -> bool:
-    """True when ``value`` rounds to the printed ``table_value`` (half a unit of the last digit)."""
-    return abs(value - table_value) <= 0.5 * 10 ** -decimals + 1e-12
-
-
-def recalc(path: Path, engine: str):
-    return recalculate(path, engine)

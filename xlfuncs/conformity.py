@@ -26,6 +26,8 @@ convert with :data:`UM_PER_MM`.  numpy and the standard library only; no spreads
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import math
 from dataclasses import dataclass
 
@@ -134,7 +136,9 @@ class Tolerance:
 
     @property
     def mid_mm(self) -> float | None:
-        return 0.5 * (self.lsl_mm + self.usl_mm) if self.two_sided else None
+        if self.lsl_mm is None or self.usl_mm is None:
+            return None
+        return 0.5 * (self.lsl_mm + self.usl_mm)
 
 
 @dataclass(frozen=True)
@@ -284,7 +288,7 @@ def decide(value_mm: float, u_um: float, tolerance: Tolerance, rule: DecisionRul
 
 def measurement_capability_index(tolerance: Tolerance, u_um: float) -> float:
     """C_m = (T_U - T_L) / (4 u) (JCGM 106:2012, 7.6 eq. (15)); two-sided intervals only."""
-    if not tolerance.two_sided:
+    if tolerance.lsl_mm is None or tolerance.usl_mm is None:      # not two-sided
         raise ModelError("the measurement capability index needs a two-sided tolerance interval")
     return (tolerance.usl_mm - tolerance.lsl_mm) * UM_PER_MM / (4.0 * float(u_um))
 
@@ -315,10 +319,11 @@ def acceptance_limits_for_p_c(tolerance: Tolerance, u_um: float, p_min: float) -
     z = norm_ppf(p_min)
     if not tolerance.two_sided:
         return acceptance_limits(tolerance, z * float(u_um))
-    mid = tolerance.mid_mm
+    mid, usl, lsl = tolerance.mid_mm, tolerance.usl_mm, tolerance.lsl_mm
+    assert mid is not None and usl is not None and lsl is not None       # two-sided
     if probability_of_conformance(mid, u_um, tolerance) < p_min:
-        return acceptance_limits(tolerance, 0.5 * (tolerance.usl_mm - tolerance.lsl_mm) * UM_PER_MM * (1 + 1e-9))
-    lo, hi = mid, tolerance.usl_mm + 40 * u_mm   # p_c(lo) >= p_min > p_c(hi) ≈ 0: bisect on the upper side
+        return acceptance_limits(tolerance, 0.5 * (usl - lsl) * UM_PER_MM * (1 + 1e-9))
+    lo, hi = mid, usl + 40 * u_mm   # p_c(lo) >= p_min > p_c(hi) ≈ 0: bisect on the upper side
     for _ in range(200):
         m = 0.5 * (lo + hi)
         if probability_of_conformance(m, u_um, tolerance) >= p_min:
@@ -340,7 +345,7 @@ class Prior:
     all but a negligible part of the probability).  Any one unit (that of the tolerance limits and
     of u_m)."""
 
-    pdf: object
+    pdf: Callable[[np.ndarray], np.ndarray]
     lo: float
     hi: float
     text: str = ""

@@ -138,7 +138,7 @@ def read_table(text: str, known: Iterable[str] = ()) -> Table:
         unnamed = [str(k + 1) for k, h in enumerate(raw) if not h]
         notes.append(f"column{'s' if len(unnamed) > 1 else ''} {', '.join(unnamed)} without a name in the "
                      f"header and without values: ignored")
-    canonical = {}
+    canonical: dict[str, str] = {}
     for name in known:
         canonical.setdefault(name.casefold(), name)
     header, renamed = [], []

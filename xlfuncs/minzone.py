@@ -24,7 +24,7 @@ h by w_i n_i^T delta x_i (the change of g is of second order: it is multiplied b
 the order of the form deviation over the feature's length).  w is non-zero only at the active
 (extreme) points.  Where two active sets compete (a degenerate optimum, or draws of the
 measurement errors that change the contact points) the true distribution of h is not that of the
-linearisation: the Monte Carlo over V_X says by how much (tests/test_characteristics.py).
+linearisation: the Monte Carlo over V_X says by how much (tests/core/test_characteristics.py).
 """
 
 from __future__ import annotations

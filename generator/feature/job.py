@@ -343,7 +343,7 @@ def _safe_rows(path, plan: Planning):
 # -- computing -----------------------------------------------------------------------------
 
 #: up to this many points V_A = G V_X G^T uses the dense V_X (what the workbook shows); beyond,
-#: the blocked evaluation that never forms V_X (equal to 1e-10, tests/test_blocked.py)
+#: the blocked evaluation that never forms V_X (equal to 1e-10, tests/core/test_blocked.py)
 DENSE_MAX_POINTS = 300
 #: beyond this many points the GP factors (ET, ER, P) of V_A go through the controlled low-rank
 #: factor of xlfuncs.lowrank (time linear in m; results carry "approximation" with its error

@@ -33,7 +33,7 @@ Out: :func:`write_uncertainties` writes a copy of the document with the attribut
 characteristic actual -- in QIF 3.0 that ``Value`` is a ``MeasuredLinearValueType`` /
 ``MeasuredAngularValueType``, extensions of ``MeasuredDecimalType`` (Units.xsd), which declares
 ``combinedUncertainty``.  ``meanError`` is not written: cmmwb does not estimate a mean error.
-Schema validity of the copy is tested in tests/test_qif_schema.py (docs/import.md says
+Schema validity of the copy is tested in tests/importers/test_qif_schema.py (docs/import.md says
 what is validated against what).
 """
 

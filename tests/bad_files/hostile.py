@@ -2,7 +2,7 @@
 
 Each case is a function ``make(tmp) -> (argv, file_name, words)``: it writes its files into
 ``tmp`` and returns the ``cmmwb`` arguments to run, the file the message must name and the words
-the message must contain.  ``tests/test_hostile_files.py`` runs each and requires one clear
+the message must contain.  ``tests/input/test_hostile_files.py`` runs each and requires one clear
 message, exit status 2, no traceback and nothing written.
 
 Families (issue 12): silent wrong numbers (field counts, duplicated columns, coordinates outside

@@ -3,7 +3,7 @@
 Every file here is something a person (or an attacker) could hand to ``cmmwb read`` (the .xlsx
 files) or ``cmmwb build`` (the .toml files and their points tables).  Each must give one clear
 message naming the file and the sheet/cell (or line/key) at fault, exit status 2, no traceback,
-and write nothing.  ``tests/test_bad_files.py`` checks that, with the words listed in CASES.
+and write nothing.  ``tests/input/test_bad_files.py`` checks that, with the words listed in CASES.
 
 The workbooks are cmmwb's own workbooks of small tasks, broken one way each.  Regenerate them
 (after a change of the workbook layout) with

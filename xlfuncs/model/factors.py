@@ -26,6 +26,8 @@ is checked against these two in ``tests/test_model_paths.py``.
 
 from __future__ import annotations
 
+from typing import Any
+
 from typing import Sequence
 
 import numpy as np
@@ -96,7 +98,7 @@ def factor_block(cloud: PointCloud, params: Parameters, I=None, J=None, factors:
     shape = (3 * len(I), 3 * len(J))
     I3 = np.eye(3)
     U = cloud.ram_mm
-    D2 = None
+    D2: Any = None                       # squared distances of the ram positions, when a GP factor needs them
     if ("ET" in factors and params.sigma_ET_um > 0) or ("ER" in factors and params.sigma_ER_urad > 0):
         D2 = sq_dists(U[I], U[J])
     out: dict[str, np.ndarray] = {}

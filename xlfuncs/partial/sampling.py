@@ -216,9 +216,11 @@ def sample(pattern: str, *, center_mm=(0.0, 0.0, 0.0), axis=(0.0, 0.0, 1.0), ref
                 ts += list(2 * math.pi * np.arange(c) / c)
                 ps += [rad(e)] * c
             if g.get("north_pole", False):
-                ts.append(0.0); ps.append(math.pi / 2)
+                ts.append(0.0)
+                ps.append(math.pi / 2)
             if g.get("south_pole", False):
-                ts.append(0.0); ps.append(-math.pi / 2)
+                ts.append(0.0)
+                ps.append(-math.pi / 2)
             t, p = np.array(ts), np.array(ps)
         else:
             nt, npf = _count("n_theta", g["n_theta"]), _count("n_phi", g["n_phi"])

@@ -1,0 +1,276 @@
+"""Every evaluation path of the six-factor model against its one definition (xlfuncs.model).
+
+The six factor covariances of Forbes 2025 eq. (28) are defined once, in block form
+(:func:`xlfuncs.model.factor_block`, points I x points J) and diagonal form
+(:func:`xlfuncs.model.factor_diagonal`, the 3 x 3 blocks V_ii); as a kernel library checks each
+kernel's ``diag`` against ``K``, each path here is checked against those two: dense V_X, blocked
+blocks and pair blocks, distances (eq. 29), V_A (exact, and low rank within its stated bound),
+the structured operators of the locator (C v against the dense C v, within eps_C), the Monte
+Carlo sampler (its covariance, and a sample covariance within its statistical tolerance), the
+simulator's draws (sample covariance) and the locator's length-record covariance.  The last
+tests read the source and fail on a second definition of the model's pieces.
+"""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from xlfuncs import blocked as bl
+from xlfuncs import lowrank as lr
+from xlfuncs import montecarlo as mc
+from xlfuncs import pointcloud as pc
+from xlfuncs.locator import model as lm
+from xlfuncs.locator import simulate as sm
+from xlfuncs.locator.structured import StructuredCovariance
+from xlfuncs.locator.structured_lengths import LengthCovariance, structure_check
+from xlfuncs.model import FACTORS, MPE1, TABLE3, factor_block, factor_diagonal, gauss_kernel, sq_dists
+
+ROOT = Path(__file__).resolve().parents[2]
+
+PARAMS = pc.Parameters(sigma_R_um=0.2, sigma_S_ppm=0.7, sigma_Sa_ppm=0.5, sigma_Q_ppm=0.9, sigma_PQ_um=0.2,
+                       sigma_ET_um=0.3, lambda_ET_mm=150, sigma_ER_urad=4.0, lambda_ER_mm=350,
+                       sigma_P0_um=0.1, sigma_P_um=0.15, lambda_P=0.5)
+PROBES = (pc.Probe("P1", (0.0, 0.0, -50.0)),
+          pc.Probe("P2", (10.0, 40.0, -30.0), sigma_PQ_um=0.3, sigma_P0_um=0.05, lambda_P=0.7),
+          pc.Probe("P3", (-20.0, 5.0, -10.0), sigma_P_um=0.0))
+
+
+def make_cloud(m: int, seed: int = 1, probes=PROBES) -> pc.PointCloud:
+    rng = np.random.default_rng(seed)
+    X = rng.uniform(-300.0, 300.0, (m, 3))
+    N = rng.normal(size=(m, 3))
+    N /= np.linalg.norm(N, axis=1)[:, None]
+    return pc.PointCloud(X, N, rng.integers(0, len(probes), m), probes)
+
+
+CLOUD = make_cloud(40)
+
+
+def rel_err(a, b) -> float:
+    return float(np.max(np.abs(np.asarray(a) - np.asarray(b))) / max(np.max(np.abs(b)), 1e-300))
+
+
+@pytest.fixture(scope="module")
+def dense():
+    return factor_block(CLOUD, PARAMS)
+
+
+# ---- the two forms of the one definition ---------------------------------------------------
+
+def test_table3_is_typed_once_and_reads_as_the_paper():
+    assert MPE1 is TABLE3["MPE1"].params
+    assert (TABLE3["MPE1"].A_um, TABLE3["MPE1"].B_mm, TABLE3["MPE2"].A_um, TABLE3["MPE2"].B_mm) == (1.0, 500.0, 3.0, 200.0)
+    assert TABLE3["MPE2"].params.sigma_ER_urad == 12.0 and TABLE3["MPE2"].params.lambda_ET_mm == 100.0
+
+
+def test_the_dense_V_X_is_the_block_form_over_every_point(dense):
+    for d_log in (False, True):
+        V = pc.V_X_components(CLOUD, PARAMS, d_log_lambda=d_log)
+        ref = factor_block(CLOUD, PARAMS, d_log_lambda=d_log)
+        assert list(V) == list(FACTORS)
+        for f in FACTORS:
+            assert np.array_equal(V[f], ref[f]), f
+
+
+@pytest.mark.parametrize("d_log", [False, True])
+def test_the_diagonal_form_is_the_diagonal_of_the_block_form(d_log):
+    full = factor_block(CLOUD, PARAMS, d_log_lambda=d_log)
+    diag = factor_diagonal(CLOUD, PARAMS, d_log_lambda=d_log)
+    m = CLOUD.m
+    for f in FACTORS:
+        blocks = full[f].reshape(m, 3, m, 3)[np.arange(m), :, np.arange(m), :]
+        assert diag[f].shape == (m, 3, 3)
+        assert np.max(np.abs(diag[f] - blocks)) <= 1e-13 * max(np.max(np.abs(full[f])), 1e-300), f
+
+
+def test_every_factor_is_symmetric_positive_semidefinite(dense):
+    for f in FACTORS:
+        assert np.array_equal(dense[f], dense[f].T) or rel_err(dense[f], dense[f].T) <= 1e-15, f
+        w = np.linalg.eigvalsh(dense[f])
+        assert w[0] >= -1e-12 * max(w[-1], 1e-300), f
+
+
+def test_blocked_blocks_are_sub_blocks_of_the_dense_V_X(dense):
+    I, J = np.array([3, 17, 5, 39]), np.arange(0, 40, 3)
+    blk = bl.V_X_block(CLOUD, PARAMS, I, J)
+    rows = (3 * I[:, None] + np.arange(3)).ravel()
+    cols = (3 * J[:, None] + np.arange(3)).ravel()
+    for f in FACTORS:
+        assert rel_err(blk[f], dense[f][np.ix_(rows, cols)]) <= 1e-13, f
+    assert rel_err(bl.V_X_dense(CLOUD, PARAMS, rows_per_block=7), pc.V_X(CLOUD, PARAMS)) <= 1e-13
+
+
+def test_pair_blocks_are_V_ii_plus_V_jj_minus_the_cross_blocks(dense):
+    pairs = np.array([[0, 1], [7, 22], [39, 3], [12, 30]])
+    pb = bl.pair_blocks(CLOUD, PARAMS, pairs)
+    m = CLOUD.m
+    for f in FACTORS:
+        V = dense[f].reshape(m, 3, m, 3)
+        for q, (i, j) in enumerate(pairs):
+            ref = V[i, :, i, :] + V[j, :, j, :] - V[i, :, j, :] - V[j, :, i, :]
+            assert np.max(np.abs(pb[f][q] - ref)) <= 1e-12 * max(np.max(np.abs(dense[f])), 1e-300), f
+
+
+def test_distance_components_are_the_quadratic_form_of_eq_29(dense):
+    """Both the all-pairs kernel and the given-pairs path; u = sqrt(g^T V g) cancels, so the
+    dense reference holds about 9 digits."""
+    pairs = pc.all_pairs(CLOUD.m)[::37]
+    every = pc.distance_components(CLOUD, PARAMS)
+    given = pc.distance_components(CLOUD, PARAMS, pairs)
+    for q, (i, j) in enumerate(pairs):
+        n = (CLOUD.X_mm[j] - CLOUD.X_mm[i]) / np.linalg.norm(CLOUD.X_mm[j] - CLOUD.X_mm[i])
+        g = np.zeros(3 * CLOUD.m)
+        g[3 * i:3 * i + 3], g[3 * j:3 * j + 3] = -n, n
+        for f in FACTORS:
+            ref = np.sqrt(max(g @ dense[f] @ g, 0.0))
+            assert every[f"u_{f}_um"][37 * q] == pytest.approx(ref, rel=1e-9, abs=1e-12), f
+            assert given[f"u_{f}_um"][q] == pytest.approx(ref, rel=1e-9, abs=1e-12), f
+
+
+# ---- the paths that never form V_X -----------------------------------------------------------
+
+def test_V_A_exact_and_low_rank_within_the_stated_bound():
+    cloud = make_cloud(300, seed=4)
+    G = np.random.default_rng(5).normal(size=(4, 3 * cloud.m))
+    V = factor_block(cloud, PARAMS)
+    exact = bl.V_A_components(G, cloud, PARAMS, block=5000)
+    approx = lr.Approximation()
+    low = bl.V_A_components(G, cloud, PARAMS, method="lowrank", approximation=approx)
+    for f in FACTORS:
+        ref = G @ V[f] @ G.T
+        assert rel_err(exact[f], ref) <= 1e-12, f
+        tol = approx.bound_abs[f] if f in approx.bound_abs else 0.0
+        assert np.all(np.abs(low[f] - ref) <= tol + 1e-12 * np.max(np.abs(ref))), f
+
+
+def test_the_low_rank_unit_kernel_is_the_model_kernel():
+    A, B = CLOUD.ram_mm[:10], CLOUD.ram_mm[5:]
+    # exp(-D^2 * (1/lambda^2)) there, exp(-D^2 / lambda^2) here: the exponents differ by rounding
+    assert np.allclose(lr.unit_kernel(A, B, 1 / 150.0**2), gauss_kernel(sq_dists(A, B), 150.0**2), rtol=1e-14, atol=0)
+
+
+@pytest.mark.parametrize("dims", [3, 2])
+def test_the_structured_point_covariance_applies_the_dense_C_within_eps_C(dims):
+    S = StructuredCovariance(CLOUD, PARAMS, dims)
+    keep = np.array([3 * i + a for i in range(CLOUD.m) for a in range(dims)])
+    C = pc.V_X(CLOUD, PARAMS)[np.ix_(keep, keep)]
+    U = np.vstack([blk for _i0, _i1, blk in S.blocks()])
+    v = np.random.default_rng(2).normal(size=(C.shape[0], 3))
+    Cv = S.d * v + U @ (U.T @ v)
+    slack = S.eps_C + 1e-12 * np.max(np.abs(C))
+    assert np.all(np.linalg.norm(Cv - C @ v, axis=0) <= slack * np.linalg.norm(v, axis=0))
+    assert np.max(np.abs(S.diagonal() - np.diag(C))) <= slack
+
+
+def test_the_structured_length_covariance_applies_the_dense_C_within_eps_C():
+    m = 30
+    I, J = np.zeros(m - 1, dtype=int), np.arange(1, m)      # one shared start, own ends
+    cloud = make_cloud(m, seed=6)
+    assert structure_check(I, J, m) is None
+    L = LengthCovariance(cloud, PARAMS, I, J)
+    C = lm.length_covariance(cloud, PARAMS, I, J)
+    v = np.random.default_rng(3).normal(size=(len(I), 2))
+    slack = L.eps_C + 1e-12 * np.max(np.abs(C))
+    assert np.all(np.linalg.norm(L.matvec(v) - C @ v, axis=0) <= slack * np.linalg.norm(v, axis=0))
+
+
+def test_the_locator_length_covariance_is_G_V_X_G_T_also_its_derivative():
+    rng = np.random.default_rng(7)
+    I = rng.integers(0, CLOUD.m, 25)
+    J = (I + rng.integers(1, CLOUD.m, 25)) % CLOUD.m
+    d = CLOUD.X_mm[J] - CLOUD.X_mm[I]
+    na = d / np.linalg.norm(d, axis=1)[:, None]
+    G = np.zeros((len(I), 3 * CLOUD.m))
+    for a in range(len(I)):
+        G[a, 3 * I[a]:3 * I[a] + 3] -= na[a]
+        G[a, 3 * J[a]:3 * J[a] + 3] += na[a]
+    for d_log in (False, True):
+        V = factor_block(CLOUD, PARAMS, d_log_lambda=d_log)
+        C = lm.length_covariance(CLOUD, PARAMS, I, J, components=True, d_log_lambda=d_log)
+        for f in FACTORS:
+            ref = G @ V[f] @ G.T
+            assert np.max(np.abs(C[f] - ref)) <= 1e-12 * max(np.max(np.abs(ref)), 1e-300), (f, d_log)
+
+
+# ---- the draws -------------------------------------------------------------------------------
+
+def within_sampling_tolerance(S: np.ndarray, V: np.ndarray, M: int, z: float = 5.0) -> bool:
+    """Sample covariance S of M draws against V: every entry within z standard errors,
+    sd(S_ij) = sqrt((V_ij^2 + V_ii V_jj) / M) for normal draws."""
+    sd = np.sqrt((V**2 + np.outer(np.diag(V), np.diag(V))) / M)
+    return bool(np.all(np.abs(S - V) <= z * sd + 1e-12))
+
+
+def test_the_monte_carlo_sampler_draws_the_model():
+    cloud = make_cloud(6, seed=8)
+    V = factor_block(cloud, PARAMS)
+    smp = mc.PointCloudSampler(cloud, PARAMS)
+    for f in FACTORS:
+        assert np.max(np.abs(smp.covariance(f) - V[f])) <= 1e-12 * max(np.max(np.abs(V[f])), 1e-300), f
+    M = 20_000
+    draws = smp.draw(M, np.random.default_rng(9))
+    x = sum(draws[f] for f in FACTORS).reshape(M, -1)
+    assert within_sampling_tolerance(x.T @ x / M, sum(V.values()), M)
+
+
+def test_the_simulator_draws_the_model():
+    cloud = make_cloud(5, seed=10)
+    V = pc.V_X(cloud, PARAMS)
+    rng = np.random.default_rng(11)
+    M = 4000
+    x = np.array([sm.model_errors(cloud.X_mm, cloud.N, cloud.probe_index, cloud.probes, PARAMS, rng).ravel()
+                  for _ in range(M)])
+    assert within_sampling_tolerance(x.T @ x / M, V, M)
+
+
+# ---- one definition: read the source ---------------------------------------------------------
+#
+# Patterns (Python source of xlfuncs/ and generator/, xlfuncs/model/ excepted):
+#   * a squared-distance helper: ``def`` of a name containing ``sq_dist``/``sqdist``/``sq_dists``;
+#     generator/pointcloud/vx_sheets.py's ``_sqdist`` writes the spreadsheet formula text of the
+#     same quantity (the engines' agreement with the core is tested on the workbooks) and is
+#     the one exception;
+#   * the cancelling form |a|^2 + |b|^2 - 2 a.b: ``2 * <name> @ <name>.T`` or ``2.0 * ...``;
+#   * a skew / G_S helper: ``def`` of ``skew*``, ``G_S*``, ``G_X_S``;
+#   * the six factor covariances: ``def factor_block``/``factor_diagonal``, the 3m x 3m expansion
+#     of a kernel (``kron(`` with a kernel, ``rho``, ``kern`` or ``exp``) or the interleaved
+#     normal products ``"ia,jb->iajb"`` of the probing factor;
+#   * Table 3's MPE1 typed out again: ``sigma_Sa_ppm=0.7, sigma_Q_ppm=0.7, sigma_PQ_um=0.2(0),``
+#     followed by ``sigma_ET_um=0.2, lambda_ET_mm=200`` (also in tests/, bench/, generator/examples/).
+
+PATTERNS = {
+    "squared distance": re.compile(r"^\s*def \w*(sq_?dist)\w*\(", re.M),
+    "cancelling distance": re.compile(r"2(\.0)? \* \w+ @ \w+\.T"),
+    "skew / G_S": re.compile(r"^\s*def (skew\w*|G_S\w*|G_X_S)\(", re.M),
+    "factor covariances": re.compile(r"^\s*def (factor_block|factor_diagonal)\(|kron\([^)\n]*(kern|rho|exp|gauss)"
+                                     r"|\"ia,jb->iajb\"", re.M),
+}
+TABLE3_TYPED = re.compile(r"sigma_Sa_ppm=0\.7, sigma_Q_ppm=0\.7, sigma_PQ_um=0\.20?,\s*sigma_ET_um=0\.2, lambda_ET_mm=200")
+EXCEPTIONS = {("squared distance", "generator/pointcloud/vx_sheets.py")}
+
+
+def sources(*tops: str):
+    for top in tops:
+        for p in sorted((ROOT / top).rglob("*.py")):
+            rel = p.relative_to(ROOT).as_posix()
+            if not rel.startswith("xlfuncs/model/"):
+                yield rel, p.read_text(encoding="utf-8")
+
+
+def test_the_model_pieces_are_defined_once():
+    found = [(name, rel) for rel, text in sources("xlfuncs", "generator")
+             for name, pat in PATTERNS.items() if pat.search(text) and (name, rel) not in EXCEPTIONS]
+    assert found == []
+    model = "\n".join(p.read_text(encoding="utf-8") for p in (ROOT / "xlfuncs" / "model").glob("*.py"))
+    for name in ("squared distance", "skew / G_S", "factor covariances"):
+        assert PATTERNS[name].search(model), name      # the patterns do find the one definition
+
+
+def test_table3_is_not_typed_out_again():
+    found = [rel for rel, text in sources("xlfuncs", "tests", "bench", "generator")
+             if TABLE3_TYPED.search(text) and rel != "tests/core/test_model_paths.py"]
+    assert found == []

@@ -1,0 +1,63 @@
+"""What the tests share (one place, imported as ``tests.helpers``; test modules never import each
+other): the paths of the tree, the three-engine comparison (``ENGINES``, ``recalc``, ``close``)
+and the printed-precision check.  Themed helpers live beside this module:
+
+- ``tests.helpers.clouds``: the model parameters, probes and point clouds the core tests share;
+- ``tests.helpers.tasks``: task files written for tests (random clouds, large plates, the bore,
+  small feature tasks);
+- ``tests.helpers.addin``: add-in formulas of a workbook evaluated by calling ``xlfuncs.udf``;
+- ``tests.helpers.locator``: the locator's test layouts and the diagnosis workbook's expected rows;
+- ``tests.helpers.budget``: Wojtyła/Płowucha 2023, the steering knuckle and Tables 1-9 as printed;
+- ``tests.helpers.decision``: building a task and comparing its Decision/Summary cells per engine;
+- ``tests.helpers.files``: the one-clear-message check of bad input.
+"""
+
+from __future__ import annotations
+
+import math
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from generator.workbook.recalc import recalculate
+
+ROOT = Path(__file__).resolve().parents[2]
+EXAMPLES = ROOT / "generator" / "examples"
+#: test data shipped with the tests (QIF samples and schemas)
+DATA = ROOT / "tests" / "data"
+#: the corpus of bad and hostile files (``make_bad_files.py``, ``hostile.py``)
+BAD_FILES = ROOT / "tests" / "bad_files"
+ENGINES = ["formulas", pytest.param("libreoffice", marks=pytest.mark.libreoffice)]
+REL = 1e-9
+
+
+def close(a, b, rel: float = REL, floor: float = 1e-12) -> bool:
+    """Relative agreement; ``floor`` (µm) absorbs rounding noise of exactly-zero components."""
+    if not isinstance(a, (int, float)) or not isinstance(b, (int, float)):
+        return False
+    if not (math.isfinite(a) and math.isfinite(b)):
+        return False
+    return abs(a - b) <= rel * max(abs(a), abs(b)) + floor
+
+
+def printed(value: float, table_value: float, decimals: int = 2) -> bool:
+    """True when ``value`` rounds to the printed ``table_value`` (half a unit of the last digit)."""
+    return abs(value - table_value) <= 0.5 * 10 ** -decimals + 1e-12
+
+
+def recalc(path: Path, engine: str):
+    return recalculate(path, engine)
+
+
+def max_rel_diff(a, b) -> float:
+    """The largest elementwise |a - b| / |b| (arrays or numbers)."""
+    a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+    return float(np.max(np.abs(a - b) / np.maximum(np.abs(b), 1e-300)))
+
+
+def run_cmmwb(*args, cwd=None) -> subprocess.CompletedProcess:
+    """``python -m generator ARGS`` in a fresh process (the command line as a user runs it)."""
+    return subprocess.run([sys.executable, "-m", "generator", *args], capture_output=True, text=True, cwd=cwd)

@@ -1,0 +1,299 @@
+"""The source tree as an installation sees it.
+
+`pip install .` (not only the editable install the tests use) must carry every package of the
+tree: a subpackage left out of `pyproject.toml` imports in the checkout and fails for a user.
+"""
+
+from __future__ import annotations
+
+import tomllib
+from pathlib import Path
+
+from setuptools import find_packages
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def _packages_in_tree() -> set[str]:
+    out = set()
+    for top in ("generator", "xlfuncs"):
+        for init in (ROOT / top).rglob("__init__.py"):
+            out.add(".".join(init.parent.relative_to(ROOT).parts))
+    return out
+
+
+def test_every_package_in_the_tree_is_installed():
+    config = tomllib.loads((ROOT / "pyproject.toml").read_text())
+    find = config["tool"]["setuptools"]["packages"]["find"]
+    installed = set(find_packages(str(ROOT), include=find["include"]))
+    assert _packages_in_tree() <= installed, sorted(_packages_in_tree() - installed)
+    assert {"xlfuncs.locator", "generator.importers"} <= installed
+
+
+# --- the import graph: layers, no cycles, no private names across modules --------------------
+#
+# Built from the source text with `ast` only (nothing is imported): every Import/ImportFrom of a
+# module of `generator` or `xlfuncs`, relative or absolute, at module level or inside a function,
+# and every string constant that is exactly a module's dotted name (what importlib.import_module
+# would be given), so that a dynamic import is a dependency too.
+
+import ast  # noqa: E402
+
+TASK_KINDS = ("pointcloud", "budget", "feature", "diagnosis", "characteristic")
+
+
+def _is_private(name: str) -> bool:
+    return name.startswith("_") and not (name.startswith("__") and name.endswith("__"))
+
+
+def _project_modules(root: Path = ROOT) -> dict[str, Path]:
+    """Dotted module name -> file, for every module inside a package of `generator`/`xlfuncs`
+    (package data such as generator/lo_addin or generator/examples is no package)."""
+    out = {}
+    for top in ("generator", "xlfuncs"):
+        for path in sorted((root / top).rglob("*.py")):
+            parts = path.relative_to(root).with_suffix("").parts
+            if not all((root.joinpath(*parts[:i]) / "__init__.py").is_file()
+                       for i in range(1, len(parts))):
+                continue
+            if parts[-1] == "__init__":
+                parts = parts[:-1]
+            out[".".join(parts)] = path
+    return out
+
+
+def _imports(name: str, path: Path, modules: dict[str, Path]):
+    """(imported project module, names taken from it, node) for each import in one module."""
+    is_package = path.name == "__init__.py"
+    package = name if is_package else name.rpartition(".")[0]
+    tree = ast.parse(path.read_text(encoding="utf-8"), str(path))
+    for node in ast.walk(tree):
+        if (isinstance(node, ast.Constant) and isinstance(node.value, str)
+                and node.value in modules):     # importlib.import_module("generator.x") & co.
+            yield node.value, [], node, None
+        elif isinstance(node, ast.Import):
+            for alias in node.names:
+                target = alias.name
+                while target and target not in modules:
+                    target = target.rpartition(".")[0]
+                if target:
+                    yield target, [], node, alias
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = package.split(".")
+                base = base[:len(base) - (node.level - 1)]
+                source = ".".join(base + ([node.module] if node.module else []))
+            else:
+                source = node.module or ""
+            if source not in modules:
+                continue
+            for alias in node.names:
+                sub = f"{source}.{alias.name}"
+                if sub in modules:                 # `from pkg import module`
+                    yield sub, [], node, alias
+                else:
+                    yield source, [alias.name], node, alias
+
+
+def _graph(root: Path = ROOT) -> dict[str, set[str]]:
+    modules = _project_modules(root)
+    graph: dict[str, set[str]] = {m: set() for m in modules}
+    for name, path in modules.items():
+        for target, _names, _node, _alias in _imports(name, path, modules):
+            if target != name:
+                graph[name].add(target)
+    return graph
+
+
+def strongly_connected(graph: dict[str, set[str]]) -> list[list[str]]:
+    """The strongly connected components of more than one module (Tarjan): each is a set of
+    modules that all import one another, directly or through the others."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on_stack: set[str] = set()
+    components: list[list[str]] = []
+
+    def strongconnect(v: str) -> None:
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        on_stack.add(v)
+        for w in sorted(graph[v]):
+            if w not in index:
+                strongconnect(w)
+                low[v] = min(low[v], low[w])
+            elif w in on_stack:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            component = []
+            while True:
+                w = stack.pop()
+                on_stack.discard(w)
+                component.append(w)
+                if w == v:
+                    break
+            if len(component) > 1:
+                components.append(sorted(component))
+
+    for v in sorted(graph):
+        if v not in index:
+            strongconnect(v)
+    return components
+
+
+def find_cycles(root: Path = ROOT) -> list[tuple[list[str], list[str]]]:
+    """For each strongly connected component of the import graph: one shortest cycle through
+    its first module (a -> b -> ... -> a) and the component's modules."""
+    graph = _graph(root)
+    out = []
+    for component in strongly_connected(graph):
+        members = set(component)
+        start = component[0]
+        previous = {start: None}
+        queue = [start]
+        found = None
+        while queue and found is None:
+            v = queue.pop(0)
+            for w in sorted(graph[v] & members):
+                if w == start:
+                    found = v
+                    break
+                if w not in previous:
+                    previous[w] = v
+                    queue.append(w)
+        path = [start]
+        v = found
+        while v is not None and v != start:
+            path.insert(1, v)
+            v = previous[v]
+        out.append((path + [start], component))
+    return out
+
+
+def private_uses(root: Path = ROOT) -> list[str]:
+    """`from m import _x` and `m._x` where m is another module of the project."""
+    modules = _project_modules(root)
+    out = []
+    for name, path in modules.items():
+        bound: dict[str, str] = {}              # local name -> project module it is bound to
+        for target, names, node, alias in _imports(name, path, modules):
+            where = f"{path.relative_to(root)}:{node.lineno}"
+            if target == name:
+                continue
+            for taken in names:
+                if _is_private(taken):
+                    out.append(f"{where}: from {target} import {taken}")
+            if alias is None:
+                continue
+            if not names:
+                if _is_private(target.rpartition(".")[2]):
+                    out.append(f"{where}: imports private module {target}")
+                if isinstance(node, ast.Import) and alias.asname is None:
+                    bound[alias.name.partition(".")[0]] = alias.name.partition(".")[0]
+                else:
+                    bound[alias.asname or alias.name] = target
+        tree = ast.parse(path.read_text(encoding="utf-8"), str(path))
+        for node in ast.walk(tree):
+            if not (isinstance(node, ast.Attribute) and _is_private(node.attr)):
+                continue
+            chain = []
+            value = node.value
+            while isinstance(value, ast.Attribute):
+                chain.insert(0, value.attr)
+                value = value.value
+            if not (isinstance(value, ast.Name) and value.id in bound):
+                continue
+            dotted = ".".join([bound[value.id]] + chain)
+            if dotted in modules and dotted != name:
+                out.append(f"{path.relative_to(root)}:{node.lineno}: {dotted}.{node.attr}")
+    return sorted(out)
+
+
+def test_no_import_cycles():
+    cycles = find_cycles()
+    assert not cycles, "import cycles:\n" + "\n".join(
+        f"{' -> '.join(cycle)}   (one of the cycles among: {', '.join(component)})"
+        for cycle, component in cycles)
+
+
+def test_no_private_names_across_modules():
+    uses = private_uses()
+    assert not uses, "private names used across modules:\n" + "\n".join(uses)
+
+
+def test_xlfuncs_imports_neither_generator_nor_openpyxl():
+    modules = _project_modules()
+    bad = []
+    for name, path in modules.items():
+        if not name.startswith("xlfuncs"):
+            continue
+        tree = ast.parse(path.read_text(encoding="utf-8"), str(path))
+        for node in ast.walk(tree):
+            if isinstance(node, ast.Import):
+                tops = [a.name.partition(".")[0] for a in node.names]
+            elif isinstance(node, ast.ImportFrom) and not node.level:
+                tops = [(node.module or "").partition(".")[0]]
+            else:
+                continue
+            bad += [f"{path.relative_to(ROOT)}:{node.lineno}: {t}" for t in tops
+                    if t in ("generator", "openpyxl")]
+    assert not bad, bad
+
+
+def _registered_job_modules() -> dict[str, str]:
+    """The registry ``JOBS`` of generator/jobs.py, read from the source: kind -> the module its
+    entry is bound to (``from .budget import job as budget``)."""
+    tree = ast.parse((ROOT / "generator" / "jobs.py").read_text(encoding="utf-8"))
+    bound = {}
+    for node in tree.body:
+        if isinstance(node, ast.ImportFrom) and node.level == 1:
+            for alias in node.names:
+                bound[alias.asname or alias.name] = f"generator.{node.module}.{alias.name}"
+    for node in tree.body:
+        target = node.target if isinstance(node, ast.AnnAssign) else \
+            node.targets[0] if isinstance(node, ast.Assign) else None
+        if getattr(target, "id", None) == "JOBS":
+            assert isinstance(node.value, ast.Dict), "JOBS is a literal dict"
+            return {ast.literal_eval(k): bound[v.id] for k, v in zip(node.value.keys, node.value.values)}
+    raise AssertionError("generator/jobs.py has no JOBS")
+
+
+def test_each_task_kind_has_its_own_package_with_its_job():
+    for kind in TASK_KINDS:
+        folder = ROOT / "generator" / kind
+        assert (folder / "__init__.py").is_file(), folder
+    for kind in ("pointcloud", "budget", "feature", "characteristic"):
+        assert (ROOT / "generator" / kind / "job.py").is_file(), kind
+    assert (ROOT / "generator" / "diagnosis" / "run.py").is_file()
+    registered = _registered_job_modules()
+    assert registered, "no task kind registered"
+    for kind, module in registered.items():
+        kind_package = module.split(".")[1]
+        assert kind_package == kind and kind in TASK_KINDS and module.endswith(".job"), module
+        assert (ROOT / Path(*module.split("."))).with_suffix(".py").is_file(), module
+
+
+def _cli_sources() -> list[Path]:
+    return [ROOT / "generator" / "jobs.py", *sorted((ROOT / "generator" / "cli").glob("*.py"))]
+
+
+def test_commands_and_kinds_are_static_lists_not_names_imported_at_run_time():
+    """No module of the command line or the kind registry imports by string (importlib,
+    __import__): every command and every kind is an import the graph above sees."""
+    for path in _cli_sources():
+        tree = ast.parse(path.read_text(encoding="utf-8"))
+        for node in ast.walk(tree):
+            if isinstance(node, (ast.Import, ast.ImportFrom)):
+                names = [a.name for a in node.names] + [getattr(node, "module", None) or ""]
+                assert "importlib" not in names, f"{path.relative_to(ROOT)}:{node.lineno}"
+            if isinstance(node, ast.Name):
+                assert node.id not in ("__import__", "import_module"), f"{path.relative_to(ROOT)}:{node.lineno}"
+
+
+def test_every_command_module_is_in_the_static_list():
+    """A command module left out of COMMANDS would be a command that silently is not there."""
+    tree = ast.parse((ROOT / "generator" / "cli" / "program.py").read_text(encoding="utf-8"))
+    listed = next([e.id for e in node.value.elts] for node in tree.body
+                  if isinstance(node, ast.Assign) and getattr(node.targets[0], "id", None) == "COMMANDS")
+    modules = {p.stem for p in (ROOT / "generator" / "cli").glob("*.py")} - {"__init__", "program", "common"}
+    assert sorted(listed) == sorted(modules)

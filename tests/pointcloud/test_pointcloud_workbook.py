@@ -1,0 +1,78 @@
+"""Three engines, one answer: the point-cloud workbooks recomputed by `formulas` and by
+LibreOffice agree with the JSON of the Python core to relative 1e-9."""
+
+import json
+
+import openpyxl
+import pytest
+
+from generator.cli import build_task
+from generator.workbook.recalc import results_rows
+
+from tests.helpers import ENGINES, EXAMPLES, close, recalc
+from tests.helpers.tasks import write_random_task
+
+FACTORS = ("R", "PQ", "S", "ET", "ER", "P")
+
+
+def expected_rows(results):
+    for d in results["distances"]:
+        yield d, {"d_mm": d["d_mm"], "u_um": d["u_um"], "U_um": d["U_um"],
+                  **{f"u_{f}_um": d["components_um"][f] for f in FACTORS}}
+
+
+def assert_workbook_matches_json(book, results, engine):
+    values = recalc(book, engine)
+    rows = results_rows(values)
+    assert len(rows) == len(results["distances"])
+    for row, (d, exp) in zip(rows, expected_rows(results)):
+        assert (row["from"], row["to"]) == (d["from"], d["to"])
+        for key, e in exp.items():
+            assert close(row[key], e), f"{engine}: {d['from']}-{d['to']} {key}: {row[key]!r} != {e!r}"
+    if "mpe_check" in results:
+        mpe = values["MPE"]
+        assert close(mpe["K1"], results["mpe_check"]["C_max"])
+        assert close(mpe["K2"], results["mpe_check"]["d_at_max_mm"])
+
+
+@pytest.mark.parametrize("engine", ENGINES)
+@pytest.mark.parametrize("example", ["stepgauge_I_MPE1", "stepgauge_I_MPE2", "stepgauge_II_MPE1", "stepgauge_II_MPE2"])
+def test_paper_workbooks_agree_with_json(tmp_path, example, engine):
+    results, _ = build_task(EXAMPLES / f"{example}.toml", tmp_path, plots=False)
+    assert_workbook_matches_json(tmp_path / f"{example}.xlsx", results, engine)
+
+
+@pytest.mark.parametrize("engine", ENGINES)
+@pytest.mark.parametrize("seed,probes", [(1, 2), (2, 3)])
+def test_random_clouds_with_every_factor_agree_with_json(tmp_path, seed, probes, engine):
+    task = write_random_task(tmp_path, seed, m=8, probes=probes)
+    results, _ = build_task(task, tmp_path / "out", plots=False)
+    assert_workbook_matches_json(tmp_path / "out" / f"random_{seed}.xlsx", results, engine)
+
+
+def test_workbook_layout_for_people(tmp_path):
+    results, files = build_task(EXAMPLES / "stepgauge_II_MPE1.toml", tmp_path)
+    wb = openpyxl.load_workbook(tmp_path / "stepgauge_II_MPE1.xlsx")
+    assert wb.sheetnames[0] == "Instructions" and "Results" in wb.sheetnames
+    assert [c.value for c in wb["Results"][1]] == ["from", "to", "d_mm", "u_um", "U_um", "u_R_um", "u_PQ_um",
+                                                   "u_S_um", "u_ET_um", "u_ER_um", "u_P_um"]
+    # inputs are bound to names equal to the task keys
+    for name in ("sigma_R_um", "sigma_ET_um", "lambda_ER_mm", "A_um", "B_mm", "K"):
+        assert name in wb.defined_names
+    # Results cells are formulas, not pasted numbers
+    assert str(wb["Results"]["D2"].value).startswith("=")
+    # the charts of Figures 4-7
+    assert wb["MPE"]._charts and wb["Budget"]._charts
+    assert {f.suffix for f in files} == {".xlsx", ".json", ".png"}
+
+
+def test_point_labels_that_look_like_formulas_stay_text(tmp_path):
+    labels = ["=SUM(A1)", "+1", "-2", "@x", "Q5", "Q6"]
+    task = write_random_task(tmp_path, 7, m=6, probes=1, labels=labels, mpe=False)
+    results, _ = build_task(task, tmp_path / "out", plots=False)
+    wb = openpyxl.load_workbook(tmp_path / "out" / "random_7.xlsx")
+    assert wb["Points"]["A2"].value == "=SUM(A1)" and wb["Points"]["A2"].data_type == "s"
+    assert wb["Results"]["A2"].data_type == "s"
+    values = recalc(tmp_path / "out" / "random_7.xlsx", "formulas")
+    assert values["Results"]["A2"] == "=SUM(A1)"
+    assert json.loads((tmp_path / "out" / "random_7.json").read_text())["distances"][0]["from"] == "=SUM(A1)"
