@@ -5,7 +5,6 @@ import math
 
 import numpy as np
 import pytest
-from model_reference import length_covariance_dense
 from scipy import stats
 
 from xlfuncs import pointcloud as pc
@@ -14,6 +13,7 @@ from xlfuncs.locator import effects as fx
 from xlfuncs.locator import simulate as sm
 
 from tests.helpers.clouds import MPE1, ONE, PAIR, THREE
+from tests.helpers.model_reference import length_covariance_dense
 
 
 def model(probes=ONE, params=MPE1):
