@@ -1,3 +1,5 @@
-from generator.cli import main
+"""``python -m generator`` (in a checkout) and ``python -m cmmwb.generator``: the command line."""
+
+from cmmwb.generator.cli import main
 
 raise SystemExit(main())

@@ -5,4 +5,12 @@ V_X), ``budget`` (Wojtyla/Plowucha 2023), ``features`` and ``partial`` (Forbes 2
 sensitivities, partial-feature approximations), ``montecarlo`` (JCGM 101 comparison),
 ``recordings``/``effects``/``diagnose``/``simulate`` (mismatch locator), ``distributed`` (Dask),
 ``udf`` (xlwings add-in functions).
+
+Installed as ``cmmwb.xlfuncs`` (see ``cmmwb/__init__.py``); imported by its folder name from a
+checkout, ``xlfuncs.x`` is made the very module ``cmmwb.xlfuncs.x`` (``cmmwb/_checkout.py``).
 """
+
+if __name__ == "xlfuncs":       # a checkout's folder, imported by its own name
+    from cmmwb._checkout import alias
+
+    alias(__name__)
