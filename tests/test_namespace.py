@@ -137,11 +137,12 @@ def test_workbooks_name_the_add_in_module_by_its_installed_name(tmp_path):
 
 
 def test_a_wheel_in_a_fresh_environment_ignores_a_hostile_generator_and_xlfuncs(tmp_path):
-    """`pip wheel` of the checkout, installed by pip into a new virtual environment (its
-    dependencies: this environment's site-packages, after its own, through a .pth file; no
-    index); then the same probe and the console script, beside the hostile modules."""
+    """`pip wheel` of the checkout (setuptools from pip's index, as for `pip install -e .`),
+    installed by pip into a new virtual environment (its dependencies: this environment's
+    site-packages, after its own, through a .pth file); then the same probe and the console
+    script, beside the hostile modules."""
     wheels = tmp_path / "wheels"
-    r = subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "--no-build-isolation", "-q",
+    r = subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "-q",
                         "-w", str(wheels), str(ROOT)], capture_output=True, text=True, timeout=600)
     assert r.returncode == 0, r.stderr
     (wheel,) = wheels.glob("cmmwb-*.whl")
