@@ -11,6 +11,7 @@ from __future__ import annotations
 import ast
 import os
 import re
+import shutil
 import subprocess
 import sys
 import venv
@@ -141,9 +142,15 @@ def test_a_wheel_in_a_fresh_environment_ignores_a_hostile_generator_and_xlfuncs(
     installed by pip into a new virtual environment (its dependencies: this environment's
     site-packages, after its own, through a .pth file); then the same probe and the console
     script, beside the hostile modules."""
+    source = tmp_path / "source"     # a clean copy: no build/ of the checkout with stale files
+    source.mkdir()
+    for name in ("pyproject.toml", "README.md"):
+        shutil.copy2(ROOT / name, source / name)
+    for name in ("cmmwb", "generator", "xlfuncs"):
+        shutil.copytree(ROOT / name, source / name, ignore=shutil.ignore_patterns("__pycache__"))
     wheels = tmp_path / "wheels"
     r = subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "-q",
-                        "-w", str(wheels), str(ROOT)], capture_output=True, text=True, timeout=600)
+                        "-w", str(wheels), str(source)], capture_output=True, text=True, timeout=600)
     assert r.returncode == 0, r.stderr
     (wheel,) = wheels.glob("cmmwb-*.whl")
     env_dir = tmp_path / "venv"
