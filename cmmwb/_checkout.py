@@ -58,7 +58,14 @@ class _AliasFinder(importlib.abc.MetaPathFinder):
 
 def alias(short: str) -> None:
     """Make the top-level package ``short`` (being imported from a checkout) ``cmmwb.<short>``."""
-    real = importlib.import_module("cmmwb." + short)
+    try:
+        real = importlib.import_module("cmmwb." + short)
+    except ModuleNotFoundError as e:
+        if e.name not in ("cmmwb", "cmmwb." + short):
+            raise
+        raise ModuleNotFoundError(f"{short} is installed as cmmwb.{short}, and cmmwb is not installed in "
+                                  f"this Python: run `python -m pip install -e .` in the checkout",
+                                  name=e.name) from None
     if not any(isinstance(f, _AliasFinder) and f.short == short for f in sys.meta_path):
         sys.meta_path.insert(0, _AliasFinder(short))
     sys.modules[short] = real
