@@ -1,4 +1,4 @@
-"""``python -m generator`` (in a checkout) and ``python -m cmmwb.generator``: the command line."""
+"""``python -m cmmwb.generator`` (anywhere) and ``python -m generator`` (in a checkout): the command line."""
 
 from cmmwb.generator.cli import main
 

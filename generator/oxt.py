@@ -14,8 +14,8 @@ Contents of the extension:
                            maps ``cmm_pair_blocks(...)`` to the add-in (without it the compatibility
                            names come too late and the cells show #NAME?)
 ``pythonpath/cmmwb/``      the numerical core as ``cmmwb.xlfuncs`` (every module of its package
-                           tree) and the empty ``cmmwb/__init__.py``, copied from this
-                           installation; LibreOffice adds ``pythonpath`` beside a component to
+                           tree; ``cmmwb`` is a namespace package, no ``__init__.py``), copied
+                           from this installation; LibreOffice adds ``pythonpath`` beside a component to
                            ``sys.path``, and the component imports ``cmmwb.xlfuncs.udf``, the
                            module the xlwings add-in names
 
@@ -30,7 +30,6 @@ import subprocess
 import zipfile
 from pathlib import Path
 
-import cmmwb
 import xlfuncs
 
 from . import __version__
@@ -114,7 +113,6 @@ def oxt_bytes() -> bytes:
         add(TYPE_LIBRARY, (SOURCES / TYPE_LIBRARY).read_bytes())
         add("CalcAddIns.xcu", calc_addins_xcu().encode())
         add(COMPONENT, (SOURCES / COMPONENT).read_text().replace("@VERSION@", __version__).encode())
-        add("pythonpath/cmmwb/__init__.py", Path(cmmwb.__file__).read_bytes())
         core = Path(xlfuncs.__file__).parent
         for f in sorted(core.rglob("*.py")):
             add(f"pythonpath/cmmwb/xlfuncs/{f.relative_to(core).as_posix()}", f.read_bytes())

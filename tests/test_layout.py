@@ -15,8 +15,8 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def _packages_in_tree() -> set[str]:
-    """The packages as installed: generator/ and xlfuncs/ inside cmmwb (cmmwb/__init__.py)."""
-    out = {"cmmwb"}
+    """The packages as installed: generator/ and xlfuncs/ inside the namespace cmmwb (no folder)."""
+    out = set()
     for top in ("generator", "xlfuncs"):
         for name in find_packages(str(ROOT), include=[top, top + ".*"]):
             out.add("cmmwb." + name)
@@ -25,8 +25,8 @@ def _packages_in_tree() -> set[str]:
 
 def test_every_package_in_the_tree_is_installed():
     setuptools = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]
-    assert setuptools["package-dir"] == {"cmmwb": "cmmwb", "cmmwb.generator": "generator",
-                                         "cmmwb.xlfuncs": "xlfuncs"}
+    assert setuptools["package-dir"] == {"cmmwb.generator": "generator", "cmmwb.xlfuncs": "xlfuncs"}
+    assert not (ROOT / "cmmwb").exists()     # cmmwb is a namespace: the tree keeps its top level
     installed = set(setuptools["packages"])
     assert _packages_in_tree() <= installed, sorted(_packages_in_tree() - installed)
     assert installed <= _packages_in_tree(), sorted(installed - _packages_in_tree())

@@ -1,9 +1,11 @@
 """cmmwb's own modules, whatever else is called `generator` or `xlfuncs` (issue 27).
 
-The installation has one top-level package, `cmmwb`; `generator/` and `xlfuncs/` are inside it
-(`cmmwb.generator`, `cmmwb.xlfuncs`). A user's `generator.py` beside a workbook (xlwings puts
-that folder first on `sys.path`) or the unrelated `generator` distribution of the package index
-must not stand in for them. The wheel test builds and installs a real wheel (slow: pip).
+The installation has `generator/` and `xlfuncs/` as `cmmwb.generator` and `cmmwb.xlfuncs`;
+`cmmwb` is an implicit namespace package (no folder of its own, so the tree keeps its top
+level). A user's `generator.py` beside a workbook (xlwings puts that folder first on `sys.path`)
+or the unrelated `generator` distribution of the package index must not stand in for them. The
+wheel test builds and installs a real wheel (slow: pip). A `cmmwb.py` beside the workbook does
+stand in for cmmwb (as it would for a regular package `cmmwb`, measured): docs/developing.md.
 """
 
 from __future__ import annotations
@@ -41,6 +43,7 @@ with contextlib.redirect_stdout(out):
 import importlib
 udf = importlib.import_module(sys.argv[1])
 print(json.dumps({"status": status, "version": out.getvalue().strip(),
+                  "cmmwb_file": getattr(sys.modules["cmmwb"], "__file__", None),
                   "udf": udf.__file__, "udf_version": udf.cmm_version(),
                   "top_level": sorted(m for m in sys.modules if m.split('.')[0] in ('generator', 'xlfuncs'))}))
 """
@@ -68,6 +71,7 @@ def _only_cmmwb(result: dict) -> None:
     assert re.fullmatch(r"cmmwb \d+\.\d+\.\d+", result["version"]), result["version"]
     assert result["udf_version"] == result["version"]
     assert result["top_level"] == []        # no `generator`, no `xlfuncs` imported: only cmmwb.*
+    assert result["cmmwb_file"] is None     # cmmwb is a namespace package: no file of its own
 
 
 def test_the_editable_install_ignores_a_hostile_generator_and_xlfuncs_beside_the_workbook(tmp_path):
@@ -87,9 +91,19 @@ def test_the_console_script_runs_beside_a_hostile_generator(tmp_path):
     assert (folder / "task.toml").is_file()
 
 
+def test_python_dash_m_cmmwb_generator_runs_beside_a_hostile_generator(tmp_path):
+    """`python -m cmmwb.generator`, what the tests' subprocesses run, works from any folder."""
+    folder = _hostile_folder(tmp_path)
+    r = subprocess.run([sys.executable, "-m", "cmmwb.generator", "--version"], cwd=folder,
+                       capture_output=True, text=True, timeout=120,
+                       env={**os.environ, "PYTHONPATH": str(folder)})
+    assert r.returncode == 0, r.stderr
+    assert re.fullmatch(r"cmmwb \d+\.\d+\.\d+", r.stdout.strip()), r.stdout
+
+
 def test_python_dash_m_generator_in_a_checkout_runs_each_module_once():
     """`python -m generator` (cwd = the checkout) is the command line, and `generator.x` is the
-    module `cmmwb.generator.x` itself, not a second copy (cmmwb/_checkout.py)."""
+    module `cmmwb.generator.x` itself, not a second copy (xlfuncs/checkout.py)."""
     r = subprocess.run([sys.executable, "-m", "generator", "--version"], cwd=ROOT, capture_output=True,
                        text=True, timeout=120)
     assert r.returncode == 0 and r.stdout.startswith("cmmwb "), r.stderr
@@ -121,7 +135,7 @@ def test_every_import_of_the_project_is_cmmwb_prefixed_or_relative():
     """`from xlfuncs import ...` works in a checkout and fails for a user (and would load a second
     copy of the module): code, tests and bench say `cmmwb.xlfuncs` (or import relatively)."""
     bad = []
-    for folder in ("cmmwb", "generator", "xlfuncs", "tests", "bench"):
+    for folder in ("generator", "xlfuncs", "tests", "bench"):
         for path in sorted((ROOT / folder).rglob("*.py")):
             bad += _absolute_imports_of_bare_top_level(path)
     assert not bad, "\n".join(bad)
@@ -146,7 +160,7 @@ def test_a_wheel_in_a_fresh_environment_ignores_a_hostile_generator_and_xlfuncs(
     source.mkdir()
     for name in ("pyproject.toml", "README.md"):
         shutil.copy2(ROOT / name, source / name)
-    for name in ("cmmwb", "generator", "xlfuncs"):
+    for name in ("generator", "xlfuncs"):
         shutil.copytree(ROOT / name, source / name, ignore=shutil.ignore_patterns("__pycache__"))
     wheels = tmp_path / "wheels"
     r = subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "-q",
@@ -167,6 +181,7 @@ def test_a_wheel_in_a_fresh_environment_ignores_a_hostile_generator_and_xlfuncs(
     assert (site / "cmmwb" / "generator" / "lo_addin" / "cmmwb_calc.py").is_file()
     assert (site / "cmmwb" / "generator" / "examples" / "knuckle.toml").is_file()
     assert not (site / "generator").exists() and not (site / "xlfuncs").exists()
+    assert sorted(p.name for p in (site / "cmmwb").iterdir()) == ["generator", "xlfuncs"]   # a namespace
     folder = _hostile_folder(tmp_path)
     clean = {"PATH": os.environ.get("PATH", ""), "HOME": str(tmp_path)}
     result = _probe(str(python), folder, env=clean)

@@ -6,11 +6,12 @@ sensitivities, partial-feature approximations), ``montecarlo`` (JCGM 101 compari
 ``recordings``/``effects``/``diagnose``/``simulate`` (mismatch locator), ``distributed`` (Dask),
 ``udf`` (xlwings add-in functions).
 
-Installed as ``cmmwb.xlfuncs`` (see ``cmmwb/__init__.py``); imported by its folder name from a
-checkout, ``xlfuncs.x`` is made the very module ``cmmwb.xlfuncs.x`` (``cmmwb/_checkout.py``).
+Installed as ``cmmwb.xlfuncs`` (``cmmwb`` is a namespace package, ``pyproject.toml``); imported by
+its folder name from a checkout, ``xlfuncs.x`` is made the very module ``cmmwb.xlfuncs.x``
+(``checkout.py``).
 """
 
 if __name__ == "xlfuncs":       # a checkout's folder, imported by its own name
-    from cmmwb._checkout import alias
+    from cmmwb.xlfuncs.checkout import alias
 
     alias(__name__)

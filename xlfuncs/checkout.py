@@ -1,13 +1,16 @@
 """One copy of each module when a checkout imports ``generator`` or ``xlfuncs`` by its folder name.
 
-In a source checkout (the working directory on ``sys.path``), ``python -m generator`` and
-``python -m generator.templates --check`` find the folder ``generator/`` as a top-level package.
-Its modules import one another relatively and the core as ``cmmwb.xlfuncs``, and the job modules
-are imported as ``cmmwb.generator.*``: without this shim the same file would run twice, as
-``generator.x`` and as ``cmmwb.generator.x``, with two ``InputError`` classes and two copies of
-every module-level state.  :func:`alias` makes ``generator`` and every ``generator.x`` the very
-module object ``cmmwb.generator[.x]`` (and the same for ``xlfuncs``).  Installed packages never
-run it: an installation has no top-level ``generator`` or ``xlfuncs``.
+The installation has no top-level ``generator`` or ``xlfuncs``: ``cmmwb`` is a namespace package
+(no folder of its own) holding ``cmmwb.generator`` <- ``generator/`` and ``cmmwb.xlfuncs`` <-
+``xlfuncs/`` (``pyproject.toml``, ``package-dir``).  In a source checkout (the working directory
+on ``sys.path``), ``python -m generator`` and ``python -m generator.templates --check`` find the
+folder ``generator/`` as a top-level package too.  Its modules import one another relatively and
+the core as ``cmmwb.xlfuncs``, and the job modules are imported as ``cmmwb.generator.*``: without
+this shim the same file would run twice, as ``generator.x`` and as ``cmmwb.generator.x``, with two
+``InputError`` classes and two copies of every module-level state.  :func:`alias` makes
+``generator`` and every ``generator.x`` the very module object ``cmmwb.generator[.x]`` (and the
+same for ``xlfuncs``); ``generator/__init__.py`` and ``xlfuncs/__init__.py`` call it when they are
+imported by their own names.  Installed packages never run it.  Standard library only.
 """
 
 from __future__ import annotations
