@@ -12,6 +12,13 @@ its folder name from a checkout, ``xlfuncs.x`` is made the very module ``cmmwb.x
 """
 
 if __name__ == "xlfuncs":       # a checkout's folder, imported by its own name
-    from cmmwb.xlfuncs.checkout import alias
+    try:
+        from cmmwb.xlfuncs.checkout import alias
+    except ModuleNotFoundError as e:    # no cmmwb in this Python: the checkout is not installed
+        if e.name != "cmmwb":
+            raise
+        raise ModuleNotFoundError(f"{__name__} is installed as cmmwb.{__name__}, and cmmwb is not installed in "
+                                  "this Python: run `python -m pip install -e .` in the checkout",
+                                  name=e.name) from None
 
     alias(__name__)
