@@ -13,8 +13,11 @@ Contents of the extension:
                            configuration data: Calc reads it at start-up, so the ``.xlsx`` import
                            maps ``cmm_pair_blocks(...)`` to the add-in (without it the compatibility
                            names come too late and the cells show #NAME?)
-``pythonpath/xlfuncs/``    the numerical core, copied from this installation (LibreOffice adds
-                           ``pythonpath`` beside a component to ``sys.path``)
+``pythonpath/cmmwb/``      the numerical core as ``cmmwb.xlfuncs`` (every module of its package
+                           tree; ``cmmwb`` is a namespace package, no ``__init__.py``), copied
+                           from this installation; LibreOffice adds ``pythonpath`` beside a component to
+                           ``sys.path``, and the component imports ``cmmwb.xlfuncs.udf``, the
+                           module the xlwings add-in names
 
 Install with ``unopkg add cmmwb.oxt`` (see docs/addins.md).  LibreOffice's Python must have
 numpy (Debian: ``python3-numpy``).
@@ -112,7 +115,7 @@ def oxt_bytes() -> bytes:
         add(COMPONENT, (SOURCES / COMPONENT).read_text().replace("@VERSION@", __version__).encode())
         core = Path(xlfuncs.__file__).parent
         for f in sorted(core.rglob("*.py")):          # with its subpackages (features/, partial/, ...)
-            add(f"pythonpath/xlfuncs/{f.relative_to(core).as_posix()}", f.read_bytes())
+            add(f"pythonpath/cmmwb/xlfuncs/{f.relative_to(core).as_posix()}", f.read_bytes())
     return buf.getvalue()
 
 

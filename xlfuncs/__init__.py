@@ -5,4 +5,20 @@ V_X), ``budget`` (Wojtyla/Plowucha 2023), ``features`` and ``partial`` (Forbes 2
 sensitivities, partial-feature approximations), ``montecarlo`` (JCGM 101 comparison),
 ``recordings``/``effects``/``diagnose``/``simulate`` (mismatch locator), ``distributed`` (Dask),
 ``udf`` (xlwings add-in functions).
+
+Installed as ``cmmwb.xlfuncs`` (``cmmwb`` is a namespace package, ``pyproject.toml``); imported by
+its folder name from a checkout, ``xlfuncs.x`` is made the very module ``cmmwb.xlfuncs.x``
+(``checkout.py``).
 """
+
+if __name__ == "xlfuncs":       # a checkout's folder, imported by its own name
+    try:
+        from cmmwb.xlfuncs.checkout import alias
+    except ModuleNotFoundError as e:    # no cmmwb in this Python: the checkout is not installed
+        if e.name != "cmmwb":
+            raise
+        raise ModuleNotFoundError(f"{__name__} is installed as cmmwb.{__name__}, and cmmwb is not installed in "
+                                  "this Python: run `python -m pip install -e .` in the checkout",
+                                  name=e.name) from None
+
+    alias(__name__)

@@ -3,8 +3,8 @@ the xlwings add-in (``xlfuncs.udf``) under the same names, so the ``Live_addin``
 large workbooks compute live in LibreOffice.
 
 This file runs inside LibreOffice's own Python (on Debian ``/usr/bin/python3`` with
-``python3-uno``), not in cmmwb's environment.  The extension ships ``xlfuncs`` in its
-``pythonpath/`` folder (LibreOffice puts that folder on ``sys.path`` for the components beside
+``python3-uno``), not in cmmwb's environment.  The extension ships the core as ``cmmwb.xlfuncs``
+in its ``pythonpath/`` folder (LibreOffice puts that folder on ``sys.path`` for the components beside
 it); numpy comes from that Python (``apt-get install python3-numpy``).  Every function converts
 the cell values Calc passes (tuples of rows; numbers as float, text as str, empty cells None) and
 calls the ``xlfuncs.udf`` function of the same name, so both add-ins run the same code.

@@ -19,7 +19,7 @@ def test_build_oxt_writes_an_extension_with_manifest_type_library_component_and_
         manifest = zf.read("META-INF/manifest.xml").decode()
         component = zf.read("cmmwb_calc.py").decode()
     assert {"META-INF/manifest.xml", "description.xml", "XCmmwb.rdb", "cmmwb_calc.py",
-            "pythonpath/xlfuncs/udf.py", "pythonpath/xlfuncs/blocked.py"} <= names
+            "pythonpath/cmmwb/xlfuncs/udf.py", "pythonpath/cmmwb/xlfuncs/blocked.py"} <= names
     assert "uno-typelibrary;type=RDB" in manifest and "uno-component;type=Python" in manifest
     assert "@VERSION@" not in component
 

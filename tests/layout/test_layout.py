@@ -15,19 +15,27 @@ ROOT = Path(__file__).resolve().parents[2]
 
 
 def _packages_in_tree() -> set[str]:
+    """The packages as installed: generator/ and xlfuncs/ inside the namespace cmmwb (no folder)."""
     out = set()
     for top in ("generator", "xlfuncs"):
-        for init in (ROOT / top).rglob("__init__.py"):
-            out.add(".".join(init.parent.relative_to(ROOT).parts))
+        for name in find_packages(str(ROOT), include=[top, top + ".*"]):
+            out.add("cmmwb." + name)
     return out
 
 
 def test_every_package_in_the_tree_is_installed():
-    config = tomllib.loads((ROOT / "pyproject.toml").read_text())
-    find = config["tool"]["setuptools"]["packages"]["find"]
-    installed = set(find_packages(str(ROOT), include=find["include"]))
+    setuptools = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]
+    assert setuptools["package-dir"] == {"cmmwb.generator": "generator", "cmmwb.xlfuncs": "xlfuncs"}
+    assert not (ROOT / "cmmwb").exists()     # cmmwb is a namespace: the tree keeps its top level
+    installed = set(setuptools["packages"])
     assert _packages_in_tree() <= installed, sorted(_packages_in_tree() - installed)
-    assert {"xlfuncs.locator", "generator.importers"} <= installed
+    assert installed <= _packages_in_tree(), sorted(installed - _packages_in_tree())
+    assert {"cmmwb.xlfuncs.locator", "cmmwb.generator.importers"} <= installed
+
+
+def _tree_name(dotted: str) -> str:
+    """A module's name in the tree (``generator.x``) from its installed name (``cmmwb.generator.x``)."""
+    return dotted.removeprefix("cmmwb.")
 
 
 # --- the import graph: layers, no cycles, no private names across modules --------------------
@@ -69,11 +77,11 @@ def _imports(name: str, path: Path, modules: dict[str, Path]):
     tree = ast.parse(path.read_text(encoding="utf-8"), str(path))
     for node in ast.walk(tree):
         if (isinstance(node, ast.Constant) and isinstance(node.value, str)
-                and node.value in modules):     # importlib.import_module("generator.x") & co.
-            yield node.value, [], node, None
+                and _tree_name(node.value) in modules):     # importlib.import_module("cmmwb.generator.x")
+            yield _tree_name(node.value), [], node, None
         elif isinstance(node, ast.Import):
             for alias in node.names:
-                target = alias.name
+                target = _tree_name(alias.name)
                 while target and target not in modules:
                     target = target.rpartition(".")[0]
                 if target:
@@ -84,7 +92,12 @@ def _imports(name: str, path: Path, modules: dict[str, Path]):
                 base = base[:len(base) - (node.level - 1)]
                 source = ".".join(base + ([node.module] if node.module else []))
             else:
-                source = node.module or ""
+                source = _tree_name(node.module or "")
+            if source == "cmmwb":                  # `from cmmwb import xlfuncs`
+                for alias in node.names:
+                    if alias.name in modules:
+                        yield alias.name, [], node, alias
+                continue
             if source not in modules:
                 continue
             for alias in node.names:
@@ -203,7 +216,7 @@ def private_uses(root: Path = ROOT) -> list[str]:
                 value = value.value
             if not (isinstance(value, ast.Name) and value.id in bound):
                 continue
-            dotted = ".".join([bound[value.id]] + chain)
+            dotted = _tree_name(".".join([bound[value.id]] + chain))
             if dotted in modules and dotted != name:
                 out.append(f"{path.relative_to(root)}:{node.lineno}: {dotted}.{node.attr}")
     return sorted(out)
@@ -230,9 +243,11 @@ def test_xlfuncs_imports_neither_generator_nor_openpyxl():
         tree = ast.parse(path.read_text(encoding="utf-8"), str(path))
         for node in ast.walk(tree):
             if isinstance(node, ast.Import):
-                tops = [a.name.partition(".")[0] for a in node.names]
+                tops = [_tree_name(a.name).partition(".")[0] for a in node.names]
+            elif isinstance(node, ast.ImportFrom) and node.module == "cmmwb":
+                tops = [a.name for a in node.names]
             elif isinstance(node, ast.ImportFrom) and not node.level:
-                tops = [(node.module or "").partition(".")[0]]
+                tops = [_tree_name(node.module or "").partition(".")[0]]
             else:
                 continue
             bad += [f"{path.relative_to(ROOT)}:{node.lineno}: {t}" for t in tops
