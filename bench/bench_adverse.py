@@ -31,7 +31,7 @@ TIMEOUT = int(os.environ.get("BENCH_TIMEOUT_S", "900"))
 SETUP = """
 import time, resource, json
 import numpy as np
-from xlfuncs import pointcloud as pc, features as ft, blocked as bl, lowrank as lr
+from cmmwb.xlfuncs import pointcloud as pc, features as ft, blocked as bl, lowrank as lr
 rng = np.random.default_rng(1)
 m, a, b = {m}, {a}, {b}
 X = np.column_stack([rng.uniform(0, a, m), rng.uniform(0, b, m), rng.normal(scale=1e-3, size=m)])

@@ -35,12 +35,12 @@ def rel(a, b) -> float:
 def main(argv: list[str]) -> int:
     import distributed
 
-    from xlfuncs import blocked as bl
-    from xlfuncs import features as ft
-    from xlfuncs import pointcloud as pc
-    from xlfuncs.distributed import DaskBackend
-    from xlfuncs.locator import diagnose as dg
-    from xlfuncs.locator import simulate as sm
+    from cmmwb.xlfuncs import blocked as bl
+    from cmmwb.xlfuncs import features as ft
+    from cmmwb.xlfuncs import pointcloud as pc
+    from cmmwb.xlfuncs.distributed import DaskBackend
+    from cmmwb.xlfuncs.locator import diagnose as dg
+    from cmmwb.xlfuncs.locator import simulate as sm
 
     n, m = 20_000, 100_000
     for a in argv:
@@ -50,7 +50,7 @@ def main(argv: list[str]) -> int:
             m = int(a.split("=")[1])
     rows = []
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as c:
-        from xlfuncs.model import MPE1  # Forbes 2025 Table 3
+        from cmmwb.xlfuncs.model import MPE1  # Forbes 2025 Table 3
         PROBES = (pc.Probe("P1", (0.0, 0.0, -50.0)), pc.Probe("P2", (150.0, 0.0, -50.0)),
                   pc.Probe("P3", (0.0, 150.0, -50.0)))
         L = sm.iso10360(PROBES, repeats=-(-n // 70), fractions=tuple(np.linspace(0.07, 0.7, 10)), hours=8.0)

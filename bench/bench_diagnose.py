@@ -29,11 +29,11 @@ sys.path.insert(0, str(ROOT))
 
 import numpy as np  # noqa: E402
 
-from xlfuncs import pointcloud as pc  # noqa: E402
-from xlfuncs.locator import diagnose as dg  # noqa: E402
-from xlfuncs.locator import simulate as sm  # noqa: E402
-from xlfuncs.locator.recordings import read_recordings, write_recordings  # noqa: E402
-from xlfuncs.model import MPE1  # noqa: E402  (Forbes 2025 Table 3)
+from cmmwb.xlfuncs import pointcloud as pc  # noqa: E402
+from cmmwb.xlfuncs.locator import diagnose as dg  # noqa: E402
+from cmmwb.xlfuncs.locator import simulate as sm  # noqa: E402
+from cmmwb.xlfuncs.locator.recordings import read_recordings, write_recordings  # noqa: E402
+from cmmwb.xlfuncs.model import MPE1  # noqa: E402  (Forbes 2025 Table 3)
 
 PROBES = (pc.Probe("P1", (0.0, 0.0, -50.0)), pc.Probe("P2", (150.0, 0.0, -50.0)), pc.Probe("P3", (0.0, 150.0, -50.0)))
 
@@ -70,7 +70,7 @@ def main(argv=None) -> int:
             core.append(t3 - t0)
             if parts is None or t3 - t0 <= min(core):
                 parts = (t1 - t0, t2 - t1, t3 - t2)
-        from generator.cli import main as cli_main
+        from cmmwb.generator.cli import main as cli_main
 
         cli = []
         for k in range(args.repeat):

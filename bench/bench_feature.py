@@ -25,8 +25,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from xlfuncs import features, partial, pointcloud  # noqa: E402
-from xlfuncs.model import MPE1 as PARAMS  # noqa: E402  (Forbes 2025 Table 3)
+from cmmwb.xlfuncs import features, partial, pointcloud  # noqa: E402
+from cmmwb.xlfuncs.model import MPE1 as PARAMS  # noqa: E402  (Forbes 2025 Table 3)
 
 
 def cylinder_scan(m_theta: int, m_z: int, seed: int = 1):
@@ -45,7 +45,7 @@ def bench_core(m_theta: int = 100, m_z: int = 20) -> None:
     """Fit + per-factor V_A, first without forming V_X (xlfuncs.blocked, what `cmmwb build` uses
     beyond 300 points; its peak memory is measured before the dense path runs), then with the
     dense V_X of eq. (28), and the largest relative difference of the two V_A."""
-    from xlfuncs import blocked
+    from cmmwb.xlfuncs import blocked
 
     cloud, s = cylinder_scan(m_theta, m_z)
     t0 = time.perf_counter()
@@ -92,8 +92,8 @@ def bench_core(m_theta: int = 100, m_z: int = 20) -> None:
 
 
 def bench_workbooks(sizes: list[int], engines: list[str]) -> None:
-    from generator.cli import build_task
-    from generator.workbook.recalc import recalculate
+    from cmmwb.generator.cli import build_task
+    from cmmwb.generator.workbook.recalc import recalculate
 
     for m in sizes:
         n_z = 4

@@ -30,9 +30,9 @@ ROOT = Path(__file__).resolve().parents[1]
 SETUP = """
 import time, resource, json, math
 import numpy as np
-from xlfuncs import pointcloud as pc
-from xlfuncs.locator import diagnose as dg, simulate as sm
-from xlfuncs.model import MPE1  # Forbes 2025 Table 3
+from cmmwb.xlfuncs import pointcloud as pc
+from cmmwb.xlfuncs.locator import diagnose as dg, simulate as sm
+from cmmwb.xlfuncs.model import MPE1  # Forbes 2025 Table 3
 PROBES = (pc.Probe("P1", (0.0, 0.0, -50.0)), pc.Probe("P2", (150.0, 0.0, -50.0)), pc.Probe("P3", (0.0, 150.0, -50.0)))
 n = {n}
 L = sm.iso10360(PROBES, repeats=-(-n // 70), fractions=tuple(np.linspace(0.07, 0.7, 10)), hours=8.0)

@@ -39,7 +39,7 @@ REPEATS = int(os.environ.get("BENCH_REPEATS", "2"))
 SETUP = """
 import time, resource, json
 import numpy as np
-from xlfuncs import pointcloud as pc, features as ft, blocked as bl
+from cmmwb.xlfuncs import pointcloud as pc, features as ft, blocked as bl
 rng = np.random.default_rng(1)
 m = {m}
 element = "{element}"
@@ -86,7 +86,7 @@ extra = {{"exact_s": exact_s, "rel_err": err, "bound_rel": lo.approximation.as_d
 PAIRS = """
 import time, resource, json
 import numpy as np
-from xlfuncs import pointcloud as pc
+from cmmwb.xlfuncs import pointcloud as pc
 rng = np.random.default_rng(1)
 m = {m}
 X = rng.uniform(0, 800, (m, 3)); N = rng.normal(size=(m, 3)); N /= np.linalg.norm(N, axis=1)[:, None]
@@ -222,9 +222,9 @@ def part_pairs(res: dict, lines: list) -> None:
 DIAG = """
 import time, resource, json, sys
 import numpy as np
-from xlfuncs import pointcloud as pc
-from xlfuncs.locator import diagnose as dg, simulate as sm
-from xlfuncs.model import MPE1  # Forbes 2025 Table 3
+from cmmwb.xlfuncs import pointcloud as pc
+from cmmwb.xlfuncs.locator import diagnose as dg, simulate as sm
+from cmmwb.xlfuncs.model import MPE1  # Forbes 2025 Table 3
 PAIR = (pc.Probe("P1", (0.0, 20.0, -30.0)), pc.Probe("P2", (0.0, -20.0, -30.0)))
 n = {n}
 rec = sm.simulate(sm.scan(PAIR, points=n), MPE1, {{"scale": 30.0, "probe_radius": 8.0}}, seed=3)
@@ -242,9 +242,9 @@ if {structured}:
 EQUAL = """
 import time, resource, json
 import numpy as np
-from xlfuncs import pointcloud as pc
-from xlfuncs.locator import diagnose as dg, simulate as sm
-from xlfuncs.model import MPE1  # Forbes 2025 Table 3
+from cmmwb.xlfuncs import pointcloud as pc
+from cmmwb.xlfuncs.locator import diagnose as dg, simulate as sm
+from cmmwb.xlfuncs.model import MPE1  # Forbes 2025 Table 3
 PAIR = (pc.Probe("P1", (0.0, 20.0, -30.0)), pc.Probe("P2", (0.0, -20.0, -30.0)))
 rec = sm.simulate(sm.scan(PAIR, points={n}), MPE1, {{"scale": 30.0, "probe_radius": 8.0}}, seed=3)
 model = dg.Model(MPE1, PAIR, True)

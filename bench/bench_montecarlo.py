@@ -25,12 +25,12 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from generator.pointcloud import job  # noqa: E402
-from generator.taskfile import read_toml  # noqa: E402
-from xlfuncs import blocked as bl  # noqa: E402
-from xlfuncs import features as ft  # noqa: E402
-from xlfuncs import montecarlo as mc  # noqa: E402
-from xlfuncs import pointcloud as pc  # noqa: E402
+from cmmwb.generator.pointcloud import job  # noqa: E402
+from cmmwb.generator.taskfile import read_toml  # noqa: E402
+from cmmwb.xlfuncs import blocked as bl  # noqa: E402
+from cmmwb.xlfuncs import features as ft  # noqa: E402
+from cmmwb.xlfuncs import montecarlo as mc  # noqa: E402
+from cmmwb.xlfuncs import pointcloud as pc  # noqa: E402
 
 REPEATS = int(os.environ.get("BENCH_REPEATS", "3"))
 N_DIG = 2

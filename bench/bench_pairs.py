@@ -36,7 +36,7 @@ ROOT = Path(__file__).resolve().parents[1]
 SETUP = """
 import time, resource, json, os, tempfile
 import numpy as np
-from xlfuncs import pointcloud as pc
+from cmmwb.xlfuncs import pointcloud as pc
 rng = np.random.default_rng(1)
 m = 3000
 X = rng.uniform(0, 800, (m, 3)); N = rng.normal(size=(m, 3)); N /= np.linalg.norm(N, axis=1)[:, None]

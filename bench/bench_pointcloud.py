@@ -22,8 +22,8 @@ CASES = {
     "build_stepgauge_m52": """
         import time, tomllib
         from pathlib import Path
-        from generator.pointcloud import job
-        from generator.taskfile import read_toml
+        from cmmwb.generator.pointcloud import job
+        from cmmwb.generator.taskfile import read_toml
         p = Path("generator/examples/stepgauge_II_MPE1.toml")
         import tempfile
         out = Path(tempfile.mkdtemp())
@@ -38,7 +38,7 @@ CASES = {
     "all_pairs_m3000": """
         import time
         import numpy as np
-        from xlfuncs import pointcloud as pc
+        from cmmwb.xlfuncs import pointcloud as pc
         rng = np.random.default_rng(1)
         m = 3000
         X = rng.uniform(0, 800, (m, 3)); N = rng.normal(size=(m, 3)); N /= np.linalg.norm(N, axis=1)[:, None]
@@ -53,8 +53,8 @@ CASES = {
     "recalc_libreoffice_m52": """
         import time, tempfile
         from pathlib import Path
-        from generator.cli import build_task
-        from generator.workbook.recalc import recalculate
+        from cmmwb.generator.cli import build_task
+        from cmmwb.generator.workbook.recalc import recalculate
         out = Path(tempfile.mkdtemp())
         build_task(Path("generator/examples/stepgauge_II_MPE1.toml"), out, plots=False)
         t = time.perf_counter()
@@ -64,8 +64,8 @@ CASES = {
     "recalc_formulas_m52": """
         import time, tempfile
         from pathlib import Path
-        from generator.cli import build_task
-        from generator.workbook.recalc import recalculate
+        from cmmwb.generator.cli import build_task
+        from cmmwb.generator.workbook.recalc import recalculate
         out = Path(tempfile.mkdtemp())
         build_task(Path("generator/examples/stepgauge_II_MPE1.toml"), out, plots=False)
         t = time.perf_counter()

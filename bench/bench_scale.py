@@ -31,7 +31,7 @@ REPEATS = int(os.environ.get("BENCH_REPEATS", "5"))
 SETUP_FEATURE = """
     import time
     import numpy as np
-    from xlfuncs import pointcloud as pc, features as ft, blocked as bl
+    from cmmwb.xlfuncs import pointcloud as pc, features as ft, blocked as bl
     rng = np.random.default_rng(1)
     m = 20_000
     params = pc.Parameters(0.2, 0.7, 0.7, 0.7, 0.2, 0.2, 200, 4.0, 400, 0.1, 0.1, 0.5)
@@ -62,7 +62,7 @@ CASES = {
     "all_pairs_m3000": """
         import time
         import numpy as np
-        from xlfuncs import pointcloud as pc
+        from cmmwb.xlfuncs import pointcloud as pc
         rng = np.random.default_rng(1)
         m = 3000
         X = rng.uniform(0, 800, (m, 3)); N = rng.normal(size=(m, 3)); N /= np.linalg.norm(N, axis=1)[:, None]
@@ -78,15 +78,15 @@ CASES = {
     "V_A_sphere_m20000": "BACKEND = None\n" + textwrap.dedent(SPHERE) + textwrap.dedent(PROPAGATE),
     "V_A_cylinder_m20000": "BACKEND = None\n" + textwrap.dedent(CYLINDER) + textwrap.dedent(PROPAGATE),
     "V_A_sphere_m20000_dask": textwrap.dedent(SPHERE) + """
-from xlfuncs.distributed import DaskBackend
+from cmmwb.xlfuncs.distributed import DaskBackend
 with DaskBackend() as BACKEND:
 """ + textwrap.indent(textwrap.dedent(PROPAGATE), "    "),
     "large_book_m2000": """
         import time, tempfile
         from pathlib import Path
         from tests.helpers.tasks import write_large_task
-        from generator.cli import build_task
-        from generator.workbook.recalc import recalculate, results_rows
+        from cmmwb.generator.cli import build_task
+        from cmmwb.generator.workbook.recalc import recalculate, results_rows
         tmp = Path(tempfile.mkdtemp())
         task = write_large_task(tmp, 2000, "plate_m2000")
         t = time.perf_counter()

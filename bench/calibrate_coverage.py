@@ -28,11 +28,11 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from xlfuncs import calibrate as cb  # noqa: E402
-from xlfuncs import pointcloud as pc  # noqa: E402
-from xlfuncs.locator import simulate as sm  # noqa: E402
-from xlfuncs.locator.model import Model, prepare  # noqa: E402
-from xlfuncs.model import MPE1  # noqa: E402  (Forbes 2025 Table 3)
+from cmmwb.xlfuncs import calibrate as cb  # noqa: E402
+from cmmwb.xlfuncs import pointcloud as pc  # noqa: E402
+from cmmwb.xlfuncs.locator import simulate as sm  # noqa: E402
+from cmmwb.xlfuncs.locator.model import Model, prepare  # noqa: E402
+from cmmwb.xlfuncs.model import MPE1  # noqa: E402  (Forbes 2025 Table 3)
 
 THREE = (pc.Probe("P1", (0.0, 0.0, -50.0)), pc.Probe("P2", (150.0, 0.0, -50.0)), pc.Probe("P3", (0.0, 150.0, -50.0)))
 PAIR = (pc.Probe("P1", (0.0, 20.0, -30.0)), pc.Probe("P2", (0.0, -20.0, -30.0)))

@@ -52,11 +52,11 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from xlfuncs import pointcloud as pc  # noqa: E402
-from xlfuncs.locator import diagnose as dg  # noqa: E402
-from xlfuncs.locator import effects as fx  # noqa: E402
-from xlfuncs.locator import simulate as sm  # noqa: E402
-from xlfuncs.model import MPE1  # noqa: E402  (Forbes 2025 Table 3)
+from cmmwb.xlfuncs import pointcloud as pc  # noqa: E402
+from cmmwb.xlfuncs.locator import diagnose as dg  # noqa: E402
+from cmmwb.xlfuncs.locator import effects as fx  # noqa: E402
+from cmmwb.xlfuncs.locator import simulate as sm  # noqa: E402
+from cmmwb.xlfuncs.model import MPE1  # noqa: E402  (Forbes 2025 Table 3)
 
 SNR_LO, SNR_HI = 10.0, 13.0
 MASK_FACTOR = 3.0

@@ -34,9 +34,9 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from xlfuncs.locator import diagnose as dg  # noqa: E402
-from xlfuncs.locator import effects as fx  # noqa: E402
-from xlfuncs.locator import simulate as sm  # noqa: E402
+from cmmwb.xlfuncs.locator import diagnose as dg  # noqa: E402
+from cmmwb.xlfuncs.locator import effects as fx  # noqa: E402
+from cmmwb.xlfuncs.locator import simulate as sm  # noqa: E402
 
 sys.path.insert(0, str(ROOT / "bench"))
 from diagnose_benchmark import ALPHA, MPE1, ONE  # noqa: E402
@@ -116,7 +116,7 @@ def library_match(diag, r0_um, steps: int = 3) -> tuple[bool, float]:
     wrong.  Returns (matched, noncentrality left)."""
     from scipy.stats import chi2 as chi2_dist
 
-    from xlfuncs.locator.linalg import orth, project_out
+    from cmmwb.xlfuncs.locator.linalg import orth, project_out
 
     prep, W = diag.prep, diag.whitener
     Q, _ = orth(W(prep.A)) if prep.A.shape[1] else (np.zeros((len(prep.r_um), 0)), [])

@@ -26,11 +26,11 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from xlfuncs.locator import diagnose as dg  # noqa: E402
-from xlfuncs.locator import effects as fx  # noqa: E402
-from xlfuncs.locator import simulate as sm  # noqa: E402
-from xlfuncs.locator.linalg import Whitener, orth, project_out  # noqa: E402
-from xlfuncs.locator.search import Candidate, scan_period  # noqa: E402
+from cmmwb.xlfuncs.locator import diagnose as dg  # noqa: E402
+from cmmwb.xlfuncs.locator import effects as fx  # noqa: E402
+from cmmwb.xlfuncs.locator import simulate as sm  # noqa: E402
+from cmmwb.xlfuncs.locator.linalg import Whitener, orth, project_out  # noqa: E402
+from cmmwb.xlfuncs.locator.search import Candidate, scan_period  # noqa: E402
 
 sys.path.insert(0, str(ROOT / "bench"))
 from diagnose_benchmark import MPE1, ONE, PAIR  # noqa: E402

@@ -29,8 +29,8 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from generator.calibration.run import run_calibrate  # noqa: E402
-from generator.diagnosis.run import load_model  # noqa: E402
+from cmmwb.generator.calibration.run import run_calibrate  # noqa: E402
+from cmmwb.generator.diagnosis.run import load_model  # noqa: E402
 
 #: starting values: a shop CMM of E = 3 + L/300 µm class (the records decide what they can)
 TASK = """[parameters]

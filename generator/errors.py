@@ -5,7 +5,7 @@ from __future__ import annotations
 from contextlib import contextmanager
 from typing import Iterator
 
-from xlfuncs.errors import ModelError
+from cmmwb.xlfuncs.errors import ModelError
 
 
 class InputError(Exception):

@@ -8,7 +8,7 @@ Contents of the extension:
 ``XCmmwb.rdb``             type library of the interface ``org.cmmwb.calc.XCmmwb``, generated from
                            ``XCmmwb.idl`` by LibreOffice's ``unoidl-write`` (shipped with the
                            sources, so packing needs no SDK; :func:`rebuild_type_library` remakes it)
-``cmmwb_calc.py``          the component: Calc functions calling ``xlfuncs.udf``
+``cmmwb_calc.py``          the component: Calc functions calling ``cmmwb.xlfuncs.udf``
 ``CalcAddIns.xcu``         the functions' names, descriptions and Excel (compatibility) names as
                            configuration data: Calc reads it at start-up, so the ``.xlsx`` import
                            maps ``cmm_pair_blocks(...)`` to the add-in (without it the compatibility
@@ -30,7 +30,7 @@ import subprocess
 import zipfile
 from pathlib import Path
 
-import xlfuncs
+from cmmwb import xlfuncs
 
 from . import __version__
 from .workbook.atomic import replacing

@@ -16,12 +16,12 @@ from __future__ import annotations
 
 import datetime as _dt
 import math
-import textwrap
 import os
+import textwrap
 from pathlib import Path
 from typing import Any
 
-from xlfuncs.statement import coverage_text, statement
+from cmmwb.xlfuncs.statement import coverage_text, statement
 
 from . import __version__
 from .decision import BONUS_CONDITIONS, column, margin_label, symbol

@@ -17,10 +17,10 @@ from typing import Iterator
 
 import numpy as np
 
-from xlfuncs.csvtable import TableError
-from xlfuncs.csvtable import read_table as read_csv_table
-from xlfuncs.limits import PLAUSIBLE, coordinate_problem, plausibility_problem
-from xlfuncs.pointcloud import Parameters, PointCloud, Probe
+from cmmwb.xlfuncs.csvtable import TableError
+from cmmwb.xlfuncs.csvtable import read_table as read_csv_table
+from cmmwb.xlfuncs.limits import PLAUSIBLE, coordinate_problem, plausibility_problem
+from cmmwb.xlfuncs.pointcloud import Parameters, PointCloud, Probe
 
 from .errors import InputError, model_errors_named
 from .workbook.guarded import MAX_BYTES, read_text

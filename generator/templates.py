@@ -25,8 +25,8 @@ import zipfile
 from pathlib import Path
 
 from .jobs import JOBS, job
-from .workbook.tasksheet import TASK_SHEET
 from .workbook.atomic import replacing
+from .workbook.tasksheet import TASK_SHEET
 
 TEMPLATE_DIR = Path(__file__).resolve().parents[1] / "workbook_templates"
 EXAMPLES_DIR = Path(__file__).parent / "examples"

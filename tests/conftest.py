@@ -9,7 +9,7 @@ import os
 import numpy  # noqa: F401  (loads OpenBLAS, so that its threads can be limited below)
 import pytest
 
-from generator.workbook.recalc import soffice
+from cmmwb.generator.workbook.recalc import soffice
 
 if os.environ.get("PYTEST_XDIST_WORKER"):
     # the suite runs as `-n 2` workers on a 2-core machine: one BLAS thread each, or the two

@@ -55,9 +55,9 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from . import pointcloud as pc
-from .model import sq_dists
 from .errors import ModelError
 from .locator.model import Prepared, is_structured, length_covariance
+from .model import sq_dists
 
 #: the hyper-parameters: (task-file name, factor, kind, unit)
 HYPERS: tuple[tuple[str, str, str, str], ...] = (

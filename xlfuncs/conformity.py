@@ -26,9 +26,8 @@ convert with :data:`UM_PER_MM`.  numpy and the standard library only; no spreads
 
 from __future__ import annotations
 
-from collections.abc import Callable
-
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np

@@ -34,8 +34,8 @@ from typing import Callable, Sequence
 import numpy as np
 
 from . import pointcloud as pc
-from .model import G_S, skew, sq_dists
 from .errors import ModelError
+from .model import G_S, skew, sq_dists
 
 FACTORS = pc.FACTORS
 MILLI = pc.MILLI

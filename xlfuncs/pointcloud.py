@@ -22,10 +22,23 @@ from dataclasses import dataclass
 import numpy as np
 
 from .errors import DegenerateGeometryError, ModelError
-# the model's names, also importable from here (xlfuncs.pointcloud.Parameters, ...)
-from .model import (FACTORS, MAX_PARAMETER, MILLI, MIN_LENGTH_SCALE, Parameters, PointCloud,  # noqa: F401
-                    Probe, V_S_diag_um_per_mm2, factor_block, gauss_kernel, probe_arrays, scale_rows, sq_dists)
 
+# the model's names, also importable from here (xlfuncs.pointcloud.Parameters, ...)
+from .model import (  # noqa: F401
+    FACTORS,
+    MAX_PARAMETER,
+    MILLI,
+    MIN_LENGTH_SCALE,
+    Parameters,
+    PointCloud,
+    Probe,
+    V_S_diag_um_per_mm2,
+    factor_block,
+    gauss_kernel,
+    probe_arrays,
+    scale_rows,
+    sq_dists,
+)
 
 # ---------------------------------------------------------------------------------------------
 # Dense V_X (Forbes 2025 eq. 28), one 3m x 3m matrix per factor, µm²

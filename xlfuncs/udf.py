@@ -3,7 +3,7 @@
 For workbooks beyond the native-formula limit (``generator.pointcloud.large_book``) Excel users on Windows
 can recompute the heavy Gaussian-process blocks live, with the core of this package, instead of
 reading the values written at build time.  Install and use: ``docs/addins.md``
-(UDF Modules = ``xlfuncs.udf``).  The LibreOffice Calc add-in (``generator/lo_addin``) calls
+(UDF Modules = ``cmmwb.xlfuncs.udf``).  The LibreOffice Calc add-in (``generator/lo_addin``) calls
 these same functions.  On other platforms the xlwings decorators do nothing and the
 functions are plain Python (the tests call them with the cell values of the ranges).
 

@@ -10,13 +10,12 @@ from dataclasses import dataclass, field
 
 from openpyxl.styles import Alignment
 
-from xlfuncs import budget as bd
-from xlfuncs import dof
+from cmmwb.xlfuncs import budget as bd
+from cmmwb.xlfuncs import dof
 
 from ..workbook.book import FMT_SCI, HEADER_FONT, Book
 from ..workbook.xlref import block, cell
 from .task import TYPE_A_INPUT
-
 
 # columns of a budget block (paper layout) and of its intermediate quantities
 C_INPUT, C_X, C_S, C_U, C_C = 1, 2, 3, 4, 5

@@ -23,12 +23,22 @@ from pathlib import Path
 
 from openpyxl.styles import Alignment
 
-from xlfuncs import budget as bd
+from cmmwb.xlfuncs import budget as bd
 
 from ..workbook.book import HEADER_FONT, Book, BookAdditions, Formula
 from ..workbook.xlref import block, cell
-from .block import (C_INPUT, DOF_HEADER, FMT_U, NU_EFF_NOTE, BudgetCells, CharCells, coord, nu_eff_formula,
-                    type_a_cells, write_variant)
+from .block import (
+    C_INPUT,
+    DOF_HEADER,
+    FMT_U,
+    NU_EFF_NOTE,
+    BudgetCells,
+    CharCells,
+    coord,
+    nu_eff_formula,
+    type_a_cells,
+    write_variant,
+)
 from .task import MODEL_TEXT, distance_name
 
 
@@ -112,7 +122,7 @@ def _ref(target_sheet: str, coord: str, here: str) -> str:
 
 
 def _split(coord: str) -> tuple[int, int]:
-    from openpyxl.utils.cell import coordinate_from_string, column_index_from_string
+    from openpyxl.utils.cell import column_index_from_string, coordinate_from_string
 
     letters, row = coordinate_from_string(coord)
     return row, column_index_from_string(letters)

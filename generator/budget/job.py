@@ -16,10 +16,10 @@ import math
 import re
 from pathlib import Path
 
-from xlfuncs import budget as bd
-from xlfuncs import dof
-from xlfuncs.errors import ModelError
-from xlfuncs.limits import coordinate_problem
+from cmmwb.xlfuncs import budget as bd
+from cmmwb.xlfuncs import dof
+from cmmwb.xlfuncs.errors import ModelError
+from cmmwb.xlfuncs.limits import coordinate_problem
 
 from .. import __version__
 from ..errors import InputError, model_errors_named

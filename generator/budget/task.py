@@ -8,7 +8,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from xlfuncs import budget as bd
+from cmmwb.xlfuncs import budget as bd
 
 #: point-name keys of each model (the points a characteristic uses), with their shape
 MODEL_KEYS: dict[str, dict[str, int]] = {

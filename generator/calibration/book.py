@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from xlfuncs import pointcloud as pc
+from cmmwb.xlfuncs import pointcloud as pc
 
 from ..pointcloud.book import MPE_GRID_POINTS, write_mpe
 from ..workbook.book import Book, ChartSeries, Formula

@@ -22,18 +22,18 @@ from pathlib import Path
 
 import numpy as np
 
-from xlfuncs import calibrate as cb
-from xlfuncs import compensation as cp
-from xlfuncs.locator import diagnose as dg
-from xlfuncs.locator import effects as fx
-from xlfuncs import pointcloud as pc
-from xlfuncs.errors import ModelError
-from xlfuncs.locator.report import effect_estimates
-from xlfuncs.locator.recordings import RecordingsError, write_recordings
+from cmmwb.xlfuncs import calibrate as cb
+from cmmwb.xlfuncs import compensation as cp
+from cmmwb.xlfuncs import pointcloud as pc
+from cmmwb.xlfuncs.errors import ModelError
+from cmmwb.xlfuncs.locator import diagnose as dg
+from cmmwb.xlfuncs.locator import effects as fx
+from cmmwb.xlfuncs.locator.recordings import RecordingsError, write_recordings
+from cmmwb.xlfuncs.locator.report import effect_estimates
 
 from .. import __version__
-from ..errors import InputError, model_errors_named
 from ..diagnosis.run import read_recordings
+from ..errors import InputError, model_errors_named
 from ..workbook.atomic import Staging
 
 #: the u(d) grid and the MPE check use the pointcloud workbook's grid (the MPE sheet is shared)

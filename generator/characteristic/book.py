@@ -14,7 +14,7 @@ squares peak-to-valley, minimum zone): their value and u are grey core values wi
 
 from __future__ import annotations
 
-from xlfuncs import characteristics as ch
+from cmmwb.xlfuncs import characteristics as ch
 
 from .. import __version__
 from ..pointcloud.vx_sheets import explain_inputs, write_inputs, write_points

@@ -28,15 +28,23 @@ import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
-
-from xlfuncs import characteristics as ch
-from xlfuncs import features as ft
-from xlfuncs import pointcloud as pc
+from cmmwb.xlfuncs import characteristics as ch
+from cmmwb.xlfuncs import features as ft
+from cmmwb.xlfuncs import pointcloud as pc
 
 from .. import __version__
 from ..errors import InputError, model_errors_named
-from ..taskfile import (COMMON_TABLES, check_keys, number, read_point_cloud, string, table, task_kind_and_name,
-                        text_list, vector3)
+from ..taskfile import (
+    COMMON_TABLES,
+    check_keys,
+    number,
+    read_point_cloud,
+    string,
+    table,
+    task_kind_and_name,
+    text_list,
+    vector3,
+)
 from ..taskkind import always_exact, no_type_a
 from ..workbook.book import BookAdditions
 

@@ -7,7 +7,7 @@ from __future__ import annotations
 from dataclasses import replace
 from pathlib import Path
 
-from xlfuncs.model import MPE1
+from cmmwb.xlfuncs.model import MPE1
 
 from ..calibration.run import parse_mpe, run_calibrate
 from ..diagnosis.run import load_model

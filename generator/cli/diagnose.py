@@ -8,7 +8,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from xlfuncs.locator import diagnose as dg
+from cmmwb.xlfuncs.locator import diagnose as dg
 
 from ..diagnosis.run import load_model, run_diagnose
 from ..taskfile import collecting_notes

@@ -13,7 +13,7 @@ import signal
 import sys
 import textwrap
 
-from xlfuncs.errors import ModelError
+from cmmwb.xlfuncs.errors import ModelError
 
 from .. import __version__
 from ..errors import InputError, os_error_reason

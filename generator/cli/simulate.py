@@ -7,8 +7,8 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-from xlfuncs.locator import simulate as sm
-from xlfuncs.locator.recordings import write_recordings
+from cmmwb.xlfuncs.locator import simulate as sm
+from cmmwb.xlfuncs.locator.recordings import write_recordings
 
 from .. import __version__
 from ..diagnosis.run import load_model

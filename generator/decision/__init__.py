@@ -8,8 +8,7 @@
 The names the rest of the project uses are re-exported here.
 """
 
-from .decide import (BONUS_CONDITIONS, characteristic_tolerances, decide_all, margin_label, read_spec, rule_json,
-                     symbol)
+from .decide import BONUS_CONDITIONS, characteristic_tolerances, decide_all, margin_label, read_spec, rule_json, symbol
 from .readback import read_back
 from .sheet import FIRST_ROW, column, write_sheet
 

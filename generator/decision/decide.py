@@ -16,14 +16,13 @@ import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from xlfuncs import conformity as cf
-from xlfuncs import dof
-from xlfuncs.errors import ModelError
-from xlfuncs.statement import statement
+from cmmwb.xlfuncs import conformity as cf
+from cmmwb.xlfuncs import dof
+from cmmwb.xlfuncs.errors import ModelError
+from cmmwb.xlfuncs.statement import statement
 
 from ..errors import InputError
 from ..taskfile import check_keys
-
 
 SECTION = "decision"
 TOL_SECTION = "[[decision.tolerances]]"

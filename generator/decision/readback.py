@@ -5,7 +5,6 @@ from __future__ import annotations
 
 from .decide import SECTION, tolerance_where
 
-
 # -- the way back (`cmmwb read`) ---------------------------------------------------------------------
 
 def read_back(cells, rt) -> None:

@@ -13,12 +13,12 @@ from typing import Any
 
 from openpyxl.chart import Reference
 
-from xlfuncs import conformity as cf
-from xlfuncs import dof
-from xlfuncs.errors import ModelError
-from xlfuncs.statement import decimals_for
+from cmmwb.xlfuncs import conformity as cf
+from cmmwb.xlfuncs import dof
+from cmmwb.xlfuncs.errors import ModelError
+from cmmwb.xlfuncs.statement import decimals_for
 
-from ..workbook.book import HEADER_FONT, TITLE_FONT, Book, ChartSeries, FMT_MM, FMT_UM
+from ..workbook.book import FMT_MM, FMT_UM, HEADER_FONT, TITLE_FONT, Book, ChartSeries
 from ..workbook.xlref import cell, col, quote_sheet
 from .decide import DecisionSpec, rows_of
 

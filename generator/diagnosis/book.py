@@ -23,9 +23,9 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-from xlfuncs.locator import effects as fx
-from xlfuncs.locator.diagnose import Diagnosis, effect_estimates
-from xlfuncs.pointcloud import Parameters
+from cmmwb.xlfuncs.locator import effects as fx
+from cmmwb.xlfuncs.locator.diagnose import Diagnosis, effect_estimates
+from cmmwb.xlfuncs.pointcloud import Parameters
 
 from ..workbook.book import FMT_SCI, FMT_UM, Book, ChartSeries, Formula
 from ..workbook.xlref import Block, cell

@@ -15,7 +15,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from xlfuncs.locator import effects as fx
+from cmmwb.xlfuncs.locator import effects as fx
 
 from ..workbook.xlref import cell
 

@@ -11,8 +11,8 @@ import math
 
 import numpy as np
 
-from xlfuncs.locator import effects as fx
-from xlfuncs.locator.diagnose import Diagnosis
+from cmmwb.xlfuncs.locator import effects as fx
+from cmmwb.xlfuncs.locator.diagnose import Diagnosis
 
 from ..workbook.book import FMT_SCI, FMT_UM, Book
 from ..workbook.xlref import Block, block, cell

@@ -8,12 +8,12 @@ from pathlib import Path
 
 import numpy as np
 
-from xlfuncs.locator import effects as fx
-from xlfuncs.locator.diagnose import Diagnosis, effect_estimates
+from cmmwb.xlfuncs.locator import effects as fx
+from cmmwb.xlfuncs.locator.diagnose import Diagnosis, effect_estimates
 
 
 def _plt():
-    from ..workbook.plots import pyplot   # headless, '$' in record ids and groups taken literally
+    from ..workbook.plots import pyplot  # headless, '$' in record ids and groups taken literally
 
     return pyplot()
 
@@ -26,7 +26,7 @@ def revealing_quantities(diag: Diagnosis) -> list[tuple[str, np.ndarray, bool]]:
     out = []
     if D.kind == "length":
         out.append(("length d / mm", rec.reference_mm, False))
-        from xlfuncs.locator.diagnose import direction_label
+        from cmmwb.xlfuncs.locator.diagnose import direction_label
         out.append(("direction", np.array([direction_label(v) for v in D.na]), True))
         if D.N1 is not None:
             o = np.einsum("ij,ij->i", D.na, D.N1) * np.einsum("ij,ij->i", D.na, D.N2)

@@ -6,8 +6,8 @@ Inputs that the straightness and periodic columns are normalized by."""
 
 from __future__ import annotations
 
-from xlfuncs.locator import effects as fx
-from xlfuncs.locator.diagnose import Diagnosis
+from cmmwb.xlfuncs.locator import effects as fx
+from cmmwb.xlfuncs.locator.diagnose import Diagnosis
 
 from ..workbook.book import Book
 from ..workbook.xlref import block, cell

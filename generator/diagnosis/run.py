@@ -12,20 +12,17 @@ import math
 import time
 from pathlib import Path
 
-
-from xlfuncs.locator import diagnose as dg
-from xlfuncs import pointcloud as pc
-from xlfuncs.locator import simulate as sm
-from xlfuncs.distributed import get_backend
-from xlfuncs.memory import ResourceError, check_diagnose_fits
-from xlfuncs.model import MPE1  # Forbes 2025 Table 3, MPE1: the model of the demonstrations
-from xlfuncs.locator.recordings import RecordingsError, parse_recordings, write_recordings
+from cmmwb.xlfuncs import pointcloud as pc
+from cmmwb.xlfuncs.distributed import get_backend
+from cmmwb.xlfuncs.locator import diagnose as dg
+from cmmwb.xlfuncs.locator import simulate as sm
+from cmmwb.xlfuncs.locator.recordings import RecordingsError, parse_recordings, write_recordings
+from cmmwb.xlfuncs.memory import ResourceError, check_diagnose_fits
+from cmmwb.xlfuncs.model import MPE1  # Forbes 2025 Table 3, MPE1: the model of the demonstrations
 
 from .. import __version__
 from ..errors import InputError, model_errors_named
 from ..workbook.atomic import Staging
-
-
 
 # -- the model ----------------------------------------------------------------------------------
 

@@ -5,7 +5,7 @@ from pathlib import Path
 
 import numpy as np
 
-from xlfuncs import plate
+from cmmwb.xlfuncs import plate
 
 HERE = Path(__file__).parent
 NAME = "characteristic_plate"

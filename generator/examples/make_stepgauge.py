@@ -6,7 +6,7 @@ left faces with p_L = (0, 20, 0), right faces with p_R = (0, -20, 0).
 """
 from pathlib import Path
 
-from xlfuncs.model import TABLE3
+from cmmwb.xlfuncs.model import TABLE3
 
 HERE = Path(__file__).parent
 

@@ -32,12 +32,12 @@ function: ``generator.feature.job.propagation_method``); J, H, G and the R facto
 formulas.  Such workbooks also carry, as the large point-cloud workbook does
 (``generator.pointcloud.large_book``):
 
-``Live_addin``    the same numbers as Excel add-in formulas (``xlfuncs.udf``): ``cmm_feature``
+``Live_addin``    the same numbers as Excel add-in formulas (``cmmwb.xlfuncs.udf``): ``cmm_feature``
                   (value, u and the six components of each reported parameter) and, per grey
                   factor, ``cmm_feature_va`` (reported V_A,f, at the cells of T V_A,f T^T on
                   'V_A') and T^T V_A,f T x 1e12 at the cells of the grey values.  #NAME? in
                   LibreOffice and without the add-in -- by design, no other cell refers to it.
-``xlwings.conf``  ``UDF Modules = xlfuncs.udf`` for this workbook.
+``xlwings.conf``  ``UDF Modules = cmmwb.xlfuncs.udf`` for this workbook.
 
 This module writes the workbook in that order, its ``Instructions`` and ``Results``; the other
 sheets are written by ``fit_sheets`` (Fit ... G_A_X), ``va_sheets`` (V_A, Budget),
@@ -59,7 +59,6 @@ from .live_sheet import write_live
 from .planning_sheet import write_planning
 from .task import FIT_CURRENT, FIT_STALE, KIND, STALE_STEP, Task
 from .va_sheets import U_COLUMN, u_display, unit_of, write_budget, write_V_A
-
 
 #: native V_X formulas up to this many points (7 matrices of 3m x 3m plus J, G, V_A).  Measured
 #: with `python bench/bench_feature.py --workbooks 24 48 72 100` (cylinder, full model; formulas
@@ -208,7 +207,7 @@ def _instructions(book: Book, task: Task, f, native: bool, limit: int, method: s
             f"(cmmwb {__version__}), marked grey with a note; they do not follow edits of the inputs. J, H, "
             "G and the R factor remain formulas.",
             f"5. '{LIVE}' holds the same numbers as formulas of the cmmwb Excel add-in (xlwings user-defined "
-            "functions cmm_feature and cmm_feature_va in xlfuncs.udf) over 'Points', the probes and "
+            "functions cmm_feature and cmm_feature_va in cmmwb.xlfuncs.udf) over 'Points', the probes and "
             "parameters on 'Inputs' and the weights on 'Local': value, u and u per factor of each parameter "
             "(as on 'Budget'), and per grey factor V_A of the reported parameters and of the paper "
             "parameters (x 1e12) in the cells where 'V_A' has them. In Excel with the add-in they refit and "

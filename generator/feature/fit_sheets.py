@@ -9,7 +9,6 @@ from ..workbook.book import FMT_SCI, Book
 from ..workbook.xlref import Block, cell
 from .task import Task
 
-
 FMT = "0.000000000"
 
 

@@ -23,17 +23,28 @@ from pathlib import Path
 
 import numpy as np
 
-from xlfuncs import blocked as bl
-from xlfuncs import features as ft
-from xlfuncs.distributed import get_backend
-from xlfuncs import partial as pa
-from xlfuncs import pointcloud as pc
-from xlfuncs.limits import MAX_COORDINATE_MM, coordinate_problem
+from cmmwb.xlfuncs import blocked as bl
+from cmmwb.xlfuncs import features as ft
+from cmmwb.xlfuncs import partial as pa
+from cmmwb.xlfuncs import pointcloud as pc
+from cmmwb.xlfuncs.distributed import get_backend
+from cmmwb.xlfuncs.limits import MAX_COORDINATE_MM, coordinate_problem
 
 from .. import __version__
 from ..errors import InputError, model_errors_named
-from ..taskfile import (COMMON_TABLES, check_keys, number, read_parameters, read_point_cloud, read_probes, text_list,
-                       string, table, task_kind_and_name, vector3)
+from ..taskfile import (
+    COMMON_TABLES,
+    check_keys,
+    number,
+    read_parameters,
+    read_point_cloud,
+    read_probes,
+    string,
+    table,
+    task_kind_and_name,
+    text_list,
+    vector3,
+)
 from ..taskkind import no_type_a
 from ..workbook.book import BookAdditions
 from .task import KIND, Planning, Task, fit_state

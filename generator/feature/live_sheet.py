@@ -1,10 +1,10 @@
 """The ``Live_addin`` sheet of a ``feature`` workbook above the native limit: the same numbers as
-Excel add-in formulas (``xlfuncs.udf``: ``cmm_feature``, ``cmm_feature_va``), as the large
+Excel add-in formulas (``cmmwb.xlfuncs.udf``: ``cmm_feature``, ``cmm_feature_va``), as the large
 point-cloud workbook does (``generator.pointcloud.large_book``)."""
 
 from __future__ import annotations
 
-from xlfuncs import pointcloud as pc
+from cmmwb.xlfuncs import pointcloud as pc
 
 from ..pointcloud.large_book import LIVE, addin_ranges
 from ..workbook.book import Book
@@ -12,7 +12,6 @@ from ..workbook.xlref import Block, block
 from .fit_sheets import SMALL, matrix_labels
 from .task import Task
 from .va_sheets import VALUE_SCALE
-
 
 # -- the same numbers as Excel add-in formulas (above the native limit) -----------------------------
 
@@ -35,7 +34,7 @@ def write_live(book: Book, task: Task, f, va: dict, probe_rows: dict) -> None:
     weights = block(2, 2, m, 1, "Local")
     circle_plane = (task.circle_plane or "space") if task.element == "circle" else ""
     book.text(ws, 1, 1, "The numbers of 'Budget' and the grey values of 'V_A' as formulas of the cmmwb "
-                        "Excel add-in (xlfuncs.udf, docs/addins.md): live in Excel with the add-in, "
+                        "Excel add-in (cmmwb.xlfuncs.udf, docs/addins.md): live in Excel with the add-in, "
                         "#NAME? elsewhere (no other cell refers to this sheet)", font=None)
     # the fit options of the task (the add-in refits the points with them)
     oc = LIVE_OPTION_COLUMN

@@ -9,7 +9,6 @@ from ..workbook.xlref import Block, cell
 from .fit_sheets import FMT, SMALL
 from .task import Task
 
-
 # -- planning (Tables 1-8) --------------------------------------------------------------------
 
 _ARC = [("alpha_rad", "RADIANS({arc_deg})/2"),

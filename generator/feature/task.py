@@ -10,8 +10,8 @@ from pathlib import Path
 
 import numpy as np
 
-from xlfuncs import partial as pa
-from xlfuncs import pointcloud as pc
+from cmmwb.xlfuncs import partial as pa
+from cmmwb.xlfuncs import pointcloud as pc
 
 KIND = "feature"
 

@@ -4,7 +4,7 @@ value, u and u per factor of each parameter, and the factor chart."""
 
 from __future__ import annotations
 
-from xlfuncs import pointcloud as pc
+from cmmwb.xlfuncs import pointcloud as pc
 
 from .. import __version__
 from ..pointcloud.large_book import LIVE
@@ -12,7 +12,6 @@ from ..pointcloud.vx_sheets import FACTOR_TITLES
 from ..workbook.book import Book
 from ..workbook.xlref import Block, cell
 from .fit_sheets import FMT, SMALL, matrix_labels
-
 
 #: core-computed V_A blocks are written x 1e12 (see write_V_A)
 VALUE_SCALE = 1e12
@@ -236,7 +235,7 @@ def _value_refs(f) -> list[str]:
     if f.kind == "sphere":
         return [*o, "fit_r0"]
     if f.kind == "circle":
-        from xlfuncs.features import CIRCLE_PLANES
+        from cmmwb.xlfuncs.features import CIRCLE_PLANES
 
         cols, _ = CIRCLE_PLANES[f.circle_plane]
         return [o[cols[0]], o[cols[1]], "fit_r0"]

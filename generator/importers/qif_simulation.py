@@ -25,12 +25,12 @@ simulated and are named.
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 
-from xlfuncs import characteristics as ch
-from xlfuncs import pointcloud as pc
-
-from pathlib import Path
+from cmmwb.xlfuncs import characteristics as ch
+from cmmwb.xlfuncs import pointcloud as pc
 
 from ..errors import InputError
 from ..workbook.atomic import replacing

@@ -1,5 +1,5 @@
 """The cmmwb LibreOffice Calc add-in: a Python UNO component that gives Calc the functions of
-the xlwings add-in (``xlfuncs.udf``) under the same names, so the ``Live_addin`` sheets of the
+the xlwings add-in (``cmmwb.xlfuncs.udf``) under the same names, so the ``Live_addin`` sheets of the
 large workbooks compute live in LibreOffice.
 
 This file runs inside LibreOffice's own Python (on Debian ``/usr/bin/python3`` with
@@ -7,7 +7,7 @@ This file runs inside LibreOffice's own Python (on Debian ``/usr/bin/python3`` w
 in its ``pythonpath/`` folder (LibreOffice puts that folder on ``sys.path`` for the components beside
 it); numpy comes from that Python (``apt-get install python3-numpy``).  Every function converts
 the cell values Calc passes (tuples of rows; numbers as float, text as str, empty cells None) and
-calls the ``xlfuncs.udf`` function of the same name, so both add-ins run the same code.
+calls the ``cmmwb.xlfuncs.udf`` function of the same name, so both add-ins run the same code.
 
 The interface ``org.cmmwb.calc.XCmmwb`` (``XCmmwb.idl``, type library ``XCmmwb.rdb``) spells the
 methods in capitals (UNOIDL forbids ``_`` before a lower-case letter); Calc matches function
@@ -58,7 +58,7 @@ FUNCTIONS = {
 
 
 def _udf():
-    from xlfuncs import udf  # imported on first use: LibreOffice starts faster
+    from cmmwb.xlfuncs import udf  # imported on first use: LibreOffice starts faster
     return udf
 
 

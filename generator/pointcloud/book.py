@@ -5,7 +5,7 @@ named inputs beside the hyper-parameters, the Results rows, the MPE sheet and th
 
 from __future__ import annotations
 
-from xlfuncs import pointcloud as pc
+from cmmwb.xlfuncs import pointcloud as pc
 
 from ..workbook.book import Book, ChartSeries, Formula
 from ..workbook.xlref import block, cell

@@ -11,9 +11,9 @@ from pathlib import Path
 
 import numpy as np
 
-from xlfuncs import blocked as bl
-from xlfuncs import pointcloud as pc
-from xlfuncs.distributed import get_backend
+from cmmwb.xlfuncs import blocked as bl
+from cmmwb.xlfuncs import pointcloud as pc
+from cmmwb.xlfuncs.distributed import get_backend
 
 from .. import __version__
 from ..errors import InputError, model_errors_named
@@ -21,8 +21,7 @@ from ..taskfile import COMMON_TABLES, check_keys, number, read_point_cloud, stri
 from ..taskkind import always_exact, no_type_a
 from ..workbook.book import Book, BookAdditions
 from ..workbook.xlref import Block, block, cell
-from .book import (KIND, MPE_GRID_POINTS, RESULT_COLUMNS, budget_chart, extra_inputs, results_rows,
-                   write_mpe)
+from .book import KIND, MPE_GRID_POINTS, RESULT_COLUMNS, budget_chart, extra_inputs, results_rows, write_mpe
 from .vx_sheets import NATIVE_MAX_POINTS, explain_inputs, point_block, write_point_cloud_model
 
 EXAMPLES = ["stepgauge_I_MPE1.toml", "stepgauge_I_MPE2.toml",

@@ -16,12 +16,12 @@ Design (LibreOffice users see every number; Excel users with the add-in see it l
             ``xlfuncs.blocked.pair_blocks``; beside them the inputs they were computed for and a
             check cell ``gp_snapshot_ok`` that turns FALSE when an input they depend on is
             edited (then rebuild, or use the add-in).
-``Live_addin`` the same numbers as add-in formulas (``xlfuncs.udf``: ``cmm_distances``,
+``Live_addin`` the same numbers as add-in formulas (``cmmwb.xlfuncs.udf``: ``cmm_distances``,
             ``cmm_pair_blocks``), cell for cell beside the values: live in Excel with the
             add-in; #NAME? in LibreOffice and without the add-in -- by design, nothing else
             refers to this sheet.
 ``MPE``, ``Results``  as in the native workbook (Results are formulas referring to Budget).
-``xlwings.conf`` the add-in setting ``UDF Modules = xlfuncs.udf`` for this workbook.
+``xlwings.conf`` the add-in setting ``UDF Modules = cmmwb.xlfuncs.udf`` for this workbook.
 """
 
 from __future__ import annotations
@@ -31,8 +31,8 @@ from pathlib import Path
 
 import numpy as np
 
-from xlfuncs import blocked as bl
-from xlfuncs import pointcloud as pc
+from cmmwb.xlfuncs import blocked as bl
+from cmmwb.xlfuncs import pointcloud as pc
 
 from .. import __version__
 from ..errors import InputError
@@ -86,7 +86,7 @@ def write_large_book(task, results: dict, path: Path, additions: BookAdditions |
 
 
 def addin_ranges(m: int, probe_rows: dict) -> tuple[str, str, str]:
-    """The ranges every add-in formula reads (``xlfuncs.udf`` argument layout): ``points`` =
+    """The ranges every add-in formula reads (``cmmwb.xlfuncs.udf`` argument layout): ``points`` =
     Points!A:H of the m points, ``probes`` = the probes table on Inputs (rows ``probe_rows``
     of :func:`generator.pointcloud.vx_sheets.write_inputs`), ``params`` = names and values of the 12
     hyper-parameters on Inputs.  Shared by the pointcloud and the feature workbooks."""
@@ -97,11 +97,11 @@ def addin_ranges(m: int, probe_rows: dict) -> tuple[str, str, str]:
 
 
 def write_xlwings_conf(book: Book) -> None:
-    """The sheet ``xlwings.conf``: the add-in setting ``UDF Modules = xlfuncs.udf`` for this
+    """The sheet ``xlwings.conf``: the add-in setting ``UDF Modules = cmmwb.xlfuncs.udf`` for this
     workbook (read by xlwings' Import Functions; ignored by every other program)."""
     ws = book.sheet("xlwings.conf", protect=False)
     book.text(ws, 1, 1, "UDF Modules")
-    book.text(ws, 1, 2, "xlfuncs.udf")
+    book.text(ws, 1, 2, "cmmwb.xlfuncs.udf")
 
 
 class _Refs:
@@ -141,7 +141,7 @@ def _instructions(book: Book, task) -> None:
         "sigma_ER_urad, a probe offset, a point ...). Then rebuild (`cmmwb read`, `cmmwb build`) or use "
         "the Excel add-in.",
         "Live_addin — the same numbers as formulas of the cmmwb Excel add-in (xlwings user-defined "
-        "functions cmm_distances and cmm_pair_blocks in xlfuncs.udf), cell for cell in the layout of "
+        "functions cmm_distances and cmm_pair_blocks in cmmwb.xlfuncs.udf), cell for cell in the layout of "
         "'GP_blocks' and 'Budget'. In Excel with the add-in they recompute live from Inputs and Points; "
         "install and use: docs/addins.md of cmmwb (save as .xlsm, reference xlwings, Import "
         "Functions; 'xlwings.conf' already names the module). In LibreOffice, or in Excel without the "

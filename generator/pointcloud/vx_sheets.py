@@ -16,7 +16,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from xlfuncs.pointcloud import FACTORS, Parameters, PointCloud
+from cmmwb.xlfuncs.pointcloud import FACTORS, Parameters, PointCloud
 
 from ..workbook.book import FMT_COORD, Book
 from ..workbook.xlref import Block, cell

@@ -23,7 +23,7 @@ from types import SimpleNamespace
 from typing import Any
 
 import openpyxl
-from openpyxl.utils import range_boundaries, get_column_letter
+from openpyxl.utils import get_column_letter, range_boundaries
 
 ENGINES = ("formulas", "libreoffice")
 Values = dict[str, dict[str, Any]]

@@ -1,5 +1,5 @@
 """The LibreOffice Calc add-in extension: packed from the sources, with the type library that
-the IDL compiles to, and a component that calls the functions of xlfuncs.udf."""
+the IDL compiles to, and a component that calls the functions of cmmwb.xlfuncs.udf."""
 
 import ast
 import zipfile
@@ -7,9 +7,9 @@ from pathlib import Path
 
 import pytest
 
-from generator import oxt
-from generator.cli import main
-from xlfuncs import udf
+from cmmwb.generator import oxt
+from cmmwb.generator.cli import main
+from cmmwb.xlfuncs import udf
 
 
 def test_build_oxt_writes_an_extension_with_manifest_type_library_component_and_core(tmp_path):
@@ -94,9 +94,9 @@ def _relink_and_recalc(book: Path, ext, out_json: Path, *settings: str, relink: 
 def test_live_addin_sheet_follows_an_edited_input_in_libreoffice(tmp_path, installed_extension, extra_points):
     import openpyxl
 
-    from generator.cli import build_task
-    from generator.pointcloud import large_book
-    from generator.pointcloud.vx_sheets import NATIVE_MAX_POINTS
+    from cmmwb.generator.cli import build_task
+    from cmmwb.generator.pointcloud import large_book
+    from cmmwb.generator.pointcloud.vx_sheets import NATIVE_MAX_POINTS
 
     from tests.helpers import close
     from tests.helpers.addin import evaluate_addin_formulas
@@ -128,8 +128,8 @@ def test_live_addin_sheet_follows_an_edited_input_in_libreoffice(tmp_path, insta
 
 
 def _small_large_book(folder: Path) -> Path:
-    from generator.cli import build_task
-    from generator.pointcloud.vx_sheets import NATIVE_MAX_POINTS
+    from cmmwb.generator.cli import build_task
+    from cmmwb.generator.pointcloud.vx_sheets import NATIVE_MAX_POINTS
 
     from tests.helpers.tasks import write_large_task
     build_task(write_large_task(folder, NATIVE_MAX_POINTS + 10, "plate"), folder / "out", plots=False)
@@ -138,7 +138,7 @@ def _small_large_book(folder: Path) -> Path:
 
 @pytest.mark.libreoffice
 def test_relink_saves_an_ods_whose_live_addin_computes_on_opening(tmp_path, installed_extension):
-    from generator.pointcloud import large_book
+    from cmmwb.generator.pointcloud import large_book
 
     from tests.helpers import close
     from tests.helpers.addin import evaluate_addin_formulas
@@ -175,8 +175,8 @@ def test_live_addin_of_a_feature_workbook_computes_in_libreoffice(tmp_path, inst
     Live_addin cell after an edit of sigma_ET_um equals the core for the edited inputs."""
     import openpyxl
 
-    from generator.cli import build_task
-    from generator.pointcloud import large_book
+    from cmmwb.generator.cli import build_task
+    from cmmwb.generator.pointcloud import large_book
 
     from tests.helpers import close
     from tests.helpers.addin import evaluate_live

@@ -1,17 +1,17 @@
-"""The Excel add-in functions (xlfuncs.udf) are plain Python here: called with the cell values
+"""The Excel add-in functions (cmmwb.xlfuncs.udf) are plain Python here: called with the cell values
 Excel would pass (lists of rows, text ids, numbers), they give the numbers of the core."""
 
 
 import numpy as np
 import pytest
 
-from generator.pointcloud import job
-from generator.taskfile import read_toml
-from xlfuncs import blocked as bl
-from xlfuncs import features as ft
-from xlfuncs import pointcloud as pc
-from xlfuncs import udf
-from xlfuncs.errors import ModelError
+from cmmwb.generator.pointcloud import job
+from cmmwb.generator.taskfile import read_toml
+from cmmwb.xlfuncs import blocked as bl
+from cmmwb.xlfuncs import features as ft
+from cmmwb.xlfuncs import pointcloud as pc
+from cmmwb.xlfuncs import udf
+from cmmwb.xlfuncs.errors import ModelError
 
 from tests.helpers import EXAMPLES
 from tests.helpers.clouds import PARAMS, PROBES, random_cloud, rel_err, sphere_cloud

@@ -225,7 +225,7 @@ CASES: dict[str, tuple] = {
 
 def build_base(folder: Path, kind: str) -> Path:
     """A small cmmwb workbook of each kind (built by cmmwb build)."""
-    from generator.cli import build_task
+    from cmmwb.generator.cli import build_task
 
     ex = ROOT / "generator" / "examples"
     if kind == "pc":
@@ -260,7 +260,7 @@ def _info(name: str) -> zipfile.ZipInfo:
 
 
 def _sheet_part(book: Path, title: str) -> str:
-    from generator.workbook.cache import sheet_parts
+    from cmmwb.generator.workbook.cache import sheet_parts
 
     with zipfile.ZipFile(book) as z:
         return sheet_parts(z)[title]

@@ -18,10 +18,10 @@ from pathlib import Path
 import pytest
 import tomli_w
 
-from generator.budget import book as budget_book
-from generator.build import build_task
-from generator.workbook.recalc import recalculate
-from xlfuncs import dof
+from cmmwb.generator.budget import book as budget_book
+from cmmwb.generator.build import build_task
+from cmmwb.generator.workbook.recalc import recalculate
+from cmmwb.xlfuncs import dof
 
 from tests.helpers import close
 

@@ -17,10 +17,10 @@ from pathlib import Path
 import openpyxl
 import pytest
 
-from generator.budget import book as budget_book
-from generator.budget import job as budget_job
-from generator.errors import InputError
-from generator.workbook.recalc import recalculate, results_rows
+from cmmwb.generator.budget import book as budget_book
+from cmmwb.generator.budget import job as budget_job
+from cmmwb.generator.errors import InputError
+from cmmwb.generator.workbook.recalc import recalculate, results_rows
 
 from tests.helpers import close
 from tests.helpers.budget import (
@@ -309,7 +309,7 @@ def test_edited_inputs_recalculate_in_libreoffice(edited):
 
 
 def test_cli_build_writes_workbook_json_and_plot(tmp_path):
-    from generator.cli import main
+    from cmmwb.generator.cli import main
 
     assert main(["build", str(KNUCKLE), "--out", str(tmp_path)]) == 0
     results = json.loads((tmp_path / "knuckle.json").read_text(encoding="utf-8"))
@@ -325,7 +325,7 @@ def test_cli_build_writes_workbook_json_and_plot(tmp_path):
 
 
 def test_new_budget_writes_the_knuckle(tmp_path):
-    from generator.cli import main
+    from cmmwb.generator.cli import main
 
     out = tmp_path / "task.toml"
     assert main(["new", "budget", "--out", str(out)]) == 0
@@ -395,7 +395,7 @@ def test_cli_exit_status_2_names_file_and_characteristic(tmp_path):
     task.write_text(KNUCKLE.read_text(encoding="utf-8").replace("C = [0, 61, 0]",
                                                                 "C = [150, -32, 0]"))
     out = tmp_path / "out"
-    r = subprocess.run([sys.executable, "-m", "generator", "build", str(task), "--out", str(out)],
+    r = subprocess.run([sys.executable, "-m", "cmmwb.generator", "build", str(task), "--out", str(out)],
                        capture_output=True, text=True)
     assert r.returncode == 2, r.stderr
     msg = r.stderr.strip()

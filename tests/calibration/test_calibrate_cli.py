@@ -35,7 +35,7 @@ offset_mm = [0.0, -20.0, -30.0]
 
 
 def run(*args, cwd):
-    return subprocess.run([sys.executable, "-m", "generator", *args], capture_output=True, text=True, cwd=cwd,
+    return subprocess.run([sys.executable, "-m", "cmmwb.generator", *args], capture_output=True, text=True, cwd=cwd,
                           env={**os.environ, "OPENBLAS_NUM_THREADS": "1"})
 
 

@@ -5,13 +5,13 @@ agree with their JSON in three engines."""
 
 import pytest
 
-from generator.calibration.run import run_calibrate
-from generator.cli import build_task
-from generator.diagnosis.run import load_model
-from generator.workbook.recalc import results_rows
-from xlfuncs import pointcloud as pc
-from xlfuncs.locator import simulate as sm
-from xlfuncs.locator.recordings import write_recordings
+from cmmwb.generator.calibration.run import run_calibrate
+from cmmwb.generator.cli import build_task
+from cmmwb.generator.diagnosis.run import load_model
+from cmmwb.generator.workbook.recalc import results_rows
+from cmmwb.xlfuncs import pointcloud as pc
+from cmmwb.xlfuncs.locator import simulate as sm
+from cmmwb.xlfuncs.locator.recordings import write_recordings
 
 from tests.helpers import ENGINES, close, recalc
 
@@ -62,8 +62,8 @@ def loop(tmp_path_factory):
     step = sm.simulate(sm.layout("stepgauge", probes), model.params, {}, seed=5)
     write_recordings(iso, tmp / "iso.csv")
     write_recordings(step, tmp / "step.csv")
-    from generator.calibration.run import parse_mpe
-    from generator.taskfile import read_toml
+    from cmmwb.generator.calibration.run import parse_mpe
+    from cmmwb.generator.taskfile import read_toml
 
     mpe = parse_mpe(None, read_toml(tmp / "task.toml"), probes)
     result, files = run_calibrate([tmp / "iso.csv", tmp / "step.csv"], model, tmp / "cal",

@@ -12,10 +12,10 @@ from __future__ import annotations
 import openpyxl
 import pytest
 
-from generator import decision
-from generator.errors import InputError
-from generator.workbook.recalc import recalculate
-from xlfuncs import conformity as cf
+from cmmwb.generator import decision
+from cmmwb.generator.errors import InputError
+from cmmwb.generator.workbook.recalc import recalculate
+from cmmwb.xlfuncs import conformity as cf
 
 from tests.helpers import EXAMPLES
 from tests.helpers.decision import assert_engine_agrees, at, build, cached
@@ -161,7 +161,7 @@ def test_a_k_typed_in_the_decision_sheet_goes_back_to_the_task_file(plate, tmp_p
     [decision] k = 3; an untouched book writes no [decision]."""
     import tomllib
 
-    from generator.reader import read_to_files
+    from cmmwb.generator.reader import read_to_files
 
     _, book = plate
     same = read_to_files(book, tmp_path / "same" / "task.toml")

@@ -7,8 +7,8 @@ import json
 import openpyxl
 import pytest
 
-from generator.build import build_task
-from generator.workbook.recalc import recalculate, results_rows
+from cmmwb.generator.build import build_task
+from cmmwb.generator.workbook.recalc import recalculate, results_rows
 
 from tests.helpers import ENGINES, EXAMPLES, REL, close
 
@@ -96,7 +96,7 @@ def test_the_json_carries_tolerances_for_the_decision_rules(built):
     (('tolerance_mm = 0.05', 'tolerance_mm = "wide"'), "must be a number"),
 ])
 def test_bad_tasks_are_input_errors_that_name_the_problem(tmp_path, edit, message):
-    from generator.errors import InputError
+    from cmmwb.generator.errors import InputError
 
     src = (EXAMPLES / "characteristic_plate.toml").read_text(encoding="utf-8")
     assert edit[0] in src
@@ -115,7 +115,7 @@ def test_a_tolerance_typed_in_the_workbook_goes_back_to_the_task_file(built, tmp
     back, and that task builds with it (the zone, not the value, changes)."""
     import tomllib
 
-    from generator.reader import read_to_files
+    from cmmwb.generator.reader import read_to_files
 
     results, book = built
     wb = openpyxl.load_workbook(book)

@@ -8,11 +8,11 @@ import json
 
 import pytest
 
-from generator.cli import build_task, main
-from generator.feature import job as feature_job
-from xlfuncs.locator import model as locator_model
-from xlfuncs.locator import simulate as sm
-from xlfuncs.locator.recordings import write_recordings
+from cmmwb.generator.cli import build_task, main
+from cmmwb.generator.feature import job as feature_job
+from cmmwb.xlfuncs.locator import model as locator_model
+from cmmwb.xlfuncs.locator import simulate as sm
+from cmmwb.xlfuncs.locator.recordings import write_recordings
 
 from tests.helpers.clouds import MPE1, PAIR
 from tests.helpers.tasks import write_bore_task
@@ -88,7 +88,7 @@ def point_records(tmp_path, monkeypatch):
     path = tmp_path / "scan.csv"
     write_recordings(rec, path)
     task = tmp_path / "machine.toml"
-    from generator.diagnosis.run import task_toml
+    from cmmwb.generator.diagnosis.run import task_toml
 
     task.write_text(task_toml(MPE1, PAIR, "machine", "MPE1 with two probes"))
     return path, task
@@ -115,7 +115,7 @@ def test_the_dense_memory_estimate_covers_the_measured_peaks():
     """The guard in front of the dense path (also `diagnose --exact`) does not underestimate
     the peaks measured by bench/bench_million.py equal: 2,777 MB at 2,000 point records and
     15,319 MB at 5,000 (ru_maxrss, interpreter included)."""
-    from xlfuncs.memory import diagnose_bytes
+    from cmmwb.xlfuncs.memory import diagnose_bytes
 
     assert diagnose_bytes("point", 2_000) >= 2_777 * 2**20
     assert diagnose_bytes("point", 5_000) >= 15_319 * 2**20

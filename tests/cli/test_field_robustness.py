@@ -23,7 +23,7 @@ def sigint_as_at_a_terminal():
 
 
 def cmmwb(*args) -> list[str]:
-    return [sys.executable, "-m", "generator", *args]
+    return [sys.executable, "-m", "cmmwb.generator", *args]
 
 
 def _tasks(tmp_path: Path, name_a: str, name_b: str) -> tuple[Path, Path]:

@@ -4,7 +4,7 @@ pair-by-pair evaluation of eq. (29), also with a probe that measured no point.""
 
 import numpy as np
 
-from xlfuncs import pointcloud as pc
+from cmmwb.xlfuncs import pointcloud as pc
 
 from tests.helpers.clouds import PARAMS, PROBES, random_cloud
 

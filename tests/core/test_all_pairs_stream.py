@@ -5,8 +5,8 @@ the block size."""
 import numpy as np
 import pytest
 
-from xlfuncs import pointcloud as pc
-from xlfuncs.errors import DegenerateGeometryError
+from cmmwb.xlfuncs import pointcloud as pc
+from cmmwb.xlfuncs.errors import DegenerateGeometryError
 
 from tests.helpers.clouds import PARAMS, random_cloud
 

@@ -8,11 +8,11 @@ import tracemalloc
 import numpy as np
 import pytest
 
-from xlfuncs import blocked as bl
-from xlfuncs import features as ft
-from xlfuncs import pointcloud as pc
-from xlfuncs.errors import DegenerateGeometryError, ModelError
-from xlfuncs.locator import diagnose as dg
+from cmmwb.xlfuncs import blocked as bl
+from cmmwb.xlfuncs import features as ft
+from cmmwb.xlfuncs import pointcloud as pc
+from cmmwb.xlfuncs.errors import DegenerateGeometryError, ModelError
+from cmmwb.xlfuncs.locator import diagnose as dg
 
 from tests.helpers.clouds import PARAMS, PROBES, random_cloud, rel_err, sphere_cloud
 from tests.helpers.model_reference import length_covariance_dense

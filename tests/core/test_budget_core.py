@@ -13,7 +13,7 @@ import math
 import numpy as np
 import pytest
 
-from xlfuncs.budget import (
+from cmmwb.xlfuncs.budget import (
     MPE,
     DatumSystem,
     DegenerateGeometryError,

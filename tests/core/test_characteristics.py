@@ -9,13 +9,13 @@ import numpy as np
 import pytest
 from scipy.optimize import linprog
 
-from xlfuncs import characteristics as ch
-from xlfuncs import features as ft
-from xlfuncs import plate as pl
-from xlfuncs import pointcloud as pc
-from xlfuncs.characteristics import evaluation as che
-from xlfuncs.errors import ModelError
-from xlfuncs.minzone import basis_is_optimal, chebyshev_zone
+from cmmwb.xlfuncs import characteristics as ch
+from cmmwb.xlfuncs import features as ft
+from cmmwb.xlfuncs import plate as pl
+from cmmwb.xlfuncs import pointcloud as pc
+from cmmwb.xlfuncs.characteristics import evaluation as che
+from cmmwb.xlfuncs.errors import ModelError
+from cmmwb.xlfuncs.minzone import basis_is_optimal, chebyshev_zone
 
 PARAMS = pc.Parameters(sigma_R_um=0.2, sigma_S_ppm=0.7, sigma_Sa_ppm=0.8, sigma_Q_ppm=0.9,
                        sigma_PQ_um=0.2, sigma_ET_um=0.3, lambda_ET_mm=150, sigma_ER_urad=4.0,

@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from xlfuncs.conformity import (
+from cmmwb.xlfuncs.conformity import (
     CONFORMS,
     DOES_NOT_CONFORM,
     UNDECIDED,
@@ -25,7 +25,7 @@ from xlfuncs.conformity import (
     norm_ppf,
     probability_of_conformance,
 )
-from xlfuncs.errors import ModelError
+from cmmwb.xlfuncs.errors import ModelError
 
 
 def printed(value: float, table_value: float, decimals: int) -> bool:

@@ -4,12 +4,12 @@
 import numpy as np
 import pytest
 
-from xlfuncs import blocked as bl
-from xlfuncs import features as ft
-from xlfuncs import pointcloud as pc
+from cmmwb.xlfuncs import blocked as bl
+from cmmwb.xlfuncs import features as ft
+from cmmwb.xlfuncs import pointcloud as pc
 
 distributed = pytest.importorskip("distributed")
-from xlfuncs.distributed import DaskBackend, get_backend  # noqa: E402
+from cmmwb.xlfuncs.distributed import DaskBackend, get_backend  # noqa: E402
 
 from tests.helpers.clouds import PARAMS, random_cloud, sphere_cloud  # noqa: E402
 
@@ -79,8 +79,8 @@ def test_the_environment_chooses_the_backend(monkeypatch, cluster):
 def test_diagnose_of_length_records_on_a_dask_cluster_equals_the_local_path(cluster):
     """The passes of the structured length covariance (xlfuncs.locator.structured_lengths) as Dask tasks
     on two worker processes: chi-square, candidates, estimates and u as on one process."""
-    from xlfuncs.locator import diagnose as dg
-    from xlfuncs.locator import simulate as sm
+    from cmmwb.xlfuncs.locator import diagnose as dg
+    from cmmwb.xlfuncs.locator import simulate as sm
 
     from tests.helpers.clouds import MPE1, PAIR
 

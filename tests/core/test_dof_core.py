@@ -7,8 +7,8 @@ import math
 
 import pytest
 
-from xlfuncs.dof import coverage_factor, nu_eff, t_cdf, t_quantile
-from xlfuncs.errors import ModelError
+from cmmwb.xlfuncs.dof import coverage_factor, nu_eff, t_cdf, t_quantile
+from cmmwb.xlfuncs.errors import ModelError
 
 #: GUM Table G.2: ν, t_95(ν), t_95.45(ν)
 TABLE_G2 = [(1, "12.71", "13.97"), (2, "4.30", "4.53"), (3, "3.18", "3.31"), (4, "2.78", "2.87"),

@@ -13,8 +13,8 @@ import math
 import numpy as np
 import pytest
 
-from xlfuncs import features, partial, pointcloud
-from xlfuncs.errors import ConvergenceError, DegenerateGeometryError, ModelError
+from cmmwb.xlfuncs import features, partial, pointcloud
+from cmmwb.xlfuncs.errors import ConvergenceError, DegenerateGeometryError, ModelError
 
 
 def random_rotation(rng):

@@ -26,8 +26,8 @@ import math
 import numpy as np
 import pytest
 
-from xlfuncs import conformity as cf
-from xlfuncs.errors import ModelError
+from cmmwb.xlfuncs import conformity as cf
+from cmmwb.xlfuncs.errors import ModelError
 
 from tests.helpers import ENGINES, close
 
@@ -243,7 +243,7 @@ def test_bearing_acceptance_limit_in_the_json(bearing_book):
 
 @pytest.mark.parametrize("engine", ENGINES)
 def test_bearing_acceptance_limit_in_the_workbook(bearing_book, engine):
-    from generator.workbook.recalc import recalculate
+    from cmmwb.generator.workbook.recalc import recalculate
 
     from tests.helpers.decision import assert_engine_agrees, at
 

@@ -7,11 +7,11 @@ import json
 import numpy as np
 import pytest
 
-from xlfuncs import blocked as bl
-from xlfuncs import features as ft
-from xlfuncs import lowrank as lr
-from xlfuncs import pointcloud as pc
-from xlfuncs.errors import ModelError
+from cmmwb.xlfuncs import blocked as bl
+from cmmwb.xlfuncs import features as ft
+from cmmwb.xlfuncs import lowrank as lr
+from cmmwb.xlfuncs import pointcloud as pc
+from cmmwb.xlfuncs.errors import ModelError
 
 from tests.helpers.clouds import PARAMS, PROBES, rel_err, sphere_cloud
 
@@ -112,8 +112,8 @@ def test_an_unknown_method_is_a_model_error():
 def test_the_feature_job_reports_the_approximation_and_exact_is_one_setting_away(tmp_path, monkeypatch):
     """Above LOWRANK_MIN_POINTS (lowered here) the feature results carry "approximation";
     CMMWB_VA_METHOD=exact gives the exact numbers, which agree to the stated bound."""
-    from generator.cli import build_task
-    from generator.feature import job as feature_job
+    from cmmwb.generator.cli import build_task
+    from cmmwb.generator.feature import job as feature_job
 
     from tests.helpers.tasks import write_bore_task
 

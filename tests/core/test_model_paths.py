@@ -19,15 +19,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from xlfuncs import blocked as bl
-from xlfuncs import lowrank as lr
-from xlfuncs import montecarlo as mc
-from xlfuncs import pointcloud as pc
-from xlfuncs.locator import model as lm
-from xlfuncs.locator import simulate as sm
-from xlfuncs.locator.structured import StructuredCovariance
-from xlfuncs.locator.structured_lengths import LengthCovariance, structure_check
-from xlfuncs.model import FACTORS, MPE1, TABLE3, factor_block, factor_diagonal, gauss_kernel, sq_dists
+from cmmwb.xlfuncs import blocked as bl
+from cmmwb.xlfuncs import lowrank as lr
+from cmmwb.xlfuncs import montecarlo as mc
+from cmmwb.xlfuncs import pointcloud as pc
+from cmmwb.xlfuncs.locator import model as lm
+from cmmwb.xlfuncs.locator import simulate as sm
+from cmmwb.xlfuncs.locator.structured import StructuredCovariance
+from cmmwb.xlfuncs.locator.structured_lengths import LengthCovariance, structure_check
+from cmmwb.xlfuncs.model import FACTORS, MPE1, TABLE3, factor_block, factor_diagonal, gauss_kernel, sq_dists
 
 ROOT = Path(__file__).resolve().parents[2]
 

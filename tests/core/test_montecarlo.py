@@ -5,13 +5,13 @@ fitted features the Monte Carlo u agrees with the direct (law of propagation) u.
 import numpy as np
 import pytest
 
-from generator.pointcloud import job
-from generator.taskfile import read_toml
-from xlfuncs import blocked as bl
-from xlfuncs import features as ft
-from xlfuncs import montecarlo as mc
-from xlfuncs import pointcloud as pc
-from xlfuncs.errors import ModelError
+from cmmwb.generator.pointcloud import job
+from cmmwb.generator.taskfile import read_toml
+from cmmwb.xlfuncs import blocked as bl
+from cmmwb.xlfuncs import features as ft
+from cmmwb.xlfuncs import montecarlo as mc
+from cmmwb.xlfuncs import pointcloud as pc
+from cmmwb.xlfuncs.errors import ModelError
 
 from tests.helpers import EXAMPLES
 from tests.helpers.clouds import PARAMS, PROBES, random_cloud, rel_err, sphere_cloud

@@ -6,9 +6,9 @@ quadratic forms of eq. (29) (distances) and section 6 (differences of distances)
 import numpy as np
 import pytest
 
-from xlfuncs import pointcloud as pc
-from xlfuncs.errors import DegenerateGeometryError, ModelError
-from xlfuncs.model import skew
+from cmmwb.xlfuncs import pointcloud as pc
+from cmmwb.xlfuncs.errors import DegenerateGeometryError, ModelError
+from cmmwb.xlfuncs.model import skew
 
 rng = np.random.default_rng(20250101)
 

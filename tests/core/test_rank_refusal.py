@@ -7,10 +7,10 @@ import re
 import numpy as np
 import pytest
 
-from xlfuncs import blocked as bl
-from xlfuncs import features as ft
-from xlfuncs import lowrank as lr
-from xlfuncs import pointcloud as pc
+from cmmwb.xlfuncs import blocked as bl
+from cmmwb.xlfuncs import features as ft
+from cmmwb.xlfuncs import lowrank as lr
+from cmmwb.xlfuncs import pointcloud as pc
 
 PARAMS = pc.Parameters(0.2, 0.7, 0.7, 0.7, 0.2, 0.2, 30.0, 4.0, 400.0, 0.1, 0.1, 0.5)
 
@@ -40,7 +40,7 @@ def test_a_table_scanned_with_a_short_correlation_length_is_refused_with_what_fi
 
 def test_the_structured_diagnosis_refuses_the_same_way(monkeypatch):
     cloud = plane(8_000, 800.0, 600.0)
-    from xlfuncs.locator.structured import StructuredCovariance
+    from cmmwb.xlfuncs.locator.structured import StructuredCovariance
 
     with pytest.raises(lr.RankError, match=r"^ET: .* What fits: a section of about"):
         StructuredCovariance(cloud, PARAMS, 3)

@@ -19,7 +19,7 @@ permissible errors to the software's specification (typical stated values are 0.
 import numpy as np
 import pytest
 
-from xlfuncs import features as ft
+from cmmwb.xlfuncs import features as ft
 
 TOL_MM = 1e-9
 TOL_RAD = 1e-9

@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import pytest
 
-from xlfuncs.errors import ModelError
-from xlfuncs.statement import decimals_for, round_to, round_uncertainty, statement
+from cmmwb.xlfuncs.errors import ModelError
+from cmmwb.xlfuncs.statement import decimals_for, round_to, round_uncertainty, statement
 
 
 @pytest.mark.parametrize("U, rounded, decimals", [

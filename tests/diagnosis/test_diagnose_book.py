@@ -6,13 +6,13 @@ import json
 
 import pytest
 
-from generator.diagnosis import book as diagnose_book
-from generator.diagnosis.run import run_diagnose
-from generator.workbook.recalc import results_rows
-from xlfuncs import pointcloud as pc
-from xlfuncs.locator import diagnose as dg
-from xlfuncs.locator import simulate as sm
-from xlfuncs.locator.recordings import write_recordings
+from cmmwb.generator.diagnosis import book as diagnose_book
+from cmmwb.generator.diagnosis.run import run_diagnose
+from cmmwb.generator.workbook.recalc import results_rows
+from cmmwb.xlfuncs import pointcloud as pc
+from cmmwb.xlfuncs.locator import diagnose as dg
+from cmmwb.xlfuncs.locator import simulate as sm
+from cmmwb.xlfuncs.locator.recordings import write_recordings
 
 from tests.helpers import ENGINES, close, recalc
 from tests.helpers.clouds import MPE1, ONE, PAIR, THREE

@@ -4,7 +4,7 @@ import json
 
 import pytest
 
-from generator.diagnosis.run import demo
+from cmmwb.generator.diagnosis.run import demo
 
 from tests.helpers import run_cmmwb as run
 

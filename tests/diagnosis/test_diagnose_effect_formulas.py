@@ -10,15 +10,15 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from generator.diagnosis import book as diagnose_book
-from generator.diagnosis import formulas as fo
-from generator.diagnosis import records
-from generator.workbook.book import Book
-from generator.workbook.xlref import col
-from xlfuncs import pointcloud as pc
-from xlfuncs.locator import diagnose as dg
-from xlfuncs.locator import effects as fx
-from xlfuncs.locator import simulate as sm
+from cmmwb.generator.diagnosis import book as diagnose_book
+from cmmwb.generator.diagnosis import formulas as fo
+from cmmwb.generator.diagnosis import records
+from cmmwb.generator.workbook.book import Book
+from cmmwb.generator.workbook.xlref import col
+from cmmwb.xlfuncs import pointcloud as pc
+from cmmwb.xlfuncs.locator import diagnose as dg
+from cmmwb.xlfuncs.locator import effects as fx
+from cmmwb.xlfuncs.locator import simulate as sm
 
 from tests.helpers import close, recalc
 

@@ -14,14 +14,14 @@ import numpy as np
 import openpyxl
 import pytest
 
-from generator.cli import build_task, main
-from generator.errors import InputError
-from generator.feature import book as feature_book
-from generator.feature import job as feature_job
-from generator.feature import va_sheets
-from generator.taskfile import read_toml
-from generator.workbook.recalc import recalculate, results_rows
-from xlfuncs.pointcloud import FACTORS
+from cmmwb.generator.cli import build_task, main
+from cmmwb.generator.errors import InputError
+from cmmwb.generator.feature import book as feature_book
+from cmmwb.generator.feature import job as feature_job
+from cmmwb.generator.feature import va_sheets
+from cmmwb.generator.taskfile import read_toml
+from cmmwb.generator.workbook.recalc import recalculate, results_rows
+from cmmwb.xlfuncs.pointcloud import FACTORS
 
 from tests.helpers import ENGINES, EXAMPLES
 from tests.helpers.tasks import SHIPPED, SMALL_TASKS, feature_task_path

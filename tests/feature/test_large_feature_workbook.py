@@ -19,13 +19,13 @@ import pytest
 from openpyxl.utils import get_column_letter
 from openpyxl.worksheet.formula import ArrayFormula
 
-from generator.cli import build_task
-from generator.feature import book as feature_book
-from generator.feature import job as feature_job
-from generator.feature import va_sheets
-from generator.pointcloud import large_book
-from generator.workbook.recalc import results_rows
-from xlfuncs.pointcloud import FACTORS
+from cmmwb.generator.cli import build_task
+from cmmwb.generator.feature import book as feature_book
+from cmmwb.generator.feature import job as feature_job
+from cmmwb.generator.feature import va_sheets
+from cmmwb.generator.pointcloud import large_book
+from cmmwb.generator.workbook.recalc import results_rows
+from cmmwb.xlfuncs.pointcloud import FACTORS
 
 from tests.helpers import ENGINES, close, recalc
 from tests.helpers.addin import evaluate_live
@@ -154,7 +154,7 @@ def test_live_addin_layout_and_notes(bore):
     visible = [ws.title for ws in wb.worksheets if ws.sheet_state == "visible"]
     assert visible == ["Instructions", "Inputs", "Points", "Fit", "Local", "J", "H", "G_A_D", "G_A_X",
                        "V_A", "Budget", large_book.LIVE, "Results", "xlwings.conf", "Summary"]   # no V_X sheets
-    assert [c.value for c in wb["xlwings.conf"][1]] == ["UDF Modules", "xlfuncs.udf"]
+    assert [c.value for c in wb["xlwings.conf"][1]] == ["UDF Modules", "cmmwb.xlfuncs.udf"]
     live = wb[large_book.LIVE]
     args = '"cylinder",Points!$A$2:$H$121,Inputs!$A$17:$H$18,Inputs!$A$2:$B$13'
     opts = '"",Local!$B$2:$B$121,$L$3:$N$3,$L$4:$N$4)'

@@ -13,7 +13,7 @@ import math
 import numpy as np
 import pytest
 
-from xlfuncs import features, partial
+from cmmwb.xlfuncs import features, partial
 
 from tests.helpers import EXAMPLES, printed
 
@@ -75,8 +75,8 @@ rad = math.radians
 
 def task_results(example: str) -> dict:
     """load + compute of a shipped feature task, through the same JSON text users get."""
-    from generator.feature import job as feature_job
-    from generator.taskfile import read_toml
+    from cmmwb.generator.feature import job as feature_job
+    from cmmwb.generator.taskfile import read_toml
 
     path = EXAMPLES / example
     return json.loads(json.dumps(feature_job.compute(feature_job.load(path, read_toml(path)))))
@@ -336,7 +336,7 @@ def test_a_strategy_in_any_frame_gives_the_same_local_uncertainties():
 
 
 def test_bad_patch_geometry_is_refused_with_the_key_named():
-    from xlfuncs.errors import ModelError
+    from cmmwb.xlfuncs.errors import ModelError
     with pytest.raises(ModelError, match="arc_deg"):
         partial.sample("circle_arc", r0_mm=10.0, arc_deg=400.0, n_points=10)
     with pytest.raises(ModelError, match="apex"):

@@ -5,7 +5,7 @@ and the printed-precision check.  Themed helpers live beside this module:
 - ``tests.helpers.clouds``: the model parameters, probes and point clouds the core tests share;
 - ``tests.helpers.tasks``: task files written for tests (random clouds, large plates, the bore,
   small feature tasks);
-- ``tests.helpers.addin``: add-in formulas of a workbook evaluated by calling ``xlfuncs.udf``;
+- ``tests.helpers.addin``: add-in formulas of a workbook evaluated by calling ``cmmwb.xlfuncs.udf``;
 - ``tests.helpers.locator``: the locator's test layouts and the diagnosis workbook's expected rows;
 - ``tests.helpers.budget``: Wojtyła/Płowucha 2023, the steering knuckle and Tables 1-9 as printed;
 - ``tests.helpers.decision``: building a task and comparing its Decision/Summary cells per engine;
@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from generator.workbook.recalc import recalculate
+from cmmwb.generator.workbook.recalc import recalculate
 
 ROOT = Path(__file__).resolve().parents[2]
 EXAMPLES = ROOT / "generator" / "examples"
@@ -60,4 +60,4 @@ def max_rel_diff(a, b) -> float:
 
 def run_cmmwb(*args, cwd=None) -> subprocess.CompletedProcess:
     """``python -m generator ARGS`` in a fresh process (the command line as a user runs it)."""
-    return subprocess.run([sys.executable, "-m", "generator", *args], capture_output=True, text=True, cwd=cwd)
+    return subprocess.run([sys.executable, "-m", "cmmwb.generator", *args], capture_output=True, text=True, cwd=cwd)

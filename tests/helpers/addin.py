@@ -1,4 +1,4 @@
-"""The add-in formulas of a large workbook evaluated in Python: each call of an ``xlfuncs.udf``
+"""The add-in formulas of a large workbook evaluated in Python: each call of an ``cmmwb.xlfuncs.udf``
 function gets the (recalculated) values of the ranges it names, as Excel would pass them."""
 
 from __future__ import annotations
@@ -11,8 +11,8 @@ import openpyxl
 from openpyxl.utils import get_column_letter, range_boundaries
 from openpyxl.worksheet.formula import ArrayFormula
 
-from generator.pointcloud import large_book
-from xlfuncs import udf
+from cmmwb.generator.pointcloud import large_book
+from cmmwb.xlfuncs import udf
 
 _CALL = re.compile(r"^=(?P<name>[A-Za-z_][A-Za-z0-9_]*)\((?P<args>.*)\)$")
 
@@ -45,7 +45,7 @@ def _range_values(values: dict, ref: str) -> list[list]:
 
 def evaluate_addin_formulas(book: Path, values: dict, sheet: str = large_book.LIVE) -> dict:
     """{cell: value} of every add-in array formula on ``sheet``, computed by calling the
-    function of xlfuncs.udf with the (recalculated) values of the ranges it names."""
+    function of cmmwb.xlfuncs.udf with the (recalculated) values of the ranges it names."""
     wb = openpyxl.load_workbook(book)
     out = {}
     for row in wb[sheet].iter_rows():
@@ -79,7 +79,7 @@ _PAPER = re.compile(r"^=MMULT\(TRANSPOSE\((?P<T>[^)]+)\),MMULT\((?P<V>[^,]+),(?P
 
 def evaluate_live(book: Path, values: dict) -> dict:
     """{cell: value} of every array formula on 'Live_addin': the add-in calls by calling the
-    function of xlfuncs.udf with the recalculated values of the ranges they name, then the
+    function of cmmwb.xlfuncs.udf with the recalculated values of the ranges they name, then the
     MMULT formulas over those results (numpy)."""
     ws = openpyxl.load_workbook(book)[large_book.LIVE]
     own = {c.coordinate: c.value for row in ws.iter_rows() for c in row

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from xlfuncs.budget import MPE, DatumSystem
+from cmmwb.xlfuncs.budget import MPE, DatumSystem
 
 #: Fig. 6 / section 4, with x = 0.01 mm for S3 and S4 (the paper's "0.01 mm for numerical
 #: reasons": x_CS4 in Table 1, x_DS4 in Table 2, x_DS3 in Tables 7-8)

@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from xlfuncs import pointcloud as pc
-from xlfuncs.model import MPE1 as MPE1  # Forbes 2025 Table 3, defined once in the core
+from cmmwb.xlfuncs import pointcloud as pc
+from cmmwb.xlfuncs.model import MPE1 as MPE1  # Forbes 2025 Table 3, defined once in the core
 
 # -- every factor on, three probes (the blocked, low-rank, Monte Carlo, udf and Dask tests) ---------
 

@@ -11,9 +11,9 @@ import openpyxl
 import tomli_w
 from openpyxl.utils import get_column_letter
 
-from generator import decision
-from generator.build import build_task
-from generator.workbook.recalc import recalculate
+from cmmwb.generator import decision
+from cmmwb.generator.build import build_task
+from cmmwb.generator.workbook.recalc import recalculate
 
 from tests.helpers import close
 

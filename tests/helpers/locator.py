@@ -5,9 +5,9 @@ from __future__ import annotations
 
 import math
 
-from xlfuncs.locator import diagnose as dg
-from xlfuncs.locator import effects as fx
-from xlfuncs.locator import simulate as sm
+from cmmwb.xlfuncs.locator import diagnose as dg
+from cmmwb.xlfuncs.locator import effects as fx
+from cmmwb.xlfuncs.locator import simulate as sm
 
 from tests.helpers.clouds import MPE1, ONE
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from xlfuncs import pointcloud as pc
+from cmmwb.xlfuncs import pointcloud as pc
 
 
 def length_covariance_dense(cloud: pc.PointCloud, params: pc.Parameters, I, J) -> np.ndarray:

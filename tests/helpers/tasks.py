@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from generator.feature import book as feature_book
+from cmmwb.generator.feature import book as feature_book
 
 from tests.helpers import EXAMPLES
 

@@ -10,9 +10,9 @@ from pathlib import Path
 
 import pytest
 
-from generator.cli import main
-from generator.errors import InputError
-from generator.importers import qif, run_import
+from cmmwb.generator.cli import main
+from cmmwb.generator.errors import InputError
+from cmmwb.generator.importers import qif, run_import
 
 from tests.helpers import DATA
 
@@ -120,7 +120,7 @@ def test_aqdef_a_missing_unit_is_said_not_assumed(tmp_path):
 
 
 def test_aqdef_length_units():
-    from generator.importers.aqdef import is_length_unit
+    from cmmwb.generator.importers.aqdef import is_length_unit
 
     assert all(is_length_unit(u) for u in ("mm", "cm", "CM", "µm", "um", "m", "inch", "in", "nm"))
     assert not any(is_length_unit(u) for u in (None, "", "deg", "°", "N", "%"))

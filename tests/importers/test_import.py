@@ -8,9 +8,9 @@ import tomllib
 import numpy as np
 import pytest
 
-from generator.cli import build_task, main
-from generator.errors import InputError
-from generator.importers import qif, run_import
+from cmmwb.generator.cli import build_task, main
+from cmmwb.generator.errors import InputError
+from cmmwb.generator.importers import qif, run_import
 
 from tests.helpers import DATA
 

@@ -9,11 +9,11 @@ from xml.etree import ElementTree as ET
 import numpy as np
 import pytest
 
-from generator.errors import InputError
-from generator.importers import qif
-from generator.importers import qif_characteristics as qc
-from generator.importers import qif_simulation as qs
-from xlfuncs import characteristics as ch
+from cmmwb.generator.errors import InputError
+from cmmwb.generator.importers import qif
+from cmmwb.generator.importers import qif_characteristics as qc
+from cmmwb.generator.importers import qif_simulation as qs
+from cmmwb.xlfuncs import characteristics as ch
 
 from tests.helpers import ROOT
 
@@ -144,7 +144,7 @@ def test_a_broken_reference_is_an_input_error(tmp_path):
 
 
 def test_cmmwb_import_to_a_qif_file_writes_the_annotated_copy_and_lists_the_characteristics(tmp_path):
-    from generator.importers import run_import
+    from cmmwb.generator.importers import run_import
 
     out = tmp_path / "with_u.qif"
     files, report = run_import(NIST, out)
@@ -163,7 +163,7 @@ def test_a_file_with_points_gives_its_form_and_size_characteristics_u_from_them(
     """QIF 3.0 sample: flatness, circularity, cylinder and circle diameters of one measured
     feature each get u from the file's own points (normals from the measured elements, stated);
     the positions from the stand-in plate; LinearCoordinate and PointProfile are named."""
-    from generator.importers import run_import
+    from cmmwb.generator.importers import run_import
 
     out = tmp_path / "sample_u.qif"
     files, report = run_import(SAMPLE, out)
@@ -187,8 +187,8 @@ def _decisions(nist, rule):
     function with u in millidegrees (it works in any unit whose thousandth is the u's unit)."""
     import math
 
-    from generator import decision
-    from xlfuncs import conformity as cf
+    from cmmwb.generator import decision
+    from cmmwb.xlfuncs import conformity as cf
 
     u, _, _ = qs.uncertainties(nist)
     _, _, _, _, specs, names, _ = qs.simulate(nist)           # the same seed: the same stand-in part

@@ -19,7 +19,7 @@ from xml.etree import ElementTree as ET
 
 import pytest
 
-from generator.importers import run_import
+from cmmwb.generator.importers import run_import
 
 from tests.helpers import ROOT
 

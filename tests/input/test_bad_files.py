@@ -14,9 +14,9 @@ from pathlib import Path
 
 import pytest
 
-from generator.cli import main
-from generator.errors import InputError
-from generator.workbook.safe_xlsx import MAX_UNCOMPRESSED_BYTES, check
+from cmmwb.generator.cli import main
+from cmmwb.generator.errors import InputError
+from cmmwb.generator.workbook.safe_xlsx import MAX_UNCOMPRESSED_BYTES, check
 
 from tests.helpers import BAD_FILES
 from tests.helpers.files import assert_clear_failure
@@ -58,7 +58,7 @@ def test_build_refuses_a_bad_task(tmp_path, capsys, name):
 
 def test_one_bad_workbook_through_the_real_command_line(tmp_path):
     """The same through `python -m generator`: the process prints one line and exits 2."""
-    r = subprocess.run([sys.executable, "-m", "generator", "read", str(CORPUS / "formula_in_parameter.xlsx"),
+    r = subprocess.run([sys.executable, "-m", "cmmwb.generator", "read", str(CORPUS / "formula_in_parameter.xlsx"),
                         "--out", str(tmp_path / "t.toml")], capture_output=True, text=True)
     assert r.returncode == 2 and r.stdout == ""
     assert r.stderr.strip() == ("cmmwb: error: " + str(CORPUS / "formula_in_parameter.xlsx") +

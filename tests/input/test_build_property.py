@@ -14,7 +14,7 @@ import tomli_w
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from generator.cli import main
+from cmmwb.generator.cli import main
 
 PARAMS = ["sigma_R_um", "sigma_S_ppm", "sigma_Sa_ppm", "sigma_Q_ppm", "sigma_PQ_um", "sigma_ET_um",
           "lambda_ET_mm", "sigma_ER_urad", "lambda_ER_mm", "sigma_P0_um", "sigma_P_um", "lambda_P"]

@@ -11,11 +11,11 @@ import sys
 import numpy as np
 import pytest
 
-from generator.cli import main
-from xlfuncs import pointcloud as pc
-from xlfuncs.csvtable import TableError, read_table
-from xlfuncs.locator import simulate as sm
-from xlfuncs.locator.recordings import parse_recordings, write_recordings
+from cmmwb.generator.cli import main
+from cmmwb.xlfuncs import pointcloud as pc
+from cmmwb.xlfuncs.csvtable import TableError, read_table
+from cmmwb.xlfuncs.locator import simulate as sm
+from cmmwb.xlfuncs.locator.recordings import parse_recordings, write_recordings
 
 from tests.helpers import BAD_FILES
 

@@ -15,7 +15,7 @@ from pathlib import Path
 import openpyxl
 import pytest
 
-from generator.cli import main
+from cmmwb.generator.cli import main
 
 from tests.helpers import BAD_FILES, DATA
 
@@ -111,7 +111,7 @@ def test_a_real_full_disk_names_the_output_folder(tmp_path):
     try:
         task = write_task(tmp_path)
         out = disk / "out"
-        r = subprocess.run([sys.executable, "-m", "generator", "build", str(task), "--out", str(out)],
+        r = subprocess.run([sys.executable, "-m", "cmmwb.generator", "build", str(task), "--out", str(out)],
                            capture_output=True, text=True, timeout=120)
         assert_clear_failure(r.returncode, r.stderr.strip(), str(out), ["the disk is full"])
         assert list(disk.iterdir()) == []

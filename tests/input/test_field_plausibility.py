@@ -11,8 +11,8 @@ import sys
 
 import pytest
 
-from generator.cli import main
-from xlfuncs.limits import PLAUSIBLE, plausibility_problem
+from cmmwb.generator.cli import main
+from cmmwb.xlfuncs.limits import PLAUSIBLE, plausibility_problem
 
 from tests.helpers import BAD_FILES, ROOT
 

@@ -18,10 +18,10 @@ import numpy as np
 import openpyxl
 import pytest
 
-from generator.cli import main
-from generator.errors import InputError
-from generator.workbook.atomic import Staging
-from generator.workbook.guarded import read_bytes
+from cmmwb.generator.cli import main
+from cmmwb.generator.errors import InputError
+from cmmwb.generator.workbook.atomic import Staging
+from cmmwb.generator.workbook.guarded import read_bytes
 
 from tests.helpers import BAD_FILES
 
@@ -77,7 +77,7 @@ def test_dollar_signs_in_names_and_groups_reach_the_plots(tmp_path, capsys):
 
 
 def test_coordinates_at_100_m_are_accepted_and_keep_a_nanometre():
-    from xlfuncs.limits import MAX_COORDINATE_MM, coordinate_problem
+    from cmmwb.xlfuncs.limits import MAX_COORDINATE_MM, coordinate_problem
 
     assert coordinate_problem(MAX_COORDINATE_MM) is None
     assert coordinate_problem(np.nextafter(MAX_COORDINATE_MM, np.inf)) is not None
@@ -147,7 +147,7 @@ def interrupt_a_build(tmp_path, delay_s: float = 0.0) -> int:
     (tmp_path / "small.toml").write_text(POINTCLOUD_TASK)
     (tmp_path / "small.csv").write_text(POINTCLOUD_CSV)
     out = tmp_path / "out"
-    proc = subprocess.Popen([sys.executable, "-m", "generator", "build", str(tmp_path / "small.toml"),
+    proc = subprocess.Popen([sys.executable, "-m", "cmmwb.generator", "build", str(tmp_path / "small.toml"),
                              "--out", str(out)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             preexec_fn=sigint_as_at_a_terminal)
     deadline = time.monotonic() + 60
@@ -177,7 +177,7 @@ def test_ctrl_c_landing_where_python_ignores_exceptions_still_interrupts(tmp_pat
     # cmmwb delivers it again, so the command ends as interrupted, without a traceback
     script = textwrap.dedent("""
         import sys, time, types
-        from generator.cli import program as cli
+        from cmmwb.generator.cli import program as cli
         sys.unraisablehook = cli._quiet_unraisable
         cli._catch_sigint()
         try:
@@ -228,7 +228,7 @@ def test_a_real_write_failure_in_a_process_is_one_line_and_the_old_output_stays(
     assert code0 == 0, err0
     before = {p.name: p.read_bytes() for p in (tmp_path / "out").iterdir()}
     (tmp_path / "small.toml").write_text(POINTCLOUD_TASK.replace("sigma_R_um = 0.2", "sigma_R_um = 0.3"))
-    r = subprocess.run([sys.executable, "-m", "generator", "build", str(tmp_path / "small.toml"), "--out",
+    r = subprocess.run([sys.executable, "-m", "cmmwb.generator", "build", str(tmp_path / "small.toml"), "--out",
                         str(tmp_path / "out"), "--no-plots"], capture_output=True, text=True, timeout=120,
                        preexec_fn=lambda: resource.setrlimit(resource.RLIMIT_FSIZE, (20_000, 20_000)))
     assert r.returncode == 2, r.stderr
@@ -247,7 +247,7 @@ def test_recalc_into_a_closed_pipe_ends_quietly(tmp_path):
     for k in range(3000):
         ws.append([f"d{k}", k * 0.5])
     wb.save(book)
-    r = subprocess.run(f"'{sys.executable}' -m generator recalc '{book}' --json | head -c 10", shell=True,
+    r = subprocess.run(f"'{sys.executable}' -m cmmwb.generator recalc '{book}' --json | head -c 10", shell=True,
                        capture_output=True, text=True, timeout=120)
     assert "Traceback" not in r.stderr and "BrokenPipe" not in r.stderr, r.stderr
     assert r.stdout.startswith("[")
@@ -283,7 +283,7 @@ def test_a_circular_reference_in_recalc_is_an_error_not_blanks(tmp_path, capsys)
 
 
 def test_diagnose_refuses_what_would_not_fit_in_memory_and_says_what_fits(tmp_path, capsys, monkeypatch):
-    import xlfuncs.memory as mem
+    import cmmwb.xlfuncs.memory as mem
 
     monkeypatch.setattr(mem, "available_bytes", lambda: 8 * mem.LENGTH_MATRICES * 2**2)   # room for 2 records
     (tmp_path / "rec.csv").write_text(LENGTH_RECORDS)
@@ -295,7 +295,7 @@ def test_diagnose_refuses_what_would_not_fit_in_memory_and_says_what_fits(tmp_pa
 
 
 def test_the_memory_estimate_for_200000_length_records_is_refused_on_this_machine():
-    from xlfuncs.memory import ResourceError, check_diagnose_fits, diagnose_bytes
+    from cmmwb.xlfuncs.memory import ResourceError, check_diagnose_fits, diagnose_bytes
 
     assert diagnose_bytes("length", 200_000) > 298 * 2**30       # the one matrix of the report, and more
     with pytest.raises(ResourceError, match="records fit"):
@@ -305,7 +305,7 @@ def test_the_memory_estimate_for_200000_length_records_is_refused_on_this_machin
 def test_200000_point_records_fit_on_the_structured_path_but_not_dense():
     """Large point scans take the structured covariance (xlfuncs.locator.structured), linear in n: the
     guard estimates that path (bench/results/million_diagnose.md measured 1.6 GB), not 3n x 3n."""
-    from xlfuncs.memory import ResourceError, check_diagnose_fits, diagnose_bytes
+    from cmmwb.xlfuncs.memory import ResourceError, check_diagnose_fits, diagnose_bytes
 
     assert diagnose_bytes("point", 200_000, structured=True) < 3 * 2**30
     check_diagnose_fits("point", 200_000, available=4 * 2**30, structured=True)
@@ -317,7 +317,7 @@ def test_an_external_hyperlink_is_not_refused(tmp_path):
     """Hyperlinks open nothing by themselves: a workbook with one (to any address) passes."""
     from hostile import book, parts
 
-    from generator.workbook.safe_xlsx import check
+    from cmmwb.generator.workbook.safe_xlsx import check
 
     p = parts()
     p["xl/worksheets/_rels/sheet1.xml.rels"] = (

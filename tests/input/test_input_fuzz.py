@@ -12,8 +12,8 @@ from pathlib import Path
 from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 
-from generator.build import load_task
-from generator.errors import InputError
+from cmmwb.generator.build import load_task
+from cmmwb.generator.errors import InputError
 
 from tests.helpers import BAD_FILES
 

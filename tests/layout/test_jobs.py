@@ -8,9 +8,9 @@ import inspect
 
 import pytest
 
-from generator.jobs import JOBS, job
-from generator.taskfile import KINDS
-from generator.taskkind import TaskKind, always_exact, no_type_a
+from cmmwb.generator.jobs import JOBS, job
+from cmmwb.generator.taskfile import KINDS
+from cmmwb.generator.taskkind import TaskKind, always_exact, no_type_a
 
 #: the members of the contract: data (checked by type) and functions (checked by signature)
 DATA = {"EXAMPLES": (list, tuple), "NEW_TASK": str, "NEW_TASK_FILES": dict}

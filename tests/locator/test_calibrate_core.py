@@ -6,11 +6,11 @@ import math
 import numpy as np
 import pytest
 
-from xlfuncs import calibrate as cb
-from xlfuncs import pointcloud as pc
-from xlfuncs.locator import diagnose as dg
-from xlfuncs.locator import simulate as sm
-from xlfuncs.locator.model import length_covariance
+from cmmwb.xlfuncs import calibrate as cb
+from cmmwb.xlfuncs import pointcloud as pc
+from cmmwb.xlfuncs.locator import diagnose as dg
+from cmmwb.xlfuncs.locator import simulate as sm
+from cmmwb.xlfuncs.locator.model import length_covariance
 
 from tests.helpers.clouds import MPE1, ONE, PAIR, THREE
 
@@ -101,7 +101,7 @@ def test_with_several_probe_offsets_on_a_ball_plate_PQ_and_ET_are_estimated():
 def test_the_demo_data_reproduce_the_simulations_hyper_parameters_within_u(planted, seed):
     """The two cases of `cmmwb demo` (generator/diagnosis/run.py demo): with the named effect as a
     fixed effect, every estimated hyper-parameter lies within one u of the value simulated."""
-    from generator.diagnosis.run import DEMO_PROBES
+    from cmmwb.generator.diagnosis.run import DEMO_PROBES
 
     rec = sm.simulate(sm.iso10360(DEMO_PROBES), MPE1, planted, seed=seed, temperature_C=20.0)
     prep = dg.prepare(rec, dg.Model(MPE1, DEMO_PROBES, True), False)
@@ -128,7 +128,7 @@ def test_a_length_scale_beyond_the_travel_is_reported_as_such():
 
 
 def test_feeding_back_a_scale_error_compensated_or_as_a_factor():
-    from xlfuncs import compensation as cp
+    from cmmwb.xlfuncs import compensation as cp
 
     found = [cp.Finding("scale", [8.0], [0.5], "um/m"), cp.Finding("EBX", [150.0], [20.0], "urad/m")]
     comp, changes, notes = cp.feed_back(MPE1, found, "compensate")

@@ -7,10 +7,10 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from xlfuncs import pointcloud as pc
-from xlfuncs.locator import diagnose as dg
-from xlfuncs.locator import effects as fx
-from xlfuncs.locator import simulate as sm
+from cmmwb.xlfuncs import pointcloud as pc
+from cmmwb.xlfuncs.locator import diagnose as dg
+from cmmwb.xlfuncs.locator import effects as fx
+from cmmwb.xlfuncs.locator import simulate as sm
 
 from tests.helpers.clouds import MPE1, ONE, PAIR, THREE
 from tests.helpers.model_reference import length_covariance_dense
@@ -196,7 +196,7 @@ def test_two_dimensional_point_records_use_x_and_y_and_three_alignment_parameter
 
 def test_records_that_repeat_a_combination_of_others_give_a_rank_deficient_covariance():
     """Every distance among five points: 10 lengths but only 3*5 - 6 = 9 independent ones."""
-    from xlfuncs.locator.recordings import LengthRecords
+    from cmmwb.xlfuncs.locator.recordings import LengthRecords
 
     rng = np.random.default_rng(0)
     P = rng.uniform(0, 500, (5, 3))

@@ -5,8 +5,8 @@ import dataclasses
 
 import numpy as np
 
-from xlfuncs.locator import diagnose as dg
-from xlfuncs.locator import simulate as sm
+from cmmwb.xlfuncs.locator import diagnose as dg
+from cmmwb.xlfuncs.locator import simulate as sm
 
 from tests.helpers.clouds import MPE1, ONE
 from tests.helpers.locator import iso, u_effect

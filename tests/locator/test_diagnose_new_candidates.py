@@ -7,9 +7,9 @@ the locator's sensitivities (xlfuncs/effects.py) must agree with it and find the
 import numpy as np
 import pytest
 
-from xlfuncs.locator import diagnose as dg
-from xlfuncs.locator import effects as fx
-from xlfuncs.locator import simulate as sm
+from cmmwb.xlfuncs.locator import diagnose as dg
+from cmmwb.xlfuncs.locator import effects as fx
+from cmmwb.xlfuncs.locator import simulate as sm
 
 from tests.helpers.clouds import MPE1, ONE, PAIR
 
@@ -108,8 +108,8 @@ def test_a_reversal_in_lengths_probed_from_both_sides():
 
 
 def test_simulate_takes_a_straightness_as_two_coefficients(tmp_path):
-    from generator.cli.simulate import parse_effect
-    from generator.errors import InputError
+    from cmmwb.generator.cli.simulate import parse_effect
+    from cmmwb.generator.errors import InputError
 
     assert parse_effect("EYX=2,-1.5", PAIR) == ("EYX", [2.0, -1.5])
     with pytest.raises(InputError, match="expected 2 numbers"):
@@ -151,7 +151,7 @@ def test_a_thermal_gradient_needs_temperatures_that_vary():
 
 
 def test_planting_a_thermal_gradient_without_temperatures_is_refused():
-    from xlfuncs.errors import ModelError
+    from cmmwb.xlfuncs.errors import ModelError
 
     with pytest.raises(ModelError, match="thermal_gradient_x needs temperatures"):
         sm.simulate(sm.layout("ballplate", PAIR[:1], grid=3), MPE1, {"thermal_gradient_x": 5.0}, seed=1)
@@ -267,8 +267,8 @@ def test_null_step_gauges_do_not_name_a_periodic_error():
 
 
 def test_simulate_takes_a_periodic_error_as_a_b_and_period(tmp_path):
-    from generator.cli.simulate import parse_effect
-    from generator.errors import InputError
+    from cmmwb.generator.cli.simulate import parse_effect
+    from cmmwb.generator.errors import InputError
 
     assert parse_effect("periodic_y=0.5,-0.2,40", PAIR) == ("periodic_y", [0.5, -0.2, 40.0])
     with pytest.raises(InputError, match="expected 3 numbers"):

@@ -5,7 +5,7 @@ clear message naming the file, line and column, exit status 2 and nothing in the
 import numpy as np
 import pytest
 
-from xlfuncs.locator.recordings import (
+from cmmwb.xlfuncs.locator.recordings import (
     LengthRecords,
     PointRecords,
     RecordingsError,

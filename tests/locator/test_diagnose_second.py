@@ -8,8 +8,8 @@ import math
 import numpy as np
 import pytest
 
-from xlfuncs.locator import diagnose as dg
-from xlfuncs.locator import simulate as sm
+from cmmwb.xlfuncs.locator import diagnose as dg
+from cmmwb.xlfuncs.locator import simulate as sm
 
 from tests.helpers.clouds import MPE1, PAIR
 from tests.helpers.locator import iso, u_effect

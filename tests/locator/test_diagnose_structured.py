@@ -7,9 +7,9 @@ import json
 import numpy as np
 import pytest
 
-from xlfuncs.locator import diagnose as dg
-from xlfuncs.locator import model as locator_model
-from xlfuncs.locator import simulate as sm
+from cmmwb.xlfuncs.locator import diagnose as dg
+from cmmwb.xlfuncs.locator import model as locator_model
+from cmmwb.xlfuncs.locator import simulate as sm
 
 from tests.helpers import ENGINES
 from tests.helpers import max_rel_diff as rel
@@ -96,10 +96,10 @@ def test_large_point_records_choose_the_structured_path_by_themselves():
 def test_the_workbook_of_a_structured_diagnosis_agrees_with_its_json(tmp_path, monkeypatch, engine):
     """The whitened GLS sheet holds the structured whitener's coordinates (fewer than n) and the
     rank of C as a number; both engines reproduce chi-square, dof and estimates of the JSON."""
-    from generator.diagnosis import book as diagnose_book
-    from generator.diagnosis.run import run_diagnose
-    from generator.workbook.recalc import results_rows
-    from xlfuncs.locator.recordings import write_recordings
+    from cmmwb.generator.diagnosis import book as diagnose_book
+    from cmmwb.generator.diagnosis.run import run_diagnose
+    from cmmwb.generator.workbook.recalc import results_rows
+    from cmmwb.xlfuncs.locator.recordings import write_recordings
 
     from tests.helpers import close, recalc
     from tests.helpers.locator import expected_rows

@@ -6,11 +6,11 @@ itself (C v, C^-1 v, log det C) equals the dense G V_X G^T."""
 import numpy as np
 import pytest
 
-from xlfuncs.errors import ModelError
-from xlfuncs.locator import diagnose as dg
-from xlfuncs.locator import model as locator_model
-from xlfuncs.locator import simulate as sm
-from xlfuncs.locator import structured_lengths as sl
+from cmmwb.xlfuncs.errors import ModelError
+from cmmwb.xlfuncs.locator import diagnose as dg
+from cmmwb.xlfuncs.locator import model as locator_model
+from cmmwb.xlfuncs.locator import simulate as sm
+from cmmwb.xlfuncs.locator import structured_lengths as sl
 
 from tests.helpers import max_rel_diff as rel
 from tests.helpers.clouds import MPE1, PAIR
@@ -131,7 +131,7 @@ def test_records_without_a_probing_of_their_own_are_refused_with_the_reason(monk
 
 
 def test_group_statistics_that_would_not_fit_are_refused_beforehand(monkeypatch):
-    from xlfuncs.memory import ResourceError
+    from cmmwb.xlfuncs.memory import ResourceError
 
     rec = sm.simulate(sm.iso10360(PAIR, repeats=2), MPE1, {}, seed=1)
     monkeypatch.setattr(sl, "available_bytes", lambda: 50 * 2**20)

@@ -15,15 +15,15 @@ import sys
 import numpy as np
 import pytest
 
-from xlfuncs.locator import simulate as sm
+from cmmwb.xlfuncs.locator import simulate as sm
 
 SCRIPT = r"""
 import json, sys
 import numpy as np
 import threadpoolctl
-from xlfuncs import pointcloud as pc
-from xlfuncs.locator import diagnose as dg, simulate as sm
-from xlfuncs.model import MPE1  # Forbes 2025 Table 3
+from cmmwb.xlfuncs import pointcloud as pc
+from cmmwb.xlfuncs.locator import diagnose as dg, simulate as sm
+from cmmwb.xlfuncs.model import MPE1  # Forbes 2025 Table 3
 ONE = (pc.Probe("P1", (0.0, 0.0, -50.0)),)
 rec = sm.simulate(sm.layout("ballplate", ONE), MPE1, {}, seed=5)
 j = dg.diagnose(rec, dg.Model(MPE1, ONE, True)).to_json()
@@ -36,8 +36,8 @@ MC_SCRIPT = r"""
 import json
 import numpy as np
 import threadpoolctl
-from xlfuncs import montecarlo as mc, pointcloud as pc
-from xlfuncs.model import MPE1 as params  # Forbes 2025 Table 3
+from cmmwb.xlfuncs import montecarlo as mc, pointcloud as pc
+from cmmwb.xlfuncs.model import MPE1 as params  # Forbes 2025 Table 3
 g = np.arange(6) * 60.0                      # a 6 x 6 grid of points: degenerate kernel spectra
 X = np.array([[x, y, 0.0] for x in g for y in g])
 N = np.tile([0.0, 0.0, 1.0], (len(X), 1))

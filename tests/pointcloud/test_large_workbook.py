@@ -10,11 +10,11 @@ from pathlib import Path
 import openpyxl
 import pytest
 
-from generator.cli import build_task
-from generator.errors import InputError
-from generator.pointcloud import large_book
-from generator.pointcloud.vx_sheets import NATIVE_MAX_POINTS
-from generator.workbook.recalc import results_rows
+from cmmwb.generator.cli import build_task
+from cmmwb.generator.errors import InputError
+from cmmwb.generator.pointcloud import large_book
+from cmmwb.generator.pointcloud.vx_sheets import NATIVE_MAX_POINTS
+from cmmwb.generator.workbook.recalc import results_rows
 
 from tests.helpers import close, recalc
 from tests.helpers.addin import evaluate_addin_formulas
@@ -112,7 +112,7 @@ def test_large_workbook_layout(book130):
     assert visible == ["Instructions", "Inputs", "Points", large_book.GP, "Budget", large_book.LIVE,
                        "Results", "xlwings.conf", "Summary"]
     assert not any(name.startswith("V_") for name in wb.sheetnames)      # no 3m x 3m matrices
-    assert [c.value for c in wb["xlwings.conf"][1]] == ["UDF Modules", "xlfuncs.udf"]
+    assert [c.value for c in wb["xlwings.conf"][1]] == ["UDF Modules", "cmmwb.xlfuncs.udf"]
     assert str(wb["Results"]["D2"].value).startswith("=Budget!")
     # GP blocks: grey values with a note naming the core function and version
     gp = wb[large_book.GP]

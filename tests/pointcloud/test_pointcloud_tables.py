@@ -5,7 +5,7 @@ import json
 
 import pytest
 
-from generator.cli import build_task
+from cmmwb.generator.cli import build_task
 
 from tests.helpers import EXAMPLES, printed
 
@@ -64,7 +64,7 @@ def test_mpe2_parameters_violate_the_mpe_above_about_885_mm(built):
     assert printed(chk["C_max"], 1.02) and chk["d_at_max_mm"] == 1000.0 and not chk["conforms"]
     import numpy as np
 
-    from xlfuncs import pointcloud as pc
+    from cmmwb.xlfuncs import pointcloud as pc
 
     p = pc.Parameters(**built["I", "MPE2"]["mpe_check"]["conforming_parameters"]).scaled(1 / chk["C_max"])
     d = np.arange(0, 1000.5, 1.0)

@@ -6,8 +6,8 @@ import json
 import openpyxl
 import pytest
 
-from generator.cli import build_task
-from generator.workbook.recalc import results_rows
+from cmmwb.generator.cli import build_task
+from cmmwb.generator.workbook.recalc import results_rows
 
 from tests.helpers import ENGINES, EXAMPLES, close, recalc
 from tests.helpers.tasks import write_random_task

@@ -16,10 +16,10 @@ import re
 import openpyxl
 import pytest
 
-from generator.errors import InputError
-from generator.workbook.recalc import recalculate
-from xlfuncs import conformity as cf
-from xlfuncs import dof
+from cmmwb.generator.errors import InputError
+from cmmwb.generator.workbook.recalc import recalculate
+from cmmwb.xlfuncs import conformity as cf
+from cmmwb.xlfuncs import dof
 
 from tests.helpers import EXAMPLES, close
 from tests.helpers.decision import assert_engine_agrees, at, build
@@ -232,7 +232,7 @@ def test_bad_decision_input_names_the_key(tmp_path, edit, where, message):
 
 
 def test_build_prints_rounded_statements_and_decisions(tmp_path, capsys):
-    from generator.cli import main
+    from cmmwb.generator.cli import main
 
     assert main(["build", str(KNUCKLE), "--out", str(tmp_path / "out"), "--no-plots"]) == 0
     out = capsys.readouterr().out

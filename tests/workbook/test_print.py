@@ -13,9 +13,9 @@ from pathlib import Path
 import openpyxl
 import pytest
 
-from generator.budget import block as budget_block
-from generator.cli import main
-from generator.workbook.recalc import soffice
+from cmmwb.generator.budget import block as budget_block
+from cmmwb.generator.cli import main
+from cmmwb.generator.workbook.recalc import soffice
 
 from tests.helpers import EXAMPLES
 
@@ -131,7 +131,7 @@ def test_no_header_is_cut(demo):
 
 
 def test_build_pdf_without_libreoffice_says_so_and_writes_nothing(tmp_path, monkeypatch, capsys):
-    import generator.workbook.pdf
+    from cmmwb import generator
 
     monkeypatch.setattr(generator.workbook.pdf, "soffice", lambda: None)
     out = tmp_path / "out"

@@ -16,10 +16,10 @@ import openpyxl
 import pytest
 import tomli_w
 
-from generator import __version__
-from generator.build import build_task
-from generator.errors import InputError
-from generator.workbook.atomic import Staging
+from cmmwb.generator import __version__
+from cmmwb.generator.build import build_task
+from cmmwb.generator.errors import InputError
+from cmmwb.generator.workbook.atomic import Staging
 
 from tests.helpers import EXAMPLES, ROOT
 

@@ -15,18 +15,18 @@ from pathlib import Path
 import openpyxl
 import pytest
 
-from generator.build import build_task
-from generator.errors import InputError
-from generator.feature import va_sheets
-from generator.feature.task import FIT_CURRENT, FIT_STALE
-from generator.taskfile import key_line
-from generator.workbook import plots
-from generator.workbook.book import CM_PER_CHAR, FMT_SCI
-from generator.workbook.recalc import recalculate, results_rows
+from cmmwb.generator.build import build_task
+from cmmwb.generator.errors import InputError
+from cmmwb.generator.feature import va_sheets
+from cmmwb.generator.feature.task import FIT_CURRENT, FIT_STALE
+from cmmwb.generator.taskfile import key_line
+from cmmwb.generator.workbook import plots
+from cmmwb.generator.workbook.book import CM_PER_CHAR, FMT_SCI
+from cmmwb.generator.workbook.recalc import recalculate, results_rows
 
 from tests.helpers import EXAMPLES
 
-CMMWB = [sys.executable, "-m", "generator"]
+CMMWB = [sys.executable, "-m", "cmmwb.generator"]
 
 
 def built(example: str, out: Path) -> tuple[dict, Path]:
@@ -84,7 +84,7 @@ def test_recalc_into_a_pipe_prints_the_table_and_no_progress_bar(sphere_book):
 def test_the_progress_bar_draws_only_on_a_terminal(monkeypatch):
     import io
 
-    from xlfuncs.execution import ProgressBar
+    from cmmwb.xlfuncs.execution import ProgressBar
 
     pipe = io.StringIO()                          # isatty() is False
     monkeypatch.setattr(sys, "stderr", pipe)
@@ -153,7 +153,7 @@ def test_scientific_formats_print_an_exact_zero_as_0():
 
 @pytest.mark.libreoffice
 def test_the_printed_knuckle_shows_no_negative_zero(tmp_path):
-    from generator.workbook.pdf import print_books
+    from cmmwb.generator.workbook.pdf import print_books
 
     _, book = built("knuckle.toml", tmp_path)
     (pdf,) = print_books([book])
@@ -216,8 +216,8 @@ def test_without_an_excess_the_summary_gives_the_delta_chi2_of_the_targeted_test
     """chi2/dof 1.24 on 105 lengths, the omnibus test passes, the targeted one fires: the effect
     is worth more than the whole excess, which '100 % of the excess' (or 33 % each of three)
     misrepresented."""
-    from xlfuncs.locator import diagnose as dg
-    from xlfuncs.locator import simulate as sm
+    from cmmwb.xlfuncs.locator import diagnose as dg
+    from cmmwb.xlfuncs.locator import simulate as sm
 
     from tests.helpers.clouds import MPE1
     from tests.helpers.locator import iso, u_effect
@@ -234,8 +234,8 @@ def test_without_an_excess_the_summary_gives_the_delta_chi2_of_the_targeted_test
 
 
 def test_with_an_excess_the_summary_gives_the_share_it_explains():
-    from xlfuncs.locator import diagnose as dg
-    from xlfuncs.locator import simulate as sm
+    from cmmwb.xlfuncs.locator import diagnose as dg
+    from cmmwb.xlfuncs.locator import simulate as sm
 
     from tests.helpers.clouds import MPE1
     from tests.helpers.locator import iso, u_effect

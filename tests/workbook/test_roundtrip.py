@@ -25,11 +25,11 @@ import openpyxl
 import pytest
 import tomli_w
 
-from generator import templates
-from generator.cli import build_task, main
-from generator.jobs import job
-from generator.reader import read_to_files
-from generator.workbook.recalc import read_cached, results_rows, soffice
+from cmmwb.generator import templates
+from cmmwb.generator.cli import build_task, main
+from cmmwb.generator.jobs import job
+from cmmwb.generator.reader import read_to_files
+from cmmwb.generator.workbook.recalc import read_cached, results_rows, soffice
 
 from tests.helpers import EXAMPLES, close
 
@@ -228,7 +228,7 @@ def test_a_filled_template_reads_back_to_the_same_results(tmp_path, kind, via):
 def test_moving_a_sampled_point_turns_the_sampling_into_a_points_table(tmp_path):
     """A feature built from a [sampling] strategy whose points were edited is read back as a
     [points] table; the results are those of the same table written by hand."""
-    from generator.taskfile import read_toml
+    from cmmwb.generator.taskfile import read_toml
 
     example = EXAMPLES / "feature_table8_sphere_six.toml"
     _, book = build(example, tmp_path / "built")
@@ -336,7 +336,7 @@ def test_a_file_cmmwb_did_not_write_is_not_overwritten(tmp_path, small_task, cap
 def test_cache_all_gives_every_formula_cell_a_value(tmp_path, small_task):
     """--cache all: every formula cell, and every cell of every array formula, carries the value
     the `formulas` engine computed; V_X equals the core's, Results the JSON (1e-9)."""
-    from xlfuncs import pointcloud as pc
+    from cmmwb.xlfuncs import pointcloud as pc
 
     mod = job("pointcloud")
     results, files = build_task(small_task, tmp_path / "out", plots=False, cache="all")
@@ -346,7 +346,7 @@ def test_cache_all_gives_every_formula_cell_a_value(tmp_path, small_task):
     formula_cells = [(ws.title, c.coordinate) for ws in wb.worksheets for row in ws.iter_rows() for c in row
                      if c.data_type == "f" or type(c.value).__name__ == "ArrayFormula"]
     assert formula_cells and all(coord in cached[sheet] for sheet, coord in formula_cells)
-    from generator.taskfile import read_toml
+    from cmmwb.generator.taskfile import read_toml
 
     task = mod.load(small_task, read_toml(small_task))
     VX = sum(pc.V_X_components(task.cloud, task.params).values())

@@ -10,19 +10,19 @@ import openpyxl
 import pytest
 from openpyxl.worksheet.formula import ArrayFormula
 
-from generator import templates
-from generator.jobs import job
-from generator.reader import TASK_SHEET
-from generator.workbook.book import DEFAULT_FILL, INPUT_FILL
-from generator.workbook.cache import results_table
-from generator.workbook.recalc import read_cached, results_rows
+from cmmwb.generator import templates
+from cmmwb.generator.jobs import job
+from cmmwb.generator.reader import TASK_SHEET
+from cmmwb.generator.workbook.book import DEFAULT_FILL, INPUT_FILL
+from cmmwb.generator.workbook.cache import results_table
+from cmmwb.generator.workbook.recalc import read_cached, results_rows
 
 SOURCES = templates.sources()
 
 
 def expected_results(kind, source, tmp_path):
     """The JSON the core computes for a template's task (no workbook involved)."""
-    from generator.taskfile import read_toml
+    from cmmwb.generator.taskfile import read_toml
 
     mod = job(kind)
     if source is None:

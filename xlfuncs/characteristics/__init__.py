@@ -37,8 +37,16 @@ them; :mod:`.joint` the joint fit and V_A; :mod:`.evaluation` values, sensitivit
 from .evaluation import Context, Result, evaluate, propagate
 from .joint import JointFit, fit_features, joint_V_A
 from .mcm import monte_carlo
-from .specs import (FORM_TYPES, ORIENTATION_TYPES, SIZE_TYPES, SMOOTH_TYPES, TYPES, CharacteristicSpec,
-                    FeatureSpec, FrameSpec)
+from .specs import (
+                    FORM_TYPES,
+                    ORIENTATION_TYPES,
+                    SIZE_TYPES,
+                    SMOOTH_TYPES,
+                    TYPES,
+                    CharacteristicSpec,
+                    FeatureSpec,
+                    FrameSpec,
+)
 
 __all__ = [
     "FeatureSpec", "FrameSpec", "CharacteristicSpec", "JointFit", "Result", "TYPES",

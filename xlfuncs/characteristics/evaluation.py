@@ -18,7 +18,6 @@ from ..minzone import chebyshev_zone
 from .joint import JointFit
 from .specs import FORM_TYPES, ORIENTATION_TYPES, SMOOTH_TYPES, TYPES, CharacteristicSpec, FrameSpec
 
-
 FORM_ELEMENT = {"flatness": ("plane",), "straightness": ("line",), "roundness": ("circle",),
                 "cylindricity": ("cylinder",)}
 #: the residual derivative columns that are free zone parameters (small-angle form): the

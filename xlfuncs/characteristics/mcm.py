@@ -13,7 +13,6 @@ from .evaluation import RAD, VALUE, Context, Result, constants, form, form_resid
 from .joint import JointFit
 from .specs import FORM_TYPES, CharacteristicSpec
 
-
 # ------------------------------------------------------------------------------------------
 # Monte Carlo (JCGM 101) of every characteristic: refit, re-evaluate exactly
 # ------------------------------------------------------------------------------------------

@@ -6,7 +6,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-
 FORM_TYPES = ("flatness", "straightness", "roundness", "cylindricity")
 ORIENTATION_TYPES = ("perpendicularity", "parallelism", "angularity")
 SIZE_TYPES = ("diameter", "width", "cone_angle")

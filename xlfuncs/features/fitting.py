@@ -13,9 +13,7 @@ import numpy as np
 
 from ..errors import ConvergenceError, DegenerateGeometryError, ModelError
 from ..partial import frame_from_axis
-from .models import (CIRCLE_PLANES, ELEMENTS, GLOBAL_NAMES, K_RESIDUALS, LOCAL_NAMES, MIN_POINTS, local_model,
-                     update_one)
-
+from .models import CIRCLE_PLANES, ELEMENTS, GLOBAL_NAMES, K_RESIDUALS, LOCAL_NAMES, MIN_POINTS, local_model, update_one
 
 # --------------------------------------------------------------------------------------------
 # the fit

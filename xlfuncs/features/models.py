@@ -11,7 +11,6 @@ import numpy as np
 
 from ..errors import DegenerateGeometryError, ModelError
 
-
 ELEMENTS: tuple[str, ...] = ("line", "plane", "circle", "sphere", "cylinder", "cone")
 
 #: smallest number of points (with positive weight) that can determine each element

@@ -12,7 +12,6 @@ import numpy as np
 from ..errors import ModelError
 from .fitting import G_A_X, FeatureFit
 
-
 #: 1 µm^2 in mm^2
 UM2_TO_MM2 = 1e-6
 

@@ -45,18 +45,49 @@ import math
 
 import numpy as np
 
-from . import effects as fx
 from ..errors import ModelError
+from . import effects as fx
 from .linalg import Whitener, cancorr, gls, orth, project_out, structured_whitener
-from .model import (STRUCTURED_MIN_OBS, Model, Prepared, direction_label, is_structured,
-                            kabsch, length_covariance, prepare, resolve_probes,
-                            uses_structured)
-from .report import (Diagnosis, diagnosis_json, effect_estimates, groups_of, indicated_report,
-                             locate_groups, locate_records, outlier_report, summary_text, unexplained_rest)
-from .search import (EXACT_ALIAS, GATE_SHARE, Candidate, Search, alias_reason, candidate_rows,
-                             copy_candidate, labels_coef, outliers_searchable, refit, search, why_zero)
-from .stats import chi2_logsf, chi2_sf, f_logcdf, f_logsf
+from .model import (
+    STRUCTURED_MIN_OBS,
+    Model,
+    Prepared,
+    direction_label,
+    is_structured,
+    kabsch,
+    length_covariance,
+    prepare,
+    resolve_probes,
+    uses_structured,
+)
 from .recordings import LengthRecords, PointRecords
+from .report import (
+    Diagnosis,
+    diagnosis_json,
+    effect_estimates,
+    groups_of,
+    indicated_report,
+    locate_groups,
+    locate_records,
+    outlier_report,
+    summary_text,
+    unexplained_rest,
+)
+from .search import (
+    EXACT_ALIAS,
+    GATE_SHARE,
+    Candidate,
+    Search,
+    alias_reason,
+    candidate_rows,
+    copy_candidate,
+    labels_coef,
+    outliers_searchable,
+    refit,
+    search,
+    why_zero,
+)
+from .stats import chi2_logsf, chi2_sf, f_logcdf, f_logsf
 
 __all__ = ["diagnose", "diagnose_prepared", "effect_covariance", "check_alphas", "NAME_SHARE",
            "Model", "Prepared", "prepare", "resolve_probes", "kabsch", "uses_structured", "is_structured",
@@ -252,7 +283,7 @@ def diagnose_prepared(prep: Prepared, alpha: float = 0.01, alpha_name: float | N
                                     z=diag.z_after) if mismatch and not diag.explained else [])
     diag.located = locate_records(diag)
     if mismatch and not diag.explained:
-        from . import discrepancy as disc   # section 7: the discrepancy, last, only when not explained
+        from . import discrepancy as disc  # section 7: the discrepancy, last, only when not explained
         diag.discrepancy = disc.fit(prep, W, X_sel, beta, alpha, chi2_after, dof_after, chi2_logsf, gls,
                                     f_logsf if noise is not None else None)
         if noise is not None and diag.discrepancy and diag.discrepancy["chosen"]:

@@ -6,10 +6,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import effects as fx
 from ..errors import ModelError
+from . import effects as fx
 from .model import Prepared, group_labels
-
 
                             # coordinates (µm in hundreds of mm) that the columns are built from
 DEPENDENT = 1e-6            # a column whose projected norm is below this share is dependent

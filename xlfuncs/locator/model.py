@@ -11,13 +11,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import effects as fx
 from .. import blocked as bl
 from .. import pointcloud as pc
-from . import structured_lengths as sl
 from ..errors import ModelError
+from . import effects as fx
+from . import structured_lengths as sl
 from .recordings import LengthRecords, PointRecords, RecordingsError
-
 
 # ---------------------------------------------------------------------------------------------
 # the model of the simulation, the probes, the design

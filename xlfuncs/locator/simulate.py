@@ -40,8 +40,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .. import pointcloud as pc
-from ..model import sq_dists
 from ..errors import ModelError
+from ..model import sq_dists
 from .recordings import LengthRecords, PointRecords
 
 LAYOUTS = ("iso10360", "stepgauge", "ballplate", "holeplate", "spheres", "scan")

@@ -36,8 +36,8 @@ from scipy.linalg import cho_factor, cho_solve
 
 from .. import lowrank as lr
 from .. import pointcloud as pc
-from ..model import G_S, skew
 from ..errors import ModelError
+from ..model import G_S, skew
 
 #: points per block of the passes over U
 BLOCK_POINTS = 4096

@@ -12,8 +12,15 @@ The evaluation paths built on them: :mod:`xlfuncs.pointcloud` (dense V_X, distan
 :mod:`xlfuncs.locator.model`.
 """
 
-from .factors import (V_S_diag_um_per_mm2, check_factors, factor_block, factor_diagonal, gauss_kernel, point_index,
-                      probe_arrays)
+from .factors import (
+                      V_S_diag_um_per_mm2,
+                      check_factors,
+                      factor_block,
+                      factor_diagonal,
+                      gauss_kernel,
+                      point_index,
+                      probe_arrays,
+)
 from .geometry import G_S, scale_rows, skew, sq_dists
 from .parameters import FACTORS, MAX_PARAMETER, MILLI, MIN_LENGTH_SCALE, Parameters, PointCloud, Probe
 from .scenarios import MPE1, MPE2, TABLE3, Scenario

@@ -26,9 +26,7 @@ is checked against these two in ``tests/test_model_paths.py``.
 
 from __future__ import annotations
 
-from typing import Any
-
-from typing import Sequence
+from typing import Any, Sequence
 
 import numpy as np
 

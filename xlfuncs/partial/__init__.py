@@ -3,9 +3,20 @@
 Tables 1-8), :mod:`.sampling` the sampling strategies that build the nominal points of a feature
 task.  The names the rest of the project uses are re-exported here."""
 
-from .approximations import (Approximation, circle_arc, cone_patch, cone_patch_quadrature, cylinder_patch,
-                             line_segment, plane_rectangle, sphere_band, sphere_cap, sphere_full, sphere_patch,
-                             sphere_segment)
+from .approximations import (
+                             Approximation,
+                             circle_arc,
+                             cone_patch,
+                             cone_patch_quadrature,
+                             cylinder_patch,
+                             line_segment,
+                             plane_rectangle,
+                             sphere_band,
+                             sphere_cap,
+                             sphere_full,
+                             sphere_patch,
+                             sphere_segment,
+)
 from .sampling import PATTERNS, Sampling, approximation, frame_from_axis, sample
 
 __all__ = [

@@ -50,7 +50,6 @@ from numpy.polynomial.legendre import leggauss
 
 from ..errors import DegenerateGeometryError, ModelError
 
-
 # --------------------------------------------------------------------------------------------
 # the approximation object
 # --------------------------------------------------------------------------------------------

@@ -11,10 +11,21 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import DegenerateGeometryError, ModelError
-from .approximations import (Approximation, check_angle, check_positive, circle_arc, cone_patch, cylinder_patch,
-                             line_segment, plane_rectangle, sphere_band, sphere_cap, sphere_full, sphere_patch,
-                             sphere_segment)
-
+from .approximations import (
+    Approximation,
+    check_angle,
+    check_positive,
+    circle_arc,
+    cone_patch,
+    cylinder_patch,
+    line_segment,
+    plane_rectangle,
+    sphere_band,
+    sphere_cap,
+    sphere_full,
+    sphere_patch,
+    sphere_segment,
+)
 
 # --------------------------------------------------------------------------------------------
 # nominal frames and sampling strategies

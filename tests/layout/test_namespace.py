@@ -19,8 +19,7 @@ import sys
 import venv
 from pathlib import Path
 
-
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 #: modules that must never be imported when a cmmwb command runs
 HOSTILE = {
