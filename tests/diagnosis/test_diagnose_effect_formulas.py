@@ -15,17 +15,14 @@ from cmmwb.generator.diagnosis import formulas as fo
 from cmmwb.generator.diagnosis import records
 from cmmwb.generator.workbook.book import Book
 from cmmwb.generator.workbook.xlref import col
-from cmmwb.xlfuncs import pointcloud as pc
 from cmmwb.xlfuncs.locator import diagnose as dg
 from cmmwb.xlfuncs.locator import effects as fx
 from cmmwb.xlfuncs.locator import simulate as sm
+from cmmwb.xlfuncs.model import MPE1  # Forbes 2025 Table 3
 
 from tests.helpers import close, recalc
+from tests.helpers.clouds import PAIR
 
-MPE1 = pc.Parameters(sigma_R_um=0.20, sigma_S_ppm=0.7, sigma_Sa_ppm=0.7, sigma_Q_ppm=0.7, sigma_PQ_um=0.20,
-                     sigma_ET_um=0.2, lambda_ET_mm=200.0, sigma_ER_urad=4.0, lambda_ER_mm=400.0,
-                     sigma_P0_um=0.10, sigma_P_um=0.10, lambda_P=0.5)
-PAIR = (pc.Probe("P1", (0.0, 20.0, -30.0)), pc.Probe("P2", (0.0, -20.0, -30.0)))
 #: the point (a0, b0) of a periodic error at which the workbook linearizes its period (Inputs)
 AB0 = (0.7, -0.4)
 
