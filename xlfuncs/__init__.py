@@ -1,10 +1,12 @@
 """xlfuncs: the numerical core of cmmwb (numpy only, no spreadsheet knowledge).
 
-Modules: ``pointcloud`` (Forbes 2025 V_X and distances), ``blocked`` (the same without forming
-V_X), ``budget`` (Wojtyla/Plowucha 2023), ``features`` and ``partial`` (Forbes 2022 fits,
-sensitivities, partial-feature approximations), ``montecarlo`` (JCGM 101 comparison),
-``recordings``/``effects``/``diagnose``/``simulate`` (mismatch locator), ``distributed`` (Dask),
-``udf`` (xlwings add-in functions).
+Modules: ``model`` (the six-factor model of Forbes 2025, defined once), ``pointcloud`` (V_X and
+distances), ``blocked`` and ``lowrank`` (the same without forming V_X), ``budget``
+(Wojtyla/Plowucha 2023), ``features`` and ``partial`` (Forbes 2022 fits, sensitivities,
+partial-feature approximations), ``characteristics`` (several features, one V_X), ``montecarlo``
+(JCGM 101 comparison), ``locator`` (the mismatch locator: recordings, effects, simulate,
+diagnose), ``calibrate`` (REML of the hyper-parameters), ``distributed`` (Dask), ``udf`` (the
+add-in functions); docs/developing.md has them all.
 
 Installed as ``cmmwb.xlfuncs`` (``cmmwb`` is a namespace package, ``pyproject.toml``); imported by
 its folder name from a checkout, ``xlfuncs.x`` is made the very module ``cmmwb.xlfuncs.x``
