@@ -18,7 +18,7 @@ Parts (default: all):
 Every measurement runs in a fresh subprocess (peak memory = its ru_maxrss, interpreter and
 numpy included).  The machine has 2 cores shared with other jobs: the load average is printed
 with every row, repeats give best and median.  Fitted exponents: least squares of log t on
-log m over the points with m >= 10^4.  Results: bench/results/million.md (and .json).
+log m over the points with m >= 10^4.  Results: bench/results/million_<tag>.md (and .json).
 """
 
 from __future__ import annotations

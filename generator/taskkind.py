@@ -1,6 +1,6 @@
 """The task-kind contract: what the job module of a kind (``generator/<kind>/job.py``) provides, so
 that ``build``, ``new``, ``read``, ``demo`` and the templates handle every kind alike.  The
-registry of the kinds is :data:`generator.jobs.JOBS`; ``tests/test_jobs.py`` checks that every
+registry of the kinds is :data:`generator.jobs.JOBS`; ``tests/layout/test_jobs.py`` checks that every
 registered module satisfies :class:`TaskKind`.
 
 The hooks only some kinds need (:meth:`TaskKind.force_exact`, :meth:`TaskKind.add_type_a`) are part

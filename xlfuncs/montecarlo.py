@@ -289,7 +289,7 @@ def distances(cloud: pc.PointCloud, params: pc.Parameters, pairs, *, components:
 
 
 def _rot_xy_batch(rx: np.ndarray, ry: np.ndarray) -> np.ndarray:
-    """R_y(ry) R_x(rx) for a batch of angles (as xlfuncs.features._rot_xy)."""
+    """R_y(ry) R_x(rx) for a batch of angles (as xlfuncs.features.rot_xy_batch)."""
     cx, sx, cy, sy = np.cos(rx), np.sin(rx), np.cos(ry), np.sin(ry)
     z, o = np.zeros_like(rx), np.ones_like(rx)
     Rx = np.stack([np.stack([o, z, z], -1), np.stack([z, cx, -sx], -1), np.stack([z, sx, cx], -1)], -2)

@@ -5,7 +5,7 @@ Every function returns the formula of one cell of a record's row (``=...``; a po
 coordinate that an effect does not move is the number 0.0): the same expression as the core's
 column of that family (``effects.FAMILIES[family].length`` / ``.point``), written over the record
 cells (probe offsets, normals, temperatures, times) so that the refit stays live.
-``tests/test_diagnose_effect_formulas.py`` recomputes every effect's columns with ``formulas`` and
+``tests/diagnosis/test_diagnose_effect_formulas.py`` recomputes every effect's columns with ``formulas`` and
 compares them with the core's to relative 1e-9.  Only the functions of docs/engines.md (SQRT, SIN,
 COS, PI, IF, EXACT) and plain arithmetic are used.
 """
@@ -261,7 +261,7 @@ class Formulas:
 
 
 #: one entry per family of ``xlfuncs.locator.effects.FAMILIES`` (same keys, checked by
-#: tests/test_diagnose_effect_formulas.py, which also compares the values cell by cell)
+#: tests/diagnosis/test_diagnose_effect_formulas.py, which also compares the values cell by cell)
 FORMULAS: dict[str, Formulas] = {
     "scale": Formulas(_scale_length, _scale_point),
     "scale_axis": Formulas(_scale_axis_length, _scale_axis_point),

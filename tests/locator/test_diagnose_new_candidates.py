@@ -2,7 +2,7 @@
 axes, orders 2 and 3 (ISO 230-1 names EYX ... EYZ), and reversal errors along x, y, z.
 
 The simulator plants them with its own code (numpy's Legendre series, the sign of the approach);
-the locator's sensitivities (xlfuncs/effects.py) must agree with it and find them."""
+the locator's sensitivities (xlfuncs/locator/effects.py) must agree with it and find them."""
 
 import numpy as np
 import pytest

@@ -75,7 +75,7 @@ One table: :data:`EFFECTS` has one entry per effect (its name, family, unit and 
 answer); :data:`FAMILIES` the sensitivity columns of each family (effects that differ only by an
 axis or a rotation share a family), for length and for point records.  The diagnosis workbook
 writes the same columns as formulas from ``generator.diagnosis.formulas.FORMULAS``, keyed by the
-same families; ``tests/test_diagnose_effect_formulas.py`` recomputes every effect's columns and
+same families; ``tests/diagnosis/test_diagnose_effect_formulas.py`` recomputes every effect's columns and
 compares them with these cell by cell.  A new effect of an existing family is one entry in
 EFFECTS (plus, where it needs something, its check in :func:`_needs`); a new family adds one
 entry to FAMILIES and one to FORMULAS.
@@ -700,7 +700,7 @@ class Sensitivity:
 
 #: the sensitivity columns of every family of :data:`EFFECTS` (``Effect.family``); the workbook's
 #: formulas of the same families are ``generator.diagnosis.formulas.FORMULAS``, and
-#: tests/test_diagnose_effect_formulas.py compares the two cell by cell for every effect
+#: tests/diagnosis/test_diagnose_effect_formulas.py compares the two cell by cell for every effect
 FAMILIES: dict[str, Sensitivity] = {
     "scale": Sensitivity(_scale_length, _scale_point),
     "scale_axis": Sensitivity(_scale_axis_length, _scale_axis_point),

@@ -21,7 +21,7 @@ Two forms, the way a kernel library offers ``K(X, Y)`` and ``diag(X)``:
 * :func:`factor_diagonal` -- the 3 x 3 blocks V_ii of every point (m x 3 x 3).
 
 Every evaluation path (dense, blocked, low-rank, structured, Monte Carlo, simulator, locator)
-is checked against these two in ``tests/test_model_paths.py``.
+is checked against these two in ``tests/core/test_model_paths.py``.
 """
 
 from __future__ import annotations
