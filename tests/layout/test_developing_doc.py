@@ -162,7 +162,9 @@ def project_modules() -> list[str]:
     them) and without the LibreOffice add-in's files (``generator/lo_addin/``, package data run by
     LibreOffice, one row)."""
     out = set()
-    for f in tracked():
+    on_disk = {p.relative_to(ROOT).as_posix() for top in ("generator", "xlfuncs") for p in (ROOT / top).rglob("*.py")
+               if "__pycache__" not in p.parts}       # a new module counts before `git add`
+    for f in tracked() | on_disk:
         if not f.startswith(("generator/", "xlfuncs/")) or f.startswith("generator/lo_addin/"):
             continue
         path = Path(f)
