@@ -5,8 +5,16 @@ Read from the text only (nothing is imported): a path in backticks that begins w
 the tree must exist; a dotted name in backticks that begins with ``generator.``, ``xlfuncs.`` or
 ``cmmwb.`` must be a module of the tree, optionally followed by a name that module defines (and, for
 a class, an attribute of its body); a file name in backticks (``read.py``) must be the name of a
-file of the tree.  The same checks run over the other documents of the repository, so that a
-module moved without its documentation fails here, not in a reader's hands.
+file of the tree.  The same checks run over the other documents of the repository (README.md,
+docs/*.md, the READMEs of workbook_templates/ and tests/data/), so that a module moved without its
+documentation fails here, not in a reader's hands.
+
+The table ``| where | job | may import |`` of docs/developing.md: every module of generator/ and
+xlfuncs/ (but ``__init__.py``, ``__main__.py`` and the add-in files of generator/lo_addin/) has
+exactly one row, either by its full path in the row's first cell or, for a module of a package,
+by the package's folder in the first cell and the module's name (``program.py`` or ``program``)
+in the row; every package has a row (or a row of one of its modules); every path of a first
+cell exists.
 """
 
 from __future__ import annotations
@@ -24,7 +32,7 @@ DEVELOPING = ROOT / "docs" / "developing.md"
 #: the folders a repository path in a document begins with
 TOP = ("generator", "xlfuncs", "tests", "bench", "docs", "workbook_templates", ".github")
 #: the documents whose backticked paths and module names must exist (developing.md among them)
-DOCUMENTS = ("README.md", "docs/*.md", "workbook_templates/README.md", "tests/data/**/README*", "bench/README*")
+DOCUMENTS = ("README.md", "docs/*.md", "workbook_templates/README.md", "tests/data/**/README*")
 #: file names a document names on purpose although the tree has no such file: a user's own
 #: ``generator.py`` or ``cmmwb.py`` beside a workbook (docs/developing.md, "Packaging")
 NOT_IN_THE_TREE = {"generator.py", "xlfuncs.py", "cmmwb.py"}
@@ -37,9 +45,12 @@ _FILE = re.compile(r"^\w[\w-]*\.py$")
 
 @cache
 def tracked() -> frozenset[str]:
-    """The files of the tree (``git ls-files``), as paths relative to the repository."""
+    """The files of the tree, as paths relative to the repository: ``git ls-files`` and the Python
+    files on disk (a new module counts before ``git add``; build outputs and caches do not)."""
     out = subprocess.run(["git", "ls-files"], cwd=ROOT, capture_output=True, text=True, check=True).stdout
-    return frozenset(out.splitlines())
+    on_disk = {p.relative_to(ROOT).as_posix() for top in ("generator", "xlfuncs", "tests", "bench")
+               for p in (ROOT / top).rglob("*.py") if "__pycache__" not in p.parts}
+    return frozenset(out.splitlines()) | on_disk
 
 
 def path_exists(path: str) -> bool:
@@ -162,9 +173,7 @@ def project_modules() -> list[str]:
     them) and without the LibreOffice add-in's files (``generator/lo_addin/``, package data run by
     LibreOffice, one row)."""
     out = set()
-    on_disk = {p.relative_to(ROOT).as_posix() for top in ("generator", "xlfuncs") for p in (ROOT / top).rglob("*.py")
-               if "__pycache__" not in p.parts}       # a new module counts before `git add`
-    for f in tracked() | on_disk:
+    for f in tracked():
         if not f.startswith(("generator/", "xlfuncs/")) or f.startswith("generator/lo_addin/"):
             continue
         path = Path(f)
