@@ -288,15 +288,6 @@ def distances(cloud: pc.PointCloud, params: pc.Parameters, pairs, *, components:
                     progress=progress)
 
 
-def _rot_xy_batch(rx: np.ndarray, ry: np.ndarray) -> np.ndarray:
-    """R_y(ry) R_x(rx) for a batch of angles (as xlfuncs.features.rot_xy_batch)."""
-    cx, sx, cy, sy = np.cos(rx), np.sin(rx), np.cos(ry), np.sin(ry)
-    z, o = np.zeros_like(rx), np.ones_like(rx)
-    Rx = np.stack([np.stack([o, z, z], -1), np.stack([z, cx, -sx], -1), np.stack([z, sx, cx], -1)], -2)
-    Ry = np.stack([np.stack([cy, z, sy], -1), np.stack([z, o, z], -1), np.stack([-sy, z, cy], -1)], -2)
-    return Ry @ Rx
-
-
 FIT_KINDS = ("plane", "sphere", "cylinder", "line", "circle")
 
 
@@ -305,7 +296,7 @@ def refit_batch(fit, X_mm: np.ndarray, *, max_iter: int = 20) -> np.ndarray:
     from the reference solution; return the paper's local parameters of each refitted element
     in the reference solution frame (B, n): for the reference points they are the fit's
     ``local_values`` and their changes are what G_A|X describes to first order."""
-    from .features import local_model
+    from .features import local_model, rot_xy_batch
 
     kind = fit.kind
     if kind not in FIT_KINDS:
@@ -329,16 +320,16 @@ def refit_batch(fit, X_mm: np.ndarray, *, max_iter: int = 20) -> np.ndarray:
             r = r + step[:, 3]
         elif kind == "plane":
             o = o + R[:, :, 2] * step[:, :1]
-            R = R @ _rot_xy_batch(step[:, 1], step[:, 2])
+            R = R @ rot_xy_batch(step[:, 1], step[:, 2])
         elif kind == "circle":   # in a coordinate plane: x0, y0, r0
             o = o + np.einsum("bij,bj->bi", R[:, :, :2], step[:, :2])
             r = r + step[:, 2]
         elif kind == "line":
             o = o + np.einsum("bij,bj->bi", R[:, :, :2], step[:, :2])
-            R = R @ _rot_xy_batch(step[:, 2], step[:, 3])
+            R = R @ rot_xy_batch(step[:, 2], step[:, 3])
         else:  # cylinder
             o = o + np.einsum("bij,bj->bi", R[:, :, :2], step[:, :2])
-            R = R @ _rot_xy_batch(step[:, 2], step[:, 3])
+            R = R @ rot_xy_batch(step[:, 2], step[:, 3])
             r = r + step[:, 4]
         if np.max(np.abs(step)) <= 1e-14 * scale:
             break
