@@ -63,6 +63,7 @@ def main(argv: list[str] | None = None) -> int:
         code = _run(args)
         return code if _stdout_flushed() else EXIT_CLOSED_PIPE
     finally:
+        _cancel_redelivery()
         sys.unraisablehook = previous_hook
         if previous_int is not None:
             signal.signal(signal.SIGINT, previous_int)
@@ -196,6 +197,24 @@ def _quiet_unraisable(unraisable) -> None:
         # a real SIGINT to the main thread, sent from another thread so that it arrives after this
         # hook has returned (raised in here it would be ignored as well) and wakes a blocking call
         main_thread = threading.main_thread().ident
-        threading.Timer(0.01, signal.pthread_kill, (main_thread, signal.SIGINT)).start()
+        timer = threading.Timer(0.01, signal.pthread_kill, (main_thread, signal.SIGINT))
+        timer.daemon = True
+        _redelivery.append(timer)
+        timer.start()
         return
     sys.__unraisablehook__(unraisable)
+
+
+#: timers delivering a Ctrl-C again (:func:`_quiet_unraisable`); cancelled when the command ends
+_redelivery: list = []
+
+
+def _cancel_redelivery() -> None:
+    """A re-delivery still pending when the command has ended must not fire: its thread would send
+    the signal while the interpreter shuts down.  (Seen once under heavy load: SIGABRT with 'Fatal
+    Python error: PyThreadState_Get ... finalizing' right after 'cmmwb: interrupted'; a timer
+    thread still alive at shutdown is the one thread of cmmwb's own that could do that.)"""
+    while _redelivery:
+        timer = _redelivery.pop()
+        timer.cancel()
+        timer.join()
