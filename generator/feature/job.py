@@ -32,19 +32,8 @@ from cmmwb.xlfuncs.limits import MAX_COORDINATE_MM, coordinate_problem
 
 from .. import __version__
 from ..errors import InputError, model_errors_named
-from ..taskfile import (
-    COMMON_TABLES,
-    check_keys,
-    number,
-    read_parameters,
-    read_point_cloud,
-    read_probes,
-    string,
-    table,
-    task_kind_and_name,
-    text_list,
-    vector3,
-)
+from ..taskcloud import read_parameters, read_point_cloud, read_probes
+from ..taskfile import COMMON_TABLES, check_keys, number, string, table, task_kind_and_name, text_list, vector3
 from ..taskkind import no_type_a
 from ..workbook.book import BookAdditions
 from .task import KIND, Planning, Task, fit_state
