@@ -30,6 +30,7 @@ sys.path.insert(0, str(ROOT))
 
 from cmmwb.xlfuncs import calibrate as cb  # noqa: E402
 from cmmwb.xlfuncs import pointcloud as pc  # noqa: E402
+from cmmwb.xlfuncs import reml  # noqa: E402
 from cmmwb.xlfuncs.locator import simulate as sm  # noqa: E402
 from cmmwb.xlfuncs.locator.model import Model, prepare  # noqa: E402
 from cmmwb.xlfuncs.model import MPE1  # noqa: E402  (Forbes 2025 Table 3)
@@ -49,11 +50,11 @@ LAYOUTS = (
 
 def run_layout(key, title, name, probes, kw, sets, seed0=0, start_factor=1.0):
     L = sm.layout(name, probes, **kw)
-    start = pc.Parameters(**{n: getattr(MPE1, n) * start_factor for n in cb.NAMES})
+    start = pc.Parameters(**{n: getattr(MPE1, n) * start_factor for n in reml.NAMES})
     model = Model(MPE1, probes, True)
     stats = {n: {"estimated": 0, "within": 0, "not identifiable": 0, "zero": 0, "zero_covered": 0, "off": 0,
                  "fixed": 0}
-             for n in cb.NAMES}
+             for n in reml.NAMES}
     times, n_obs, failed = [], 0, 0
     for k in range(sets):
         rec = sm.simulate(L, MPE1, {}, seed=seed0 + k)
@@ -61,7 +62,7 @@ def run_layout(key, title, name, probes, kw, sets, seed0=0, start_factor=1.0):
         n_obs = prep.r_um.shape[0]
         t = time.perf_counter()
         try:
-            cal = cb.calibrate([cb.record_set(prep, key)], start)
+            cal = cb.calibrate([reml.record_set(prep, key)], start)
         except Exception as e:  # noqa: BLE001  (counted and reported)
             failed += 1
             print(f"  set {k}: {e}", file=sys.stderr)
@@ -99,7 +100,7 @@ def table(results, started: str, start_factor: float = 1.0) -> str:
                   f"{r['median_s']:.2f} s, max {r['max_s']:.2f} s.", "",
                   "| hyper-parameter | estimated | within 2u | share | zero | truth below the upper limit | share, estimated or zero | not ident. |",
                   "|---|---|---|---|---|---|---|---|"]
-        for n in cb.NAMES:
+        for n in reml.NAMES:
             st = r["stats"][n]
             share = f"{100.0 * st['within'] / st['estimated']:.1f} %" if st["estimated"] else "—"
             tried = st["estimated"] + st["zero"]

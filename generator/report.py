@@ -28,7 +28,8 @@ from .decision import BONUS_CONDITIONS, column, margin_label, symbol
 from .errors import InputError
 from .taskfile import check_keys
 from .workbook.atomic import sha256
-from .workbook.book import HEADER_FONT, TITLE_FONT, Book
+from .workbook.book import Book
+from .workbook.styles import HEADER_FONT, TITLE_FONT
 from .workbook.xlref import cell, quote_sheet
 
 SHEET = "Summary"

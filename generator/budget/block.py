@@ -13,7 +13,8 @@ from openpyxl.styles import Alignment
 from cmmwb.xlfuncs import budget as bd
 from cmmwb.xlfuncs import dof
 
-from ..workbook.book import FMT_SCI, HEADER_FONT, Book
+from ..workbook.book import Book
+from ..workbook.styles import FMT_SCI, HEADER_FONT
 from ..workbook.xlref import block, cell
 from .task import TYPE_A_INPUT
 

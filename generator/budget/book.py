@@ -25,7 +25,8 @@ from openpyxl.styles import Alignment
 
 from cmmwb.xlfuncs import budget as bd
 
-from ..workbook.book import HEADER_FONT, Book, BookAdditions, Formula
+from ..workbook.book import Book, BookAdditions, Formula
+from ..workbook.styles import HEADER_FONT
 from ..workbook.xlref import block, cell
 from .block import (
     C_INPUT,

@@ -23,8 +23,10 @@ from pathlib import Path
 import numpy as np
 
 from cmmwb.xlfuncs import calibrate as cb
+from cmmwb.xlfuncs import calibration_checks as checks
 from cmmwb.xlfuncs import compensation as cp
 from cmmwb.xlfuncs import pointcloud as pc
+from cmmwb.xlfuncs import reml
 from cmmwb.xlfuncs.errors import ModelError
 from cmmwb.xlfuncs.locator import diagnose as dg
 from cmmwb.xlfuncs.locator import effects as fx
@@ -104,9 +106,9 @@ def run_calibrate(paths: list[Path], model: dg.Model, out_dir: Path, *, task_pat
         with model_errors_named(path):
             try:
                 prep = dg.prepare(rec, model, False)
-                if prep.r_um.shape[0] > cb.DENSE_MAX_OBS:
+                if prep.r_um.shape[0] > reml.DENSE_MAX_OBS:
                     raise ModelError(f"{prep.r_um.shape[0]} observations: calibrate uses the dense record "
-                                     f"covariance, at most {cb.DENSE_MAX_OBS} per file (split the file)")
+                                     f"covariance, at most {reml.DENSE_MAX_OBS} per file (split the file)")
                 chosen, diag = [], None
                 if effects == "auto":
                     diag = dg.diagnose_prepared(prep, alpha)
@@ -117,7 +119,7 @@ def run_calibrate(paths: list[Path], model: dg.Model, out_dir: Path, *, task_pat
                 else:
                     chosen = [e.strip() for e in effects.split(",") if e.strip()]
                     X, labels = _effect_columns(prep, chosen, path)
-                s = cb.RecordSet(stem, prep, X, [f"{a} {b}" for a, b in labels], cb.record_covariance(prep))
+                s = reml.RecordSet(stem, prep, X, [f"{a} {b}" for a, b in labels], reml.record_covariance(prep))
             except RecordingsError as e:     # a ModelError too, named by the recordings' line
                 raise InputError(e.message, file=path, where=e.where) from None
         sets.append(s)
@@ -132,7 +134,7 @@ def run_calibrate(paths: list[Path], model: dg.Model, out_dir: Path, *, task_pat
         # a factor the effects take over is left out of C for their estimates (compensation.absorbed)
         gone = cp.absorbed(f["chosen"])
         p_eff = replace(cal.params, **{k: 0.0 for k in gone})
-        beta, cov, _, _ = cb.gls_fit(s, p_eff)
+        beta, cov, _, _ = checks.gls_fit(s, p_eff)
         f["beta"], f["cov"] = beta, cov
         for name in f["chosen"]:
             idx = [j for j, (e, _) in enumerate(f["labels"]) if e == name]
@@ -154,14 +156,14 @@ def run_calibrate(paths: list[Path], model: dg.Model, out_dir: Path, *, task_pat
     compensated = []
     for f, s in zip(per_file, sets):
         A = f["prep"].A
-        _, _, c0, d0 = cb.gls_fit(s, model.params, X=A)
+        _, _, c0, d0 = checks.gls_fit(s, model.params, X=A)
         y = s.y
         if feedback == "compensate" and f["chosen"]:
             eff = [j for j, (e, _) in enumerate(f["labels"]) if e in f["chosen"]]
             Xe, be = s.X[:, eff], f["beta"][eff]
             y = s.y - Xe @ be
             compensated.append((f["path"], cp.corrected_records(f["rec"], f["prep"], Xe, be)))
-        _, _, c1, d1 = cb.gls_fit(s, final, y=y, X=A)
+        _, _, c1, d1 = checks.gls_fit(s, final, y=y, X=A)
         f["chi2"] = {"before": c0, "dof_before": d0, "after": c1, "dof_after": d1}
         chi2["before"] += c0
         chi2["dof_before"] += d0
@@ -181,15 +183,15 @@ def run_calibrate(paths: list[Path], model: dg.Model, out_dir: Path, *, task_pat
         u_uncomp = pc.summary_components_um(d, cp.feed_back(cal.params, findings, "factor")[0], P_mm)["u"].tolist()
     mpe_json = None
     if mpe:
-        mpe_json = {"fitted": cb.mpe_consistency(final, mpe["A_um"], mpe["B_mm"], mpe["K"], P_mm, L_max,
+        mpe_json = {"fitted": checks.mpe_consistency(final, mpe["A_um"], mpe["B_mm"], mpe["K"], P_mm, L_max,
                                                  cal if feedback == "none" or not changes else None, GRID_POINTS),
-                    "task": cb.mpe_consistency(model.params, mpe["A_um"], mpe["B_mm"], mpe["K"], P_mm, L_max,
+                    "task": checks.mpe_consistency(model.params, mpe["A_um"], mpe["B_mm"], mpe["K"], P_mm, L_max,
                                                None, GRID_POINTS)}
-    prof = [cb.profile(cal, n) for n in cal.free] if profiles else []
+    prof = [checks.profile(cal, n) for n in cal.free] if profiles else []
 
     resid = []
     for s in sets:
-        e, u, z = cb.standardized_residuals(s, cal.params)
+        e, u, z = checks.standardized_residuals(s, cal.params)
         resid.append({"file": s.name, "residual_um": e.tolist(), "u_um": u.tolist(), "z": z.tolist()})
 
     result = {"name": "calibration", "version": __version__, "simulation": task_label,

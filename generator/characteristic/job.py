@@ -34,17 +34,8 @@ from cmmwb.xlfuncs import pointcloud as pc
 
 from .. import __version__
 from ..errors import InputError, model_errors_named
-from ..taskfile import (
-    COMMON_TABLES,
-    check_keys,
-    number,
-    read_point_cloud,
-    string,
-    table,
-    task_kind_and_name,
-    text_list,
-    vector3,
-)
+from ..taskcloud import read_point_cloud
+from ..taskfile import COMMON_TABLES, check_keys, number, string, table, task_kind_and_name, text_list, vector3
 from ..taskkind import always_exact, no_type_a
 from ..workbook.book import BookAdditions
 

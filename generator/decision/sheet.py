@@ -18,7 +18,8 @@ from cmmwb.xlfuncs import dof
 from cmmwb.xlfuncs.errors import ModelError
 from cmmwb.xlfuncs.statement import decimals_for
 
-from ..workbook.book import FMT_MM, FMT_UM, HEADER_FONT, TITLE_FONT, Book, ChartSeries
+from ..workbook.book import Book, ChartSeries
+from ..workbook.styles import FMT_MM, FMT_UM, HEADER_FONT, TITLE_FONT
 from ..workbook.xlref import cell, col, quote_sheet
 from .decide import DecisionSpec, rows_of
 

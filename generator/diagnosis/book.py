@@ -27,7 +27,8 @@ from cmmwb.xlfuncs.locator import effects as fx
 from cmmwb.xlfuncs.locator.diagnose import Diagnosis, effect_estimates
 from cmmwb.xlfuncs.pointcloud import Parameters
 
-from ..workbook.book import FMT_SCI, FMT_UM, Book, ChartSeries, Formula
+from ..workbook.book import Book, ChartSeries, Formula
+from ..workbook.styles import FMT_SCI, FMT_UM
 from ..workbook.xlref import Block, cell
 from .gls import fill_after, gls_sheets
 from .records import display_unit, length_records, point_records

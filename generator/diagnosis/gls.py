@@ -14,7 +14,8 @@ import numpy as np
 from cmmwb.xlfuncs.locator import effects as fx
 from cmmwb.xlfuncs.locator.diagnose import Diagnosis
 
-from ..workbook.book import FMT_SCI, FMT_UM, Book
+from ..workbook.book import Book
+from ..workbook.styles import FMT_SCI, FMT_UM
 from ..workbook.xlref import Block, block, cell
 from .records import display_unit
 

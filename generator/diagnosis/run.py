@@ -27,7 +27,8 @@ from ..workbook.atomic import Staging
 # -- the model ----------------------------------------------------------------------------------
 
 def load_model(task: str | None, sigma_um: float | None, *, default_mpe1: bool = False) -> tuple[dg.Model, str]:
-    from ..taskfile import naming_lines, read_parameters, read_probes, read_toml
+    from ..taskcloud import read_parameters, read_probes
+    from ..taskfile import naming_lines, read_toml
 
     if task is not None and sigma_um is not None:
         raise InputError("give either --task or --sigma-um, not both")

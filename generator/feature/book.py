@@ -51,8 +51,9 @@ from openpyxl.styles import Alignment
 from .. import __version__
 from ..pointcloud.large_book import LIVE, write_xlwings_conf
 from ..pointcloud.vx_sheets import explain_inputs, write_inputs, write_point_cloud_model, write_points
-from ..workbook.book import FMT_SCI, Book, BookAdditions, Formula
+from ..workbook.book import Book, BookAdditions, Formula
 from ..workbook.cache import FEATURE_NOT_APPLICABLE
+from ..workbook.styles import FMT_SCI
 from ..workbook.xlref import Block, cell
 from .fit_sheets import feature_label, gn_step_block, write_fit, write_G, write_H, write_jacobian, write_local
 from .live_sheet import write_live

@@ -5,7 +5,8 @@ step), ``G_A_D`` (eq. (12)) and ``G_A_X`` (eq. (8)), as native formulas."""
 
 from __future__ import annotations
 
-from ..workbook.book import FMT_SCI, Book
+from ..workbook.book import Book
+from ..workbook.styles import FMT_SCI
 from ..workbook.xlref import Block, cell
 from .task import Task
 

@@ -17,7 +17,8 @@ from cmmwb.xlfuncs.distributed import get_backend
 
 from .. import __version__
 from ..errors import InputError, model_errors_named
-from ..taskfile import COMMON_TABLES, check_keys, number, read_point_cloud, string, table, task_kind_and_name, text_list
+from ..taskcloud import read_point_cloud
+from ..taskfile import COMMON_TABLES, check_keys, number, string, table, task_kind_and_name, text_list
 from ..taskkind import always_exact, no_type_a
 from ..workbook.book import Book, BookAdditions
 from ..workbook.xlref import Block, block, cell

@@ -36,7 +36,8 @@ from cmmwb.xlfuncs import pointcloud as pc
 
 from .. import __version__
 from ..errors import InputError
-from ..workbook.book import FMT_SCI, VALUE_FILL, Book, BookAdditions
+from ..workbook.book import Book, BookAdditions
+from ..workbook.styles import FMT_SCI, VALUE_FILL
 from ..workbook.xlref import Block, block, cell
 from .book import KIND, RESULT_COLUMNS, budget_chart, extra_inputs, results_rows, write_mpe
 from .vx_sheets import NATIVE_MAX_POINTS, explain_inputs, write_inputs, write_points

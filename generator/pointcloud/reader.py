@@ -12,7 +12,7 @@ import re
 from typing import Any
 
 from ..errors import InputError
-from ..taskfile import PARAMETER_KEYS, PROBE_OVERRIDES
+from ..taskcloud import PARAMETER_KEYS, PROBE_OVERRIDES
 from ..workbook.readback import CSV_HEADER, MAX_TABLE_ROWS, POINT_HEADER, Cells, ReadTask, Section
 
 

@@ -18,7 +18,8 @@ from dataclasses import dataclass
 
 from cmmwb.xlfuncs.pointcloud import FACTORS, Parameters, PointCloud
 
-from ..workbook.book import FMT_COORD, Book
+from ..workbook.book import Book
+from ..workbook.styles import FMT_COORD
 from ..workbook.xlref import Block, cell
 
 # Workbook limit for native V_X formulas: 3m x 3m array formulas per factor.  Measured:

@@ -8,6 +8,7 @@ import pytest
 
 from cmmwb.xlfuncs import calibrate as cb
 from cmmwb.xlfuncs import pointcloud as pc
+from cmmwb.xlfuncs import reml
 from cmmwb.xlfuncs.locator import diagnose as dg
 from cmmwb.xlfuncs.locator import simulate as sm
 from cmmwb.xlfuncs.locator.model import length_covariance
@@ -21,30 +22,30 @@ def prepared(layout, probes, planted=None, seed=1, **kw):
 
 
 def values(p):
-    return {n: float(getattr(p, n)) for n in cb.NAMES}
+    return {n: float(getattr(p, n)) for n in reml.NAMES}
 
 
 @pytest.mark.parametrize("layout,probes,kw", [("iso10360", THREE, {"repeats": 1}),
                                                ("spheres", PAIR, {}),
                                                ("ballplate", PAIR, {"grid": 3})])
 def test_the_closed_form_gradient_is_the_derivative_of_the_reml_likelihood(layout, probes, kw):
-    s = cb.record_set(prepared(layout, probes, **kw))
+    s = reml.record_set(prepared(layout, probes, **kw))
     v = values(MPE1)
-    free = list(cb.NAMES)
-    t = cb.reml_terms([s], v, free)
+    free = list(reml.NAMES)
+    t = reml.reml_terms([s], v, free)
     h = 1e-5
     for k, name in enumerate(free):
         up, dn = dict(v), dict(v)
         up[name] *= math.exp(h)
         dn[name] *= math.exp(-h)
-        fd = (cb.reml_terms([s], up, [], fisher=False).loglik - cb.reml_terms([s], dn, [], fisher=False).loglik) / (2 * h)
+        fd = (reml.reml_terms([s], up, [], fisher=False).loglik - reml.reml_terms([s], dn, [], fisher=False).loglik) / (2 * h)
         assert abs(t.grad[k] - fd) <= 1e-5 * max(1.0, abs(fd)), (name, t.grad[k], fd)
 
 
 def test_the_kernel_derivative_of_length_records_is_d_dlog_lambda():
     prep = prepared("iso10360", THREE, repeats=1)
     I, J = prep.ends
-    cloud = cb.DenseRecordCovariance(prep).cloud
+    cloud = reml.DenseRecordCovariance(prep).cloud
     d = length_covariance(cloud, MPE1, I, J, components=True, d_log_lambda=True)
     h = 1e-6
     for f, lam in (("ET", "lambda_ET_mm"), ("ER", "lambda_ER_mm"), ("P", "lambda_P")):
@@ -60,7 +61,7 @@ def test_the_kernel_derivative_of_point_records_is_d_dlog_lambda():
     from dataclasses import replace
 
     prep = prepared("spheres", PAIR)
-    cloud = cb.DenseRecordCovariance(prep).cloud
+    cloud = reml.DenseRecordCovariance(prep).cloud
     d = pc.V_X_components(cloud, MPE1, d_log_lambda=True)
     h = 1e-6
     for f, lam in (("ET", "lambda_ET_mm"), ("ER", "lambda_ER_mm"), ("P", "lambda_P")):
@@ -72,12 +73,12 @@ def test_the_kernel_derivative_of_point_records_is_d_dlog_lambda():
 
 def test_the_record_covariance_is_the_one_diagnose_uses():
     for prep in (prepared("iso10360", THREE, repeats=1), prepared("ballplate", PAIR, grid=3)):
-        C, _ = cb.record_covariance(prep).evaluate(values(MPE1), [])
+        C, _ = reml.record_covariance(prep).evaluate(values(MPE1), [])
         assert np.max(np.abs(C - prep.C)) <= 1e-12 * np.max(np.abs(prep.C))
 
 
 def test_sigma_ER_with_one_probe_offset_is_reported_not_identifiable():
-    s = cb.record_set(prepared("iso10360", ONE))
+    s = reml.record_set(prepared("iso10360", ONE))
     cal = cb.calibrate([s], MPE1)
     e = cal.estimates["sigma_ER_urad"]
     assert e.status == "not identifiable" and "one probe offset" in e.reason
@@ -88,7 +89,7 @@ def test_sigma_ER_with_one_probe_offset_is_reported_not_identifiable():
 
 
 def test_with_several_probe_offsets_on_a_ball_plate_PQ_and_ET_are_estimated():
-    s = cb.record_set(prepared("ballplate", PAIR, passes=4, seed=3))
+    s = reml.record_set(prepared("ballplate", PAIR, passes=4, seed=3))
     cal = cb.calibrate([s], MPE1)
     for name in ("sigma_R_um", "sigma_PQ_um", "sigma_ET_um"):
         assert cal.estimates[name].status == "estimated", (name, cal.estimates[name].reason)
@@ -107,7 +108,7 @@ def test_the_demo_data_reproduce_the_simulations_hyper_parameters_within_u(plant
     prep = dg.prepare(rec, dg.Model(MPE1, DEMO_PROBES, True), False)
     diag = dg.diagnose_prepared(prep)
     assert diag.chosen
-    s = cb.RecordSet("demo", prep, diag.X_sel, [str(lb) for lb in diag.sel_labels], cb.record_covariance(prep))
+    s = reml.RecordSet("demo", prep, diag.X_sel, [str(lb) for lb in diag.sel_labels], reml.record_covariance(prep))
     cal = cb.calibrate([s], MPE1)
     assert cal.free
     for name in cal.free:
@@ -121,7 +122,7 @@ def test_a_length_scale_beyond_the_travel_is_reported_as_such():
     far = replace(MPE1, lambda_ET_mm=5000.0)
     rec = sm.simulate(sm.layout("ballplate", PAIR), far, {}, seed=2)
     prep = dg.prepare(rec, dg.Model(far, PAIR, True), False)
-    cal = cb.calibrate([cb.record_set(prep)], far)
+    cal = cb.calibrate([reml.record_set(prep)], far)
     for name in ("sigma_ET_um", "lambda_ET_mm"):
         e = cal.estimates[name]
         assert e.status == "not identifiable" and "beyond the travel" in e.reason, (name, e.reason)

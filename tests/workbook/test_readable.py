@@ -21,8 +21,9 @@ from cmmwb.generator.feature import va_sheets
 from cmmwb.generator.feature.task import FIT_CURRENT, FIT_STALE
 from cmmwb.generator.taskfile import key_line
 from cmmwb.generator.workbook import plots
-from cmmwb.generator.workbook.book import CM_PER_CHAR, FMT_SCI
+from cmmwb.generator.workbook.pagesetup import CM_PER_CHAR
 from cmmwb.generator.workbook.recalc import recalculate, results_rows
+from cmmwb.generator.workbook.styles import FMT_SCI
 
 from tests.helpers import EXAMPLES
 

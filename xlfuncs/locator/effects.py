@@ -79,6 +79,11 @@ same families; ``tests/diagnosis/test_diagnose_effect_formulas.py`` recomputes e
 compares them with these cell by cell.  A new effect of an existing family is one entry in
 EFFECTS (plus, where it needs something, its check in :func:`_needs`); a new family adds one
 entry to FAMILIES and one to FORMULAS.
+
+Over 600 lines but one job, kept whole on purpose (issue 27): it is this one table of effects and
+their sensitivity columns (one pair of short functions per family, the period scan of
+``periodic_a``); split, the table and its columns would sit in two places and a new effect would
+again touch several modules.
 """
 
 from __future__ import annotations
