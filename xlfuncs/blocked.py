@@ -459,8 +459,60 @@ def _record_rows(item, shared):
     return out
 
 
+#: few unique points (every record set the locator and the calibration treat densely): the
+#: kernels of the unique points are formed once (three m x m arrays of at most this many bytes)
+#: and gathered for the records' four end-point combinations; beyond it, row blocks
+POINT_KERNEL_BYTES = 1 << 29
+
+
+def _gathered_records(cloud, params, pa, I, J, na, dll) -> dict[str, np.ndarray]:
+    """The factors R, PQ, ET, ER, P of :func:`record_covariance` from the unique points' kernels
+    (formed once, memory O(n^2 + m^2)): the same sums as :func:`_record_rows`, each end-point
+    combination gathered from the m x m kernel instead of evaluated again."""
+    U, N, P, kp = cloud.ram_mm, cloud.N, cloud.offsets_mm, cloud.probe_index
+    NN = na @ na.T
+    out: dict[str, np.ndarray] = {}
+
+    def four(kern, WI=None, WJ=None) -> np.ndarray:
+        """sum_{s,t} sign_s sign_t kern(s, t)[a, b] (W_s[a] . W_t[b]) over the ends s of record
+        a and t of record b (W None: 1)."""
+        total = np.zeros((len(I), len(I)))
+        for s, ss, Ws in ((I, -1.0, WI), (J, 1.0, WJ)):
+            for t, st, Wt in ((I, -1.0, WI), (J, 1.0, WJ)):
+                term = kern(s, t)
+                if Ws is not None:
+                    term = term * (Ws @ Wt.T)
+                total += ss * st * term
+        return total
+
+    def gather(K: np.ndarray):
+        return lambda s, t: K[np.ix_(s, t)]
+
+    # R (eq. 8): one probing, one repeatability draw
+    out["R"] = params.sigma_R_um**2 * four(lambda s, t: (s[:, None] == t[None, :]).astype(float)) * NN
+    # PQ (eq. 9)
+    sPQ = pa["sigma_PQ_um"]
+    out["PQ"] = four(lambda a, b: (kp[a][:, None] == kp[b][None, :]) * np.outer(sPQ[a], sPQ[b])) * NN
+    D2 = sq_dists(U, U) if params.sigma_ET_um > 0 or params.sigma_ER_urad > 0 else None
+    # ET (eq. 21): independent axes
+    out["ET"] = (params.sigma_ET_um**2 * four(gather(gauss_kernel(D2, params.lambda_ET_mm**2, dll))) * NN
+                 if params.sigma_ET_um > 0 else np.zeros_like(NN))
+    # ER (eq. 25): w = G_k^T n = n x p (eq. 24)
+    out["ER"] = ((params.sigma_ER_urad * MILLI) ** 2
+                 * four(gather(gauss_kernel(D2, params.lambda_ER_mm**2, dll)), np.cross(na, P[I]), np.cross(na, P[J]))
+                 if params.sigma_ER_urad > 0 else np.zeros_like(NN))
+    # P (eqs. 26-27): o = n_a . n_point, same probe only
+    s0, sp, lam = pa["sigma_P0_um"], pa["sigma_P_um"], pa["lambda_P"]
+    same = kp[:, None] == kp[None, :]
+    spp = np.outer(sp, sp)
+    kern = np.where(spp > 0, gauss_kernel(sq_dists(N, N), np.outer(lam, lam), dll), 0.0)
+    KP = same * ((0.0 if dll else np.outer(s0, s0)) + spp * kern)
+    out["P"] = four(gather(KP), np.einsum("ij,ij->i", na, N[I])[:, None], np.einsum("ij,ij->i", na, N[J])[:, None])
+    return out
+
+
 def record_covariance(cloud: pc.PointCloud, params: pc.Parameters, I, J, *, components: bool = False,
-                      d_log_lambda: bool = False, block: int = BLOCK_ENTRIES // 16, backend=None,
+                      d_log_lambda: bool = False, block: int | None = None, backend=None,
                       progress=None):
     """Covariance (µm²) of the lengths d_a = ||x_J[a] - x_I[a]||: C = G V_X G^T with
     g_a = -n_a at point I[a] and +n_a at J[a] (eq. 29), per factor if ``components``.
@@ -470,7 +522,10 @@ def record_covariance(cloud: pc.PointCloud, params: pc.Parameters, I, J, *, comp
     is a point kernel times a direction term, so every entry is built from the kernel at the
     records' four end-point combinations (w = n_a for R, PQ, ET; n_a x p for ER, eq. 24;
     n_a . n_point for P, eq. 26; S is rank 7, eq. 11), in row blocks of records: no m x m kernel
-    of the unique points is formed, memory O(n^2) for n records, whatever m.
+    of the unique points is formed, memory O(n^2) for n records, whatever m.  Without ``block``
+    and ``backend``, and when the unique points' kernels take at most ``POINT_KERNEL_BYTES``, they
+    are formed once and gathered (:func:`_gathered_records`, the same sums, about twice as fast
+    for the few hundred records of a calibration's likelihood, which evaluates this many times).
 
     ``d_log_lambda`` (with ``components``): the GP factors ET, ER and P with every kernel
     exp(-D^2/lambda^2) replaced by its derivative in log lambda (:func:`xlfuncs.model.gauss_kernel`),
@@ -491,15 +546,19 @@ def record_covariance(cloud: pc.PointCloud, params: pc.Parameters, I, J, *, comp
         raise ModelError(f"record {a + 1}: both ends at the same place, the direction n of "
                          "Forbes 2025 eq. (29) is undefined")
     na = d / dn[:, None]
-    rows = max(1, block // max(n, 1))
-    items = [(a0, min(a0 + rows, n)) for a0 in range(0, n, rows)]
-    shared = {"cloud": cloud, "params": params, "pa": pc.probe_arrays(cloud, params),
-              "I": I, "J": J, "na": na, "d_log_lambda": d_log_lambda}
-    out = {f: np.empty((n, n)) for f in FACTORS}
-    for (a0, a1), part in zip(items, run_blocks(_record_rows, items, shared, backend, progress,
-                                          [a1 - a0 for a0, a1 in items])):
-        for f in ("R", "PQ", "ET", "ER", "P"):
-            out[f][a0:a1] = part[f]
+    pa = pc.probe_arrays(cloud, params)
+    if backend is None and block is None and 3 * 8 * cloud.m**2 <= POINT_KERNEL_BYTES:
+        out = _gathered_records(cloud, params, pa, I, J, na, d_log_lambda)
+    else:       # row blocks (those of a given ``block`` size or ``backend``: the same on any backend)
+        rows = max(1, (block or BLOCK_ENTRIES // 16) // max(n, 1))
+        items = [(a0, min(a0 + rows, n)) for a0 in range(0, n, rows)]
+        shared = {"cloud": cloud, "params": params, "pa": pa,
+                  "I": I, "J": J, "na": na, "d_log_lambda": d_log_lambda}
+        out = {f: np.empty((n, n)) for f in FACTORS}
+        for (a0, a1), part in zip(items, run_blocks(_record_rows, items, shared, backend, progress,
+                                              [a1 - a0 for a0, a1 in items])):
+            for f in ("R", "PQ", "ET", "ER", "P"):
+                out[f][a0:a1] = part[f]
     # S: rank 7 at the ram positions (eq. 11)
     g7 = scale_rows(na, cloud.ram_mm[J] - cloud.ram_mm[I])
     out["S"] = (g7 * pc.V_S_diag_um_per_mm2(params)) @ g7.T
