@@ -2,28 +2,17 @@
 naming the file and where, nothing written)."""
 
 import json
-import os
-import subprocess
-import sys
+
+from cmmwb.xlfuncs.model import MPE1
+
+from tests.helpers import run_cmmwb
+from tests.helpers.tasks import parameters_toml
 
 TASK = """[task]
 kind = "pointcloud"
 name = "cmm"
 
-[parameters]
-sigma_R_um = 0.20
-sigma_S_ppm = 0.7
-sigma_Sa_ppm = 0.7
-sigma_Q_ppm = 0.7
-sigma_PQ_um = 0.20
-sigma_ET_um = 0.2
-lambda_ET_mm = 200
-sigma_ER_urad = 4.0
-lambda_ER_mm = 400
-sigma_P0_um = 0.10
-sigma_P_um = 0.10
-lambda_P = 0.5
-
+""" + parameters_toml(MPE1) + """
 [[probes]]
 id = "P1"
 offset_mm = [0.0, 20.0, -30.0]
@@ -35,8 +24,7 @@ offset_mm = [0.0, -20.0, -30.0]
 
 
 def run(*args, cwd):
-    return subprocess.run([sys.executable, "-m", "cmmwb.generator", *args], capture_output=True, text=True, cwd=cwd,
-                          env={**os.environ, "OPENBLAS_NUM_THREADS": "1"})
+    return run_cmmwb(*args, cwd=cwd, env={"OPENBLAS_NUM_THREADS": "1"})
 
 
 def test_a_ball_plate_with_two_probes_gives_estimates_and_says_what_it_cannot(tmp_path):

@@ -5,27 +5,16 @@ import json
 import pytest
 
 from cmmwb.generator.diagnosis.run import demo
+from cmmwb.xlfuncs.model import MPE1
 
 from tests.helpers import run_cmmwb as run
+from tests.helpers.tasks import parameters_toml
 
 TASK = """[task]
 kind = "pointcloud"
 name = "cmm"
 
-[parameters]
-sigma_R_um = 0.20
-sigma_S_ppm = 0.7
-sigma_Sa_ppm = 0.7
-sigma_Q_ppm = 0.7
-sigma_PQ_um = 0.20
-sigma_ET_um = 0.2
-lambda_ET_mm = 200
-sigma_ER_urad = 4.0
-lambda_ER_mm = 400
-sigma_P0_um = 0.10
-sigma_P_um = 0.10
-lambda_P = 0.5
-
+""" + parameters_toml(MPE1) + """
 [[probes]]
 id = "P1"
 offset_mm = [0.0, 0.0, -50.0]

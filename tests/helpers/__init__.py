@@ -15,6 +15,7 @@ and the printed-precision check.  Themed helpers live beside this module:
 from __future__ import annotations
 
 import math
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -58,6 +59,8 @@ def max_rel_diff(a, b) -> float:
     return float(np.max(np.abs(a - b) / np.maximum(np.abs(b), 1e-300)))
 
 
-def run_cmmwb(*args, cwd=None) -> subprocess.CompletedProcess:
-    """``python -m generator ARGS`` in a fresh process (the command line as a user runs it)."""
-    return subprocess.run([sys.executable, "-m", "cmmwb.generator", *args], capture_output=True, text=True, cwd=cwd)
+def run_cmmwb(*args, cwd=None, env=None) -> subprocess.CompletedProcess:
+    """``python -m generator ARGS`` in a fresh process (the command line as a user runs it);
+    ``env``: variables added to this process's environment."""
+    return subprocess.run([sys.executable, "-m", "cmmwb.generator", *args], capture_output=True, text=True, cwd=cwd,
+                          env=None if env is None else {**os.environ, **env})

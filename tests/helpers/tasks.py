@@ -17,6 +17,12 @@ ALL_FACTORS = dict(sigma_R_um=0.2, sigma_S_ppm=0.7, sigma_Sa_ppm=0.8, sigma_Q_pp
                    sigma_P0_um=0.1, sigma_P_um=0.15, lambda_P=0.5)
 
 
+def parameters_toml(params) -> str:
+    """The ``[parameters]`` table of a task file holding ``params`` (a core ``Parameters``, e.g.
+    Forbes 2025 Table 3 MPE1 from ``cmmwb.xlfuncs.model``), so that tests do not type it out."""
+    return "[parameters]\n" + "".join(f"{k} = {getattr(params, k)!r}\n" for k in params.__dataclass_fields__)
+
+
 def write_random_task(folder: Path, seed: int, m: int = 8, probes: int = 2, name: str | None = None,
                       labels: list[str] | None = None, mpe: bool = True) -> Path:
     rng = np.random.default_rng(seed)
