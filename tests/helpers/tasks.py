@@ -133,25 +133,7 @@ weights = {{ B3 = 0.5, B7 = 0 }}
 
 [points]
 file = "{name}.csv"
-
-[parameters]
-sigma_R_um = 0.3
-sigma_S_ppm = 1.0
-sigma_Sa_ppm = 0.8
-sigma_Q_ppm = 0.9
-sigma_PQ_um = 0.25
-sigma_ET_um = 0.3
-lambda_ET_mm = 150
-sigma_ER_urad = 5.0
-lambda_ER_mm = 300
-sigma_P0_um = 0.1
-sigma_P_um = 0.15
-lambda_P = 0.6
-
-[[probes]]
-id = "P1"
-offset_mm = [0.0, 0.0, -50.0]
-
+{FULL_MODEL}
 [[probes]]
 id = "P2"
 offset_mm = [30.0, 10.0, -40.0]
