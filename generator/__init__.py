@@ -9,13 +9,7 @@ module ``cmmwb.generator.x`` (``xlfuncs/checkout.py``), never a second copy.
 __version__ = "0.1.0"
 
 if __name__ == "generator":     # a checkout's folder, imported by its own name
-    try:
-        from cmmwb.xlfuncs.checkout import alias
-    except ModuleNotFoundError as e:    # no cmmwb in this Python: the checkout is not installed
-        if e.name != "cmmwb":
-            raise
-        raise ModuleNotFoundError(f"{__name__} is installed as cmmwb.{__name__}, and cmmwb is not installed in "
-                                  "this Python: run `python -m pip install -e .` in the checkout",
-                                  name=e.name) from None
+    import importlib
 
-    alias(__name__)
+    # the shim is the sibling xlfuncs/'s (its __init__.py runs first, then checkout.alias), not typed here again
+    importlib.import_module("xlfuncs.checkout").alias(__name__)

@@ -13,14 +13,8 @@ its folder name from a checkout, ``xlfuncs.x`` is made the very module ``cmmwb.x
 (``checkout.py``).
 """
 
-if __name__ == "xlfuncs":       # a checkout's folder, imported by its own name
-    try:
-        from cmmwb.xlfuncs.checkout import alias
-    except ModuleNotFoundError as e:    # no cmmwb in this Python: the checkout is not installed
-        if e.name != "cmmwb":
-            raise
-        raise ModuleNotFoundError(f"{__name__} is installed as cmmwb.{__name__}, and cmmwb is not installed in "
-                                  "this Python: run `python -m pip install -e .` in the checkout",
-                                  name=e.name) from None
+if __name__ == "xlfuncs":       # a checkout's folder, imported by its own name (also by generator/__init__.py)
+    # the checkout's own file, standard library only: without cmmwb installed, its message says to install it
+    from .checkout import alias
 
     alias(__name__)

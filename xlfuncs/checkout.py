@@ -9,8 +9,15 @@ the core as ``cmmwb.xlfuncs``, and the job modules are imported as ``cmmwb.gener
 this shim the same file would run twice, as ``generator.x`` and as ``cmmwb.generator.x``, with two
 ``InputError`` classes and two copies of every module-level state.  :func:`alias` makes
 ``generator`` and every ``generator.x`` the very module object ``cmmwb.generator[.x]`` (and the
-same for ``xlfuncs``); ``generator/__init__.py`` and ``xlfuncs/__init__.py`` call it when they are
-imported by their own names.  Installed packages never run it.  Standard library only.
+same for ``xlfuncs``).  Installed packages never run it.  Standard library only.
+
+The shim's one home is here.  ``xlfuncs/__init__.py``, imported as ``xlfuncs``, takes
+:func:`alias` from this file relatively (``from .checkout import alias``: the checkout's own
+file, so that a Python without cmmwb installed gets the message to install it rather than
+"No module named 'cmmwb'"), and ``generator/__init__.py``, imported as ``generator``, imports its
+sibling ``xlfuncs.checkout`` (which runs the former first) and calls the same function.  The copy
+of this file loaded as ``xlfuncs.checkout`` before the alias existed is dropped from
+``sys.modules`` by :func:`alias`, so that ``xlfuncs.checkout`` too is ``cmmwb.xlfuncs.checkout``.
 """
 
 from __future__ import annotations
@@ -46,7 +53,7 @@ class _AliasLoader(importlib.abc.Loader):
 
 class _AliasFinder(importlib.abc.MetaPathFinder):
     def __init__(self, short: str):
-        self.short = short
+        self.short = short      # compared by value: each copy of this file has its own class
 
     def find_spec(self, fullname, path=None, target=None):
         if not fullname.startswith(self.short + "."):
@@ -66,9 +73,12 @@ def alias(short: str) -> None:
     except ModuleNotFoundError as e:
         if e.name not in ("cmmwb", "cmmwb." + short):
             raise
-        raise ModuleNotFoundError(f"{short} is installed as cmmwb.{short}, and cmmwb is not installed in "
-                                  f"this Python: run `python -m pip install -e .` in the checkout",
-                                  name=e.name) from None
-    if not any(isinstance(f, _AliasFinder) and f.short == short for f in sys.meta_path):
+        raise ModuleNotFoundError("this checkout's generator/ and xlfuncs/ are installed as cmmwb.generator and "
+                                  "cmmwb.xlfuncs, and cmmwb is not installed in this Python: run "
+                                  "`python -m pip install -e .` in the checkout", name=e.name) from None
+    if not any(type(f).__name__ == "_AliasFinder" and f.short == short for f in sys.meta_path):
         sys.meta_path.insert(0, _AliasFinder(short))
     sys.modules[short] = real
+    for name in [n for n in sys.modules if n.startswith(short + ".")]:
+        if not getattr(sys.modules[name], "__name__", "").startswith("cmmwb."):    # loaded before the alias
+            del sys.modules[name]

@@ -115,6 +115,33 @@ def test_python_dash_m_generator_in_a_checkout_runs_each_module_once():
     assert r.returncode == 0, r.stderr
 
 
+def test_the_shim_itself_is_one_module_in_a_checkout():
+    """xlfuncs/__init__.py takes the shim from its own folder (``xlfuncs.checkout`` loaded before the
+    alias): that early copy is dropped, and the later ``xlfuncs.checkout`` is the installed module."""
+    code = ("import generator, xlfuncs.checkout, cmmwb.xlfuncs.checkout, sys\n"
+            "assert xlfuncs.checkout is cmmwb.xlfuncs.checkout\n"
+            "copies = [n for n, m in sys.modules.items() if n.split('.')[0] in ('generator', 'xlfuncs')\n"
+            "          and not m.__name__.startswith('cmmwb.')]\n"
+            "assert copies == [], copies\n"
+            "assert sorted(f.short for f in sys.meta_path if type(f).__name__ == '_AliasFinder') == "
+            "['generator', 'xlfuncs']\n")
+    r = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+
+
+def test_python_dash_m_generator_in_a_checkout_without_cmmwb_says_to_install_it():
+    """``-S``: no site-packages, so neither cmmwb nor its dependencies; the shim (standard library
+    only, xlfuncs/checkout.py) still runs and names the command that installs the checkout."""
+    for module in ("generator", "xlfuncs.udf"):
+        r = subprocess.run([sys.executable, "-S", "-m", module, "--help"], cwd=ROOT, capture_output=True,
+                           text=True, timeout=120)
+        assert r.returncode == 1
+        last = r.stderr.strip().splitlines()[-1]
+        assert last.startswith("ModuleNotFoundError: this checkout's generator/ and xlfuncs/ are installed as "
+                               "cmmwb.generator and cmmwb.xlfuncs, and cmmwb is not installed"), r.stderr
+        assert "`python -m pip install -e .`" in last
+
+
 def _absolute_imports_of_bare_top_level(path: Path) -> list[str]:
     tree = ast.parse(path.read_text(encoding="utf-8"), str(path))
     out = []
