@@ -95,6 +95,8 @@ def bench_workbooks(sizes: list[int], engines: list[str]) -> None:
     from cmmwb.generator.cli import build_task
     from cmmwb.generator.workbook.recalc import recalculate
 
+    from tests.helpers.tasks import parameters_toml
+
     for m in sizes:
         n_z = 4
         n_theta = max(3, math.ceil(m / n_z))
@@ -113,20 +115,7 @@ arc_deg = 360.0
 half_height_mm = 20.0
 n_theta = {n_theta}
 n_z = {n_z}
-[parameters]
-sigma_R_um = 0.2
-sigma_S_ppm = 0.7
-sigma_Sa_ppm = 0.7
-sigma_Q_ppm = 0.7
-sigma_PQ_um = 0.2
-sigma_ET_um = 0.2
-lambda_ET_mm = 200
-sigma_ER_urad = 4.0
-lambda_ER_mm = 400
-sigma_P0_um = 0.1
-sigma_P_um = 0.1
-lambda_P = 0.5
-[[probes]]
+{parameters_toml(PARAMS)}[[probes]]
 id = "P1"
 offset_mm = [0.0, 0.0, -50.0]
 ''')

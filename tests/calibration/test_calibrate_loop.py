@@ -12,8 +12,10 @@ from cmmwb.generator.workbook.recalc import results_rows
 from cmmwb.xlfuncs import pointcloud as pc
 from cmmwb.xlfuncs.locator import simulate as sm
 from cmmwb.xlfuncs.locator.recordings import write_recordings
+from cmmwb.xlfuncs.model import MPE1
 
 from tests.helpers import ENGINES, close, recalc
+from tests.helpers.tasks import parameters_toml
 
 TASK = """[task]
 kind = "pointcloud"
@@ -26,20 +28,7 @@ B_mm = 333
 K = 2
 L_max_mm = 1000
 
-[parameters]
-sigma_R_um = 0.2
-sigma_S_ppm = 0.7
-sigma_Sa_ppm = 0.7
-sigma_Q_ppm = 0.7
-sigma_PQ_um = 0.2
-sigma_ET_um = 0.2
-lambda_ET_mm = 200
-sigma_ER_urad = 4.0
-lambda_ER_mm = 400
-sigma_P0_um = 0.1
-sigma_P_um = 0.1
-lambda_P = 0.5
-
+""" + parameters_toml(MPE1) + """
 [[probes]]
 id = "P1"
 offset_mm = [0.0, 0.0, -50.0]

@@ -8,7 +8,9 @@ blocks and pair blocks, distances (eq. 29), V_A (exact, and low rank within its 
 the structured operators of the locator (C v against the dense C v, within eps_C), the Monte
 Carlo sampler (its covariance, and a sample covariance within its statistical tolerance), the
 simulator's draws (sample covariance) and the locator's length-record covariance.  The last
-tests read the source and fail on a second definition of the model's pieces.
+tests read the source and fail on a second definition of the model's pieces, or on Table 3's
+MPE1/MPE2 typed again in Python or as a TOML ``[parameters]`` table (planted retypings show that
+the search finds them).
 """
 
 from __future__ import annotations
@@ -239,8 +241,9 @@ def test_the_simulator_draws_the_model():
 #   * the six factor covariances: ``def factor_block``/``factor_diagonal``, the 3m x 3m expansion
 #     of a kernel (``kron(`` with a kernel, ``rho``, ``kern`` or ``exp``) or the interleaved
 #     normal products ``"ia,jb->iajb"`` of the probing factor;
-#   * Table 3's MPE1 typed out again: ``sigma_Sa_ppm=0.7, sigma_Q_ppm=0.7, sigma_PQ_um=0.2(0),``
-#     followed by ``sigma_ET_um=0.2, lambda_ET_mm=200`` (also in tests/, bench/, generator/examples/).
+#   * Table 3's MPE1 typed out again as ``Parameters(...)`` keywords: ``sigma_Sa_ppm=0.7,
+#     sigma_Q_ppm=0.7, sigma_PQ_um=0.2(0),`` followed by ``sigma_ET_um=0.2, lambda_ET_mm=200`` (also in
+#     tests/ and bench/); the tests of Table 3 typed as text (TOML, keywords, dict) follow below.
 
 PATTERNS = {
     "squared distance": re.compile(r"^\s*def \w*(sq_?dist)\w*\(", re.M),
@@ -274,3 +277,131 @@ def test_table3_is_not_typed_out_again():
     found = [rel for rel, text in sources("xlfuncs", "tests", "bench", "generator")
              if TABLE3_TYPED.search(text) and rel != "tests/core/test_model_paths.py"]
     assert found == []
+
+
+# ---- Table 3 typed as text -------------------------------------------------------------------
+#
+# A run of parameter assignments (Table 3's names, ``key = value`` lines of TOML, ``key=value``
+# keywords or ``"key": value`` dict items, separated only by commas, blanks, line ends and
+# comments) is a retyping of MPE1 or MPE2 when it gives at least six of the twelve values and at
+# most one of them differs from the scenario's (``dataclasses.replace(MPE1, ...)`` says the
+# same). Sets made up for a test (tests.helpers.tasks.ALL_FACTORS, PARAMS above: about six values
+# of twelve differ) are not retypings.
+
+TABLE3_KEYS = tuple(MPE1.__dataclass_fields__)
+ASSIGNMENT = re.compile(r"""(^[ \t]*)?["']?\b(%s)["']?[ \t]*[=:][ \t]*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)"""
+                        % "|".join(TABLE3_KEYS), re.M)
+#: where Table 3 may be typed as TOML lines (test_table3_is_not_typed_out_as_text_again says why)
+TOML_TABLE3_ALLOWED = ("generator/examples/*.toml", "generator/pointcloud/job.py", "generator/feature/job.py")
+
+
+def table3_runs(text: str) -> list[tuple[dict, bool]]:
+    """Every run of parameter assignments in ``text``: ({name: value}, typed as TOML lines)."""
+    runs, run, toml, end = [], {}, True, None
+    for m in ASSIGNMENT.finditer(text):
+        if end is not None and re.sub(r"#[^\n]*", "", text[end:m.start()]).strip(" \t\r\n,") != "":
+            runs.append((run, toml))
+            run, toml = {}, True
+        run[m.group(2)] = float(m.group(3))
+        line_end = re.match(r"[ \t]*(#|\r?\n|$)", text[m.end():])     # no comma, no bracket after it
+        toml = toml and m.group(1) is not None and ":" not in m.group(0) and line_end is not None
+        end = m.end()
+    return runs + [(run, toml)]
+
+
+def table3_retypings(text: str) -> list[tuple[str, bool]]:
+    """(scenario, typed as TOML lines) of every run of ``text`` that retypes MPE1 or MPE2."""
+    return [(name, toml) for run, toml in table3_runs(text) for name, sc in TABLE3.items()
+            if len(run) >= 6 and sum(v != getattr(sc.params, k) for k, v in run.items()) <= 1]
+
+
+def text_sources():
+    """The Python sources of sources() and every .toml file of tests/, bench/ and generator/."""
+    yield from sources("xlfuncs", "tests", "bench", "generator")
+    for top in ("tests", "bench", "generator"):
+        for p in sorted((ROOT / top).rglob("*.toml")):
+            yield p.relative_to(ROOT).as_posix(), p.read_text(encoding="utf-8")
+
+
+def test_table3_is_not_typed_out_as_text_again():
+    """The MPE1/MPE2 parameters of a task file written by a test or a benchmark come from
+    ``tests.helpers.tasks.parameters_toml(MPE1)`` (or ``cmmwb.xlfuncs.model.TABLE3``), not typed.
+
+    Searched: every .py file of xlfuncs/, generator/, tests/, bench/ and every .toml file of
+    tests/, bench/, generator/.  Allowed (TOML_TABLE3_ALLOWED), as ``key = value`` lines only:
+
+    * ``generator/examples/*.toml``: the worked examples of the papers that users open, read and
+      copy; they are package data (a task file cannot import MPE1) and must read as Table 3 on
+      their own;
+    * ``generator/pointcloud/job.py`` and ``generator/feature/job.py``: the commented task files
+      ``cmmwb new pointcloud|feature`` writes, each key with a comment for the user (the templates
+      of workbook_templates/ are built from them and stay as they are).
+
+    The next test checks that these copies still give Table 3's twelve values exactly.  A Python
+    ``Parameters(...)`` or dict retyping is caught in every file, these included; this file is
+    left out for its planted examples."""
+    found = [(rel, name) for rel, text in text_sources() if rel != "tests/core/test_model_paths.py"
+             for name, toml in table3_retypings(text)
+             if not (toml and any(Path(rel).match(pat) for pat in TOML_TABLE3_ALLOWED))]
+    assert found == []
+
+
+def test_the_allowed_toml_copies_of_table3_are_found_and_equal_to_it():
+    """The exception is used (each pattern matches files that carry Table 3), and every copy gives
+    all twelve values of its column exactly, so that a user copying one copies Table 3."""
+    for pat in TOML_TABLE3_ALLOWED:
+        copies = [(p.name, run) for p in sorted(ROOT.glob(pat)) for run, _toml in table3_runs(p.read_text("utf-8"))
+                  if table3_retypings("\n".join(f"{k} = {v}" for k, v in run.items()))]
+        assert copies, pat
+        for name, run in copies:
+            assert any(run == {k: getattr(sc.params, k) for k in TABLE3_KEYS} for sc in TABLE3.values()), (name, run)
+
+
+PLANTED_TOML = """[task]
+kind = "pointcloud"
+
+[parameters]
+sigma_R_um = 0.60        # a comment does not break the run
+sigma_S_ppm = 2.1
+sigma_Sa_ppm = 2.1
+sigma_Q_ppm = 2.1
+sigma_PQ_um = 0.6
+sigma_ET_um = 0.6
+lambda_ET_mm = 100
+sigma_ER_urad = 12
+lambda_ER_mm = 200
+sigma_P0_um = 0.3
+sigma_P_um = 0.3
+lambda_P = 0.5
+
+[[probes]]
+id = "P1"
+"""
+
+
+def test_a_planted_toml_retyping_of_mpe2_is_found():
+    assert table3_retypings(PLANTED_TOML) == [("MPE2", True)]
+    # one value changed is still a retyping of MPE2; two are a parameter set of its own
+    assert table3_retypings(PLANTED_TOML.replace("sigma_P_um = 0.3", "sigma_P_um = 0.2")) == [("MPE2", True)]
+    assert table3_retypings(PLANTED_TOML.replace("sigma_P_um = 0.3", "sigma_P_um = 0.2")
+                            .replace("lambda_P = 0.5", "lambda_P = 0.7")) == []
+
+
+def test_a_planted_keyword_or_dict_retyping_of_mpe1_is_found_and_not_taken_for_toml():
+    keywords = ('PARAMS = pc.Parameters(sigma_R_um=0.2, sigma_S_ppm=0.7, sigma_Sa_ppm=0.7,\n'
+                '                       sigma_Q_ppm=0.7, sigma_PQ_um=0.2, sigma_ET_um=0.2, lambda_ET_mm=200)\n')
+    one_a_line = "Parameters(\n    sigma_R_um=0.2,\n    sigma_S_ppm=0.7,\n    sigma_Sa_ppm=0.7,\n" \
+                 "    sigma_Q_ppm=0.7,\n    sigma_PQ_um=0.2,\n    sigma_ET_um=0.2,\n)\n"
+    assert table3_retypings(one_a_line) == [("MPE1", False)]
+    items = '{"sigma_ER_urad": 4.0, "lambda_ER_mm": 400, "sigma_P0_um": 0.1, "sigma_P_um": 0.1, "lambda_P": 0.5, "sigma_R_um": 0.2}'
+    assert table3_retypings(keywords) == [("MPE1", False)]
+    assert table3_retypings(items) == [("MPE1", False)]
+    assert table3_retypings("sigma_R_um = 0.2\nsigma_S_ppm = 0.7\nx = 1\nsigma_Sa_ppm = 0.7\n") == []   # too few
+
+
+def test_made_up_parameter_sets_are_not_retypings():
+    from tests.helpers.tasks import ALL_FACTORS
+
+    typed = "\n".join(f"{k} = {v}" for k, v in ALL_FACTORS.items())
+    assert table3_retypings(typed) == []
+    assert table3_retypings(Path(__file__).read_text(encoding="utf-8").partition("PROBES =")[0]) == []   # PARAMS
