@@ -10,6 +10,19 @@ __version__ = "0.1.0"
 
 if __name__ == "generator":     # a checkout's folder, imported by its own name
     import importlib
+    import importlib.util
+    import os
+    import sys
 
-    # the shim is the sibling xlfuncs/'s (its __init__.py runs first, then checkout.alias), not typed here again
-    importlib.import_module("xlfuncs.checkout").alias(__name__)
+    # The shim is the sibling folder xlfuncs/'s (xlfuncs/checkout.py), not typed here again: its
+    # __init__.py, run from beside this folder (whatever else on sys.path is called xlfuncs), makes
+    # xlfuncs cmmwb.xlfuncs or says that cmmwb is not installed; then the same for generator.
+    spec = importlib.util.spec_from_file_location("xlfuncs", os.path.join(os.path.dirname(__path__[0]), "xlfuncs",
+                                                                          "__init__.py"))
+    sys.modules["xlfuncs"] = importlib.util.module_from_spec(spec)
+    try:
+        spec.loader.exec_module(sys.modules["xlfuncs"])
+    except BaseException:
+        del sys.modules["xlfuncs"]      # as the import system does with a module that failed
+        raise
+    importlib.import_module("cmmwb.xlfuncs.checkout").alias(__name__)

@@ -14,10 +14,11 @@ same for ``xlfuncs``).  Installed packages never run it.  Standard library only.
 The shim's one home is here.  ``xlfuncs/__init__.py``, imported as ``xlfuncs``, takes
 :func:`alias` from this file relatively (``from .checkout import alias``: the checkout's own
 file, so that a Python without cmmwb installed gets the message to install it rather than
-"No module named 'cmmwb'"), and ``generator/__init__.py``, imported as ``generator``, imports its
-sibling ``xlfuncs.checkout`` (which runs the former first) and calls the same function.  The copy
-of this file loaded as ``xlfuncs.checkout`` before the alias existed is dropped from
-``sys.modules`` by :func:`alias`, so that ``xlfuncs.checkout`` too is ``cmmwb.xlfuncs.checkout``.
+"No module named 'cmmwb'"), and ``generator/__init__.py``, imported as ``generator``, runs its
+sibling folder's ``xlfuncs/__init__.py`` by location (not whatever ``xlfuncs`` sys.path finds
+first), then calls the same function for ``generator``.  The copy of this file loaded as
+``xlfuncs.checkout`` before the alias existed is dropped from ``sys.modules`` by :func:`alias`,
+so that ``xlfuncs.checkout`` too is ``cmmwb.xlfuncs.checkout``.
 """
 
 from __future__ import annotations

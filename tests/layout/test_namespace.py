@@ -129,6 +129,18 @@ def test_the_shim_itself_is_one_module_in_a_checkout():
     assert r.returncode == 0, r.stderr
 
 
+def test_python_dash_m_generator_from_a_checkout_on_the_path_ignores_a_hostile_xlfuncs(tmp_path):
+    """The checkout on PYTHONPATH, a user's ``xlfuncs.py`` in the working folder (first on sys.path):
+    ``generator/__init__.py`` takes the shim from its sibling folder xlfuncs/, not from sys.path."""
+    folder = tmp_path / "workbooks"
+    folder.mkdir()
+    (folder / "xlfuncs.py").write_text(HOSTILE["xlfuncs.py"])
+    r = subprocess.run([sys.executable, "-m", "generator", "--version"], cwd=folder, capture_output=True,
+                       text=True, timeout=120, env={**os.environ, "PYTHONPATH": str(ROOT)})
+    assert r.returncode == 0, r.stderr
+    assert re.fullmatch(r"cmmwb \d+\.\d+\.\d+", r.stdout.strip()), r.stdout
+
+
 def test_python_dash_m_generator_in_a_checkout_without_cmmwb_says_to_install_it():
     """``-S``: no site-packages, so neither cmmwb nor its dependencies; the shim (standard library
     only, xlfuncs/checkout.py) still runs and names the command that installs the checkout."""
