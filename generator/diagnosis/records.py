@@ -6,6 +6,8 @@ Inputs that the straightness and periodic columns are normalized by."""
 
 from __future__ import annotations
 
+from collections.abc import Callable, Iterable, Iterator
+
 from cmmwb.xlfuncs.locator import effects as fx
 from cmmwb.xlfuncs.locator.diagnose import Diagnosis
 
@@ -61,7 +63,6 @@ def travel_cells(book: Book, diag: Diagnosis, inputs: dict, sheet: str, cols: di
     return out
 
 
-
 # -- records -------------------------------------------------------------------------------------
 
 #: columns of the recordings (docs/recordings.md names them without a unit) that are in mm: their
@@ -90,34 +91,76 @@ def _input_column(book: Book, ws, r0: int, c: int, values) -> None:
         book.number(ws, r0 + k, c, float(v), fmt="General")
 
 
+def _record_sheet(book: Book, rec, sheet: str, columns: list[str], derived: list[str], notes: dict[str, str],
+                  mm_columns, data: dict, texts: dict[str, list[str]],
+                  row_formulas: Callable[[dict[str, str]], Iterable[tuple[str, str]]]):
+    """One sheet of records, the part Records (length records) and Points (point records) share
+    (docs/recordings.md section 3): the header, the recordings' ``columns`` followed by
+    temperature_C, time_s, group and the extra columns of the recordings that have them, then the
+    ``derived`` columns (units shown by :func:`shown` with ``mm_columns``, ``notes`` on the
+    headers); the numbers ``data`` (and temperature_C, time_s) as input cells; per record its id,
+    the text columns ``texts``, group and the extra columns, and the formulas ``row_formulas(L)``
+    yields as (column, formula) with L the record's cell of every column.  Returns the sheet, the
+    column index {key: column} and the records' :class:`Row` s."""
+    ws = book.sheet(sheet)
+    cols, data = list(columns), dict(data)
+    for key in ("temperature_C", "time_s"):
+        if getattr(rec, key) is not None:
+            cols.append(key)
+            data[key] = getattr(rec, key)
+    if rec.group is not None:
+        cols.append("group")
+        texts = {**texts, "group": rec.group}
+    cols += list(rec.extra)
+    header = cols + derived
+    ci = {k: i + 1 for i, k in enumerate(header)}
+    book.header(ws, 1, 1, [shown(h, mm_columns) for h in header], [notes.get(h) for h in header])
+    for k, v in data.items():
+        _input_column(book, ws, 2, ci[k], v)
+    texts = {"id": rec.ids, **texts, **rec.extra}
+    rows = []
+    for a in range(rec.n):
+        r = a + 2
+        rows.append(Row(sheet, r, ci))
+        for k, v in texts.items():
+            book.text(ws, r, ci[k], v[a])
+        L = {k: cell(r, ci[k]) for k in ci}
+        for k, f in row_formulas(L):
+            book.formula(ws, r, ci[k], f)
+    ws.freeze_panes = "B2"
+    return ws, ci, rows
+
+
+def _length_formulas(L: dict[str, str]) -> Iterator[tuple[str, str]]:
+    """A length record's row: d = X2 - X1 and its length, the direction n_a, the ram positions
+    X - p of both ends (Forbes 2025 section 5.3), the residual in µm."""
+    for ax in "xyz":
+        yield f"d{ax}_mm", f"={L[ax + '2']}-{L[ax + '1']}"
+    yield "d_mm", f"=SQRT({L['dx_mm']}^2+{L['dy_mm']}^2+{L['dz_mm']}^2)"
+    for ax in "xyz":
+        yield f"na{ax}", f"={L['d' + ax + '_mm']}/{L['d_mm']}"
+        for e in "12":
+            yield f"u{ax}{e}_mm", f"={L[ax + e]}-{L['p' + e + ax]}"
+    yield "residual_um", f"=({L['measured_mm']}-{L['reference_mm']})*1000"
+
+
 def length_records(book: Book, diag: Diagnosis, inputs: dict):
     prep = diag.prep
     rec, D = prep.rec, prep.design
-    ws = book.sheet("Records")
     cols: list[str] = ["id", "x1", "y1", "z1", "x2", "y2", "z2", "reference_mm", "measured_mm"]
     if D.N1 is not None:
         cols += ["n1x", "n1y", "n1z", "n2x", "n2y", "n2z"]
     cols += ["p1x", "p1y", "p1z", "p2x", "p2y", "p2z", "probe1", "probe2"]
-    if rec.temperature_C is not None:
-        cols.append("temperature_C")
-    if rec.time_s is not None:
-        cols.append("time_s")
-    if rec.group is not None:
-        cols.append("group")
-    cols += list(rec.extra)
     derived = ["dx_mm", "dy_mm", "dz_mm", "d_mm", "nax", "nay", "naz", "ux1_mm", "uy1_mm", "uz1_mm",
                "ux2_mm", "uy2_mm", "uz2_mm", "residual_um", "u_um", "z"]
     chosen_cols = [f"{e}:{l}" for e, l in diag.sel_labels if e != "alignment"]
     after = ["fitted_um", "residual_after_um", "z_after"]
-    header = cols + derived + chosen_cols + after
-    ci = {k: i + 1 for i, k in enumerate(header)}
     notes = {"residual_um": "r = (measured - reference) * 1000: the simulation predicts 0",
              "u_um": "standard uncertainty of the residual under the simulation: sqrt(C_aa) (Cov sheet)",
              "z": "standardized residual r/u", "nax": "n_a = (x2 - x1)/d, the direction of the length",
              "ux1_mm": "ram position x - p (Forbes 2025 section 5.3, multiple probes)",
              "fitted_um": "sum of the chosen effects: row of X times b (GLS sheet)",
              "residual_after_um": "r - fitted", "z_after": "(r - fitted)/u"}
-    book.header(ws, 1, 1, [shown(h, LENGTH_MM_COLUMNS) for h in header], [notes.get(h) for h in header])
     P1, P2 = D.P1, D.P2
     pid = D.probe_ids
     data = {"x1": rec.X1_mm[:, 0], "y1": rec.X1_mm[:, 1], "z1": rec.X1_mm[:, 2],
@@ -128,33 +171,9 @@ def length_records(book: Book, diag: Diagnosis, inputs: dict):
         for e, N in (("1", rec.N1), ("2", rec.N2)):
             for a, ax in enumerate("xyz"):
                 data[f"n{e}{ax}"] = N[:, a]
-    if rec.temperature_C is not None:
-        data["temperature_C"] = rec.temperature_C
-    if rec.time_s is not None:
-        data["time_s"] = rec.time_s
-    rows = []
-    for k, v in data.items():
-        _input_column(book, ws, 2, ci[k], v)
-    for a in range(rec.n):
-        r = a + 2
-        R = Row("Records", r, ci)
-        rows.append(R)
-        book.text(ws, r, ci["id"], rec.ids[a])
-        book.text(ws, r, ci["probe1"], pid[D.k1[a]])
-        book.text(ws, r, ci["probe2"], pid[D.k2[a]])
-        if rec.group is not None:
-            book.text(ws, r, ci["group"], rec.group[a])
-        for k, v in rec.extra.items():
-            book.text(ws, r, ci[k], v[a])
-        L = {k: cell(r, ci[k]) for k in ci}
-        for ax in "xyz":
-            book.formula(ws, r, ci[f"d{ax}_mm"], f"={L[ax + '2']}-{L[ax + '1']}")
-        book.formula(ws, r, ci["d_mm"], f"=SQRT({L['dx_mm']}^2+{L['dy_mm']}^2+{L['dz_mm']}^2)")
-        for ax in "xyz":
-            book.formula(ws, r, ci[f"na{ax}"], f"={L['d' + ax + '_mm']}/{L['d_mm']}")
-            for e in "12":
-                book.formula(ws, r, ci[f"u{ax}{e}_mm"], f"={L[ax + e]}-{L['p' + e + ax]}")
-        book.formula(ws, r, ci["residual_um"], f"=({L['measured_mm']}-{L['reference_mm']})*1000")
+    ws, ci, rows = _record_sheet(book, rec, "Records", cols, derived + chosen_cols + after, notes, LENGTH_MM_COLUMNS,
+                                 data, {"probe1": [pid[k] for k in D.k1], "probe2": [pid[k] for k in D.k2]},
+                                 _length_formulas)
     obs = {"sheet": "Records", "rows": [R.row for R in rows], "ci": ci, "chosen_cols": chosen_cols,
            "first_X": ci[chosen_cols[0]] if chosen_cols else None, "n_align": 0, "row_of_obs": rows}
     travel = travel_cells(book, diag, inputs, "Records",
@@ -162,14 +181,10 @@ def length_records(book: Book, diag: Diagnosis, inputs: dict):
     # the middle of the probed positions along each axis (thermal gradient, section 7)
     pos = {ax: ",".join(block(2, ci[f"{ax}{e}"], rec.n, 1, "Records") for e in "12") for ax in "xyz"}
     travel.update({f"pos_{ax}": (f"MIN({r})", f"MAX({r})") for ax, r in pos.items()})
-    for q, label in enumerate(chosen_cols):
-        name, par = label.split(":", 1)
+    for label in chosen_cols:
         for a, R in enumerate(rows):
-            # an outlier left out (docs/recordings.md section 7): its own mean-shift column, 1 on its row
-            f = (1.0 if rec.ids[a] == par else 0.0) if name == "outlier" else \
-                length_formula(name, par, R, inputs["probe_cells"], travel)
-            _value_or_formula(book, ws, R.row, ci[label], f)
-    ws.freeze_panes = "B2"
+            _design_cell(book, ws, R.row, ci[label], label, rec.ids[a],
+                         lambda name, par: length_formula(name, par, R, inputs["probe_cells"], travel))
     return rows, obs
 
 
@@ -180,59 +195,43 @@ def _value_or_formula(book: Book, ws, r: int, c: int, f: str | float) -> None:
         ws.cell(row=r, column=c).value = float(f)
 
 
+def _design_cell(book: Book, ws, r: int, c: int, label: str, outlier_key: str,
+                 formula: Callable[[str, str], str]) -> None:
+    """The cell of the chosen effect ``label`` (``name:parameter``) on a record's row: an outlier
+    left out (docs/recordings.md section 7) has its own mean-shift column, 1 on the row of the
+    record (length) or coordinate (point) ``outlier_key`` names and 0 elsewhere; any other effect
+    is the formula of the row ``formula(name, parameter)`` gives (:mod:`.formulas`)."""
+    name, par = label.split(":", 1)
+    _value_or_formula(book, ws, r, c, (1.0 if par == outlier_key else 0.0) if name == "outlier" else formula(name, par))
+
 
 def point_records(book: Book, diag: Diagnosis, inputs: dict):
     prep = diag.prep
     rec, D = prep.rec, prep.design
-    ws = book.sheet("Points")
     cols = ["id", "x_nom", "y_nom", "z_nom", "x", "y", "z"]
     if rec.N is not None:
         cols += ["nx", "ny", "nz"]
     cols += ["px", "py", "pz", "probe"]
-    if rec.temperature_C is not None:
-        cols.append("temperature_C")
-    if rec.time_s is not None:
-        cols.append("time_s")
-    if rec.group is not None:
-        cols.append("group")
-    cols += list(rec.extra)
     derived = ["yx_mm", "yy_mm", "yz_mm", "ux_mm", "uy_mm", "uz_mm"]
-    header = cols + derived
-    ci = {k: i + 1 for i, k in enumerate(header)}
     notes = {"yx_mm": "nominal point in machine coordinates y = R0 x_nom + t0 (Inputs)",
              "ux_mm": "ram position y - p"}
-    book.header(ws, 1, 1, [shown(h, POINT_MM_COLUMNS) for h in header], [notes.get(h) for h in header])
     data = {"x_nom": rec.X_nom_mm[:, 0], "y_nom": rec.X_nom_mm[:, 1], "z_nom": rec.X_nom_mm[:, 2],
             "x": rec.X_mm[:, 0], "y": rec.X_mm[:, 1], "z": rec.X_mm[:, 2],
             "px": D.P[:, 0], "py": D.P[:, 1], "pz": D.P[:, 2]}
     if rec.N is not None:
         for a, ax in enumerate("xyz"):
             data[f"n{ax}"] = rec.N[:, a]
-    if rec.temperature_C is not None:
-        data["temperature_C"] = rec.temperature_C
-    if rec.time_s is not None:
-        data["time_s"] = rec.time_s
     R0, t0 = inputs["R0"], inputs["t0"]
-    prow = []
-    for k, v in data.items():
-        _input_column(book, ws, 2, ci[k], v)
-    for i in range(rec.n):
-        r = i + 2
-        R = Row("Points", r, ci)
-        prow.append(R)
-        book.text(ws, r, ci["id"], rec.ids[i])
-        book.text(ws, r, ci["probe"], D.probe_ids[D.k[i]])
-        if rec.group is not None:
-            book.text(ws, r, ci["group"], rec.group[i])
-        for k, v in rec.extra.items():
-            book.text(ws, r, ci[k], v[i])
-        L = {k: cell(r, ci[k]) for k in ci}
+
+    def point_formulas(L: dict[str, str]) -> Iterator[tuple[str, str]]:
+        """y = R0 x_nom + t0, the nominal point in machine coordinates, and the ram position y - p."""
         for a, ax in enumerate("xyz"):
-            book.formula(ws, r, ci[f"y{ax}_mm"],
-                         f"={R0.cell(a, 0)}*{L['x_nom']}+{R0.cell(a, 1)}*{L['y_nom']}+{R0.cell(a, 2)}*{L['z_nom']}"
-                         f"+{t0.cell(a, 0)}")
-            book.formula(ws, r, ci[f"u{ax}_mm"], f"={L['y' + ax + '_mm']}-{L['p' + ax]}")
-    ws.freeze_panes = "B2"
+            yield (f"y{ax}_mm", f"={R0.cell(a, 0)}*{L['x_nom']}+{R0.cell(a, 1)}*{L['y_nom']}"
+                                f"+{R0.cell(a, 2)}*{L['z_nom']}+{t0.cell(a, 0)}")
+            yield f"u{ax}_mm", f"={L['y' + ax + '_mm']}-{L['p' + ax]}"
+
+    _, ci, prow = _record_sheet(book, rec, "Points", cols, derived, notes, POINT_MM_COLUMNS, data,
+                                {"probe": [D.probe_ids[k] for k in D.k]}, point_formulas)
     # centroid of the nominal points on Inputs
     wi = book.wb["Inputs"]
     crow = inputs["c_row"]
@@ -271,10 +270,8 @@ def point_records(book: Book, diag: Diagnosis, inputs: dict):
             for lab in al:
                 _value_or_formula(book, wc, r, cc[lab], alignment_formula(lab, a, P, centroid))
             for label in chosen_cols:
-                name, par = label.split(":", 1)
-                f = (1.0 if par == f"{rec.ids[i]}.{ax}" else 0.0) if name == "outlier" else \
-                    point_formula(name, par, a, P, centroid, inputs["probe_cells"], travel)
-                _value_or_formula(book, wc, r, cc[label], f)
+                _design_cell(book, wc, r, cc[label], label, f"{rec.ids[i]}.{ax}",
+                             lambda name, par: point_formula(name, par, a, P, centroid, inputs["probe_cells"], travel))
     wc.freeze_panes = "C2"
     obs = {"sheet": "Coords", "rows": [R.row for R in rows], "ci": cc, "chosen_cols": chosen_cols,
            "first_X": cc[al[0]] if al else cc.get(chosen_cols[0]) if chosen_cols else None,
