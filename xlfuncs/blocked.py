@@ -48,6 +48,7 @@ finish; :class:`ProgressBar` draws a text bar on stderr for long runs.
 
 from __future__ import annotations
 
+import threading
 from typing import Sequence
 
 import numpy as np
@@ -486,6 +487,7 @@ class _PointKernels:
 _POINT_D2: dict[bytes, np.ndarray] = {}
 _POINT_D2_KEEP = 8
 _POINT_D2_MAX_M = 1000
+_POINT_D2_LOCK = threading.Lock()
 
 
 def _unique_points_d2(Z: np.ndarray) -> np.ndarray:
@@ -493,13 +495,16 @@ def _unique_points_d2(Z: np.ndarray) -> np.ndarray:
     if Z.shape[0] > _POINT_D2_MAX_M:
         return sq_dists(Z, Z)
     key = np.ascontiguousarray(Z, dtype=float).tobytes()
-    D2 = _POINT_D2.pop(key, None)
+    with _POINT_D2_LOCK:
+        D2 = _POINT_D2.pop(key, None)
     if D2 is None:
         D2 = sq_dists(Z, Z)
         D2.setflags(write=False)
+    with _POINT_D2_LOCK:
+        _POINT_D2.pop(key, None)
         while len(_POINT_D2) >= _POINT_D2_KEEP:
             _POINT_D2.pop(next(iter(_POINT_D2)))
-    _POINT_D2[key] = D2           # the most recent last
+        _POINT_D2[key] = D2           # the most recent last
     return D2
 
 
