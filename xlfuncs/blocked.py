@@ -418,7 +418,7 @@ def propagate_cloud(fit, cloud: pc.PointCloud, params: pc.Parameters, *, G: np.n
 
 
 # ---------------------------------------------------------------------------------------------
-# covariance of length records (the mismatch locator): C = G V_X G^T, g_a = [-n_a; n_a]
+# covariance of length records (the mismatch locator, cmmwb calibrate): C = G V_X G^T, g_a = [-n_a; n_a]
 # ---------------------------------------------------------------------------------------------
 
 #: exp(-q) is below the smallest normal double (2.2e-308) beyond this q; numpy's exp takes 10-100
