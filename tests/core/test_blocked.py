@@ -120,6 +120,24 @@ def test_record_covariance_equals_the_mismatch_locator_and_the_dense_reference()
     assert rel_err(total, length_covariance_dense(cloud, PARAMS, I, J)) <= REL
 
 
+
+def test_record_covariance_with_short_length_scales_and_zero_factors_on_both_forms():
+    # most kernel entries below exp(-708) (set to 0 unevaluated), PQ/S/R zero: the gathered form
+    # (no block) and the row blocks are the same sums, and the dense reference
+    cloud = random_cloud(40)
+    rng = np.random.default_rng(6)
+    I = rng.integers(0, 40, 30)
+    J = (I + rng.integers(1, 39, 30)) % 40
+    short = pc.Parameters(sigma_ET_um=0.3, lambda_ET_mm=10, sigma_ER_urad=4.0, lambda_ER_mm=20,
+                          sigma_P0_um=0.1, sigma_P_um=0.15, lambda_P=0.03)
+    for d_log in (False, True):
+        gathered = bl.record_covariance(cloud, short, I, J, components=True, d_log_lambda=d_log)
+        rows = bl.record_covariance(cloud, short, I, J, components=True, d_log_lambda=d_log, block=70)
+        for f in FACTORS:
+            assert rel_err(gathered[f], rows[f]) <= REL, (f, d_log)
+        assert not np.any(gathered["R"]) and not np.any(gathered["S"])
+    assert rel_err(bl.record_covariance(cloud, short, I, J), length_covariance_dense(cloud, short, I, J)) <= REL
+
 def test_distances_on_a_backend_are_the_local_numbers():
     cloud = random_cloud(50)
     backend = bl.ThreadBackend(2)
