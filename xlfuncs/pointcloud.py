@@ -14,7 +14,6 @@ Two evaluation paths give the same numbers:
 
 from __future__ import annotations
 
-import os
 import threading
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
@@ -154,18 +153,24 @@ def pair_arrays(cloud: PointCloud, pa: dict) -> dict:
     sPQ2 = pa["sigma_PQ_um"] ** 2
     s0, sp = pa["sigma_P0_um"], pa["sigma_P_um"]
     Pk = P[first] if cloud.m else np.zeros((K, 3))
+    ilam = 1.0 / np.where(lam > 0, lam, 1.0)
+    M = cloud.N * ilam[:, None]
     return {"Xt": np.ascontiguousarray(cloud.X_mm.T), "Nt": np.ascontiguousarray(cloud.N.T),
             "Ut": np.ascontiguousarray(cloud.ram_mm.T),
             "Pt": np.ascontiguousarray(P.T), "p2": np.einsum("ij,ij->i", P, P),
             "sPQ2": sPQ2, "sP2": s0 ** 2 + sp ** 2,
-            "ilamP": 1.0 / np.where(lam > 0, lam, 1.0),
+            # normals over lambda_P: |M_i - M_j|^2 = |n_i - n_j|^2 / lambda^2 for points of one
+            # probe, formed as 2 M_i.M_j - |M_i|^2 - |M_j|^2 (outer products, no full-size reads)
+            "Mt": np.ascontiguousarray(M.T), "M2t": np.ascontiguousarray(2.0 * M.T),
+            "mm": np.einsum("ij,ij->i", M, M),
             # per probe pair (eq. 9, section 6.5, section 6.6): PQ is sigma_PQ,i^2 + sigma_PQ,j^2
             # for different probes, p_i.p_j, and the same-probe factors of the probing covariance
             "T_PQ": np.where(same, 0.0, sPQ2[first][:, None] + sPQ2[None, :]),
             "T_pij": (Pk[:, 0][:, None] * P[:, 0][None, :] + Pk[:, 1][:, None] * P[:, 1][None, :]
                       + Pk[:, 2][:, None] * P[:, 2][None, :]),
-            "T_s0": np.where(same, s0[first][:, None] * s0[None, :], 0.0),
-            "T_sp": np.where(same, sp[first][:, None] * sp[None, :], 0.0)}
+            # (doubled, exactly: the factor 2 of the cross term 2 C o_i o_j)
+            "T_2s0": np.where(same, 2.0 * (s0[first][:, None] * s0[None, :]), 0.0),
+            "T_2sp": np.where(same, 2.0 * (sp[first][:, None] * sp[None, :]), 0.0)}
 
 
 class PairWorkspace:
@@ -282,25 +287,24 @@ def rect_variances(cloud: PointCloud, params: Parameters, pa: dict, I: slice, J:
         mul(nx, side(N, 0), out=o)
         o += mul(ny, side(N, 1), out=t)
         o += mul(nz, side(N, 2), out=t)
-    # exp(-|n_i - n_j|^2 / (lambda_i lambda_j)); only pairs of one probe (one lambda) use it
-    dn2 = ws("dn2", shape)
-    for k in range(3):
-        dk = sub(col(N, k), row(N, k), out=t if k else dn2)
-        dk *= dk
-        if k:
-            dn2 += dk
-    dn2 *= -pa["ilamP"][I][:, None]
-    dn2 *= pa["ilamP"][J][None, :]
-    kern = np.exp(dn2, out=dn2)
-    kern *= np.take(pa["T_sp"][:, J], kI, axis=0, out=t)
+    # exp(-|n_i - n_j|^2 / lambda^2) = exp(2 M_i.M_j - |M_i|^2 - |M_j|^2), M = n / lambda_P;
+    # only pairs of one probe (one lambda) use it
+    M, M2 = pa["Mt"], pa["M2t"]
+    kern = mul(col(M, 0), row(M2, 0), out=ws("kern", shape))
+    kern += mul(col(M, 1), row(M2, 1), out=t)
+    kern += mul(col(M, 2), row(M2, 2), out=t)
+    kern -= pa["mm"][I][:, None]
+    kern -= pa["mm"][J][None, :]
+    np.exp(kern, out=kern)
+    # 2 C = 2 (s0_i s0_j + sp_i sp_j kern) for one probe, 0 otherwise (tables doubled exactly)
+    kern *= np.take(pa["T_2sp"][:, J], kI, axis=0, out=t)
     cross = kern
-    cross += np.take(pa["T_s0"][:, J], kI, axis=0, out=t)
+    cross += np.take(pa["T_2s0"][:, J], kI, axis=0, out=t)
     Pv = mul(oi, pa["sP2"][I][:, None], out=ws("P", shape))
     Pv *= oi
     t = mul(oj, pa["sP2"][J][None, :], out=t)
     t *= oj
     Pv += t
-    cross *= 2.0
     cross *= oi
     cross *= oj
     Pv -= cross
@@ -379,12 +383,13 @@ def all_pairs_index(m: int, i0: int, rows: int, q: int) -> tuple[int, int]:
 
 
 def iter_distance_components(cloud: PointCloud, params: Parameters, *, block: int = PAIR_BLOCK,
-                             workers: int | None = None):
+                             workers: int = 1):
     """Every pair i < j streamed in blocks, in ``all_pairs`` order: yields ``(sl, part)`` with
     ``part`` the arrays of :func:`distance_components` (float64) for the pairs ``sl`` of the
     whole result.  Memory is a few blocks, whatever m: a consumer that writes or reduces the
     blocks handles m(m-1)/2 pairs without holding them.  Blocks run on ``workers`` threads
-    (default: one per core), at most two blocks ahead of the consumer per thread."""
+    (default one: on the 2-core machine a second thread made it slower, GIL hand-offs at every
+    numpy call; bench/results/pairs.md), at most two blocks ahead of the consumer per thread."""
     pa = probe_arrays(cloud, params)
     pa.update(pair_arrays(cloud, pa))
 
@@ -405,9 +410,9 @@ def iter_distance_components(cloud: PointCloud, params: Parameters, *, block: in
 
 
 def _ordered_blocks(work, blocks, workers):
-    """work(b) for every block on ``workers`` threads (default one per core), in order, at most
-    two blocks ahead of the consumer per thread."""
-    workers = min(len(blocks), workers or os.cpu_count() or 1)
+    """work(b) for every block on ``workers`` threads (at least one), in order, at most two
+    blocks ahead of the consumer per thread."""
+    workers = min(len(blocks), workers or 1)
     if workers <= 1:
         yield from map(work, blocks)
         return
@@ -425,7 +430,8 @@ def _ordered_blocks(work, blocks, workers):
 
 
 def distance_components(cloud: PointCloud, params: Parameters, pairs: np.ndarray | None = None,
-                        *, block: int = PAIR_BLOCK, progress=None) -> dict[str, np.ndarray]:
+                        *, block: int = PAIR_BLOCK, progress=None,
+                        workers: int = 1) -> dict[str, np.ndarray]:
     """d_ij (mm), u(d_ij) (µm) and the per-factor u (µm) of eq. (30) for many pairs.
 
     ``pairs=None`` means every pair i < j, in the order of ``all_pairs`` (the blocks of
@@ -433,7 +439,8 @@ def distance_components(cloud: PointCloud, params: Parameters, pairs: np.ndarray
     that function).  Evaluates the quadratic form of eq. (29) factor by factor without forming
     V_X, about ``block`` pairs at a time, so memory grows only through the outputs.  Returns a
     dict with keys ``d_mm``, ``u_um`` and ``u_<factor>_um``.  ``progress(done, total)`` is
-    called after every block.
+    called after every block.  ``workers``: threads for the blocks of all pairs (default one, as
+    :func:`iter_distance_components`).
     """
     pa = probe_arrays(cloud, params)
     m = cloud.m
@@ -452,7 +459,7 @@ def distance_components(cloud: PointCloud, params: Parameters, pairs: np.ndarray
             return _all_pairs_block(cloud, params, pa, b, out, ws=local.ws)
 
         done = 0
-        for size in _ordered_blocks(work, row_blocks(m, block), None):
+        for size in _ordered_blocks(work, row_blocks(m, block), workers):
             done += size
             if progress is not None:
                 progress(done, total)
