@@ -158,6 +158,8 @@ def pair_arrays(cloud: PointCloud, pa: dict) -> dict:
     return {"Xt": np.ascontiguousarray(cloud.X_mm.T), "Nt": np.ascontiguousarray(cloud.N.T),
             "Ut": np.ascontiguousarray(cloud.ram_mm.T),
             "Pt": np.ascontiguousarray(P.T), "p2": np.einsum("ij,ij->i", P, P),
+            # the axes on which some probe offset is not 0 (the others add exact zeros to n.p)
+            "P_axes": tuple(k for k in range(3) if np.any(P[:, k] != 0)),
             "sPQ2": sPQ2, "sP2": s0 ** 2 + sp ** 2,
             # normals over lambda_P: |M_i - M_j|^2 = |n_i - n_j|^2 / lambda^2 for points of one
             # probe, formed as 2 M_i.M_j - |M_i|^2 - |M_j|^2 (outer products, no full-size reads)
@@ -261,12 +263,13 @@ def rect_variances(cloud: PointCloud, params: Parameters, pa: dict, I: slice, J:
         var["ET"] = e
     else:
         var["ET"] = np.broadcast_to(np.float64(0.0), shape)
-    if params.sigma_ER_urad > 0:
+    if params.sigma_ER_urad > 0 and pa["P_axes"]:   # (no offsets: n x p = 0, ER = 0)
         ai, aj = ws("ai", shape), ws("aj", shape)
-        for a, side in ((ai, row), (aj, col)):
-            mul(nx, side(P, 0), out=a)
-            a += mul(ny, side(P, 1), out=t)
-            a += mul(nz, side(P, 2), out=t)
+        n3, (k0, *ks) = (nx, ny, nz), pa["P_axes"]
+        for a, side in ((ai, row), (aj, col)):       # n.p over the axes on which some p is not 0
+            mul(n3[k0], side(P, k0), out=a)
+            for k in ks:
+                a += mul(n3[k], side(P, k), out=t)
         rho = mul(du2, -1.0 / params.lambda_ER_mm**2, out=ws("rho", shape))
         np.exp(rho, out=rho)
         er = add(pa["p2"][I][:, None], pa["p2"][J][None, :], out=ws("ER", shape))
@@ -360,12 +363,12 @@ def _all_pairs_block(cloud, params, pa, b, out, base=0, ws=None):
     for q in range(rows):
         e = p + w - q
         out["d_mm"][p:e] = d[q, q:]
-        out["u_R_um"][p:e] = u_R
         for key, a in roots:
             np.sqrt(a[q, q:], out=out[key][p:e])
         p = e
+    out["u_R_um"][start:p] = u_R
     seg = out["d_mm"][start:p]
-    if np.any(seg <= 1e-9):
+    if seg.size and seg.min() <= 1e-9:
         i, j = all_pairs_index(m, i0, rows, int(np.flatnonzero(seg <= 1e-9)[0]))
         raise DegenerateGeometryError(
             f"points {cloud.labels[i]} and {cloud.labels[j]} are at the same place: "
