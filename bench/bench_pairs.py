@@ -13,8 +13,9 @@ alternately so that each sees the same load:
                 u(d_ij)^2 = n^T (V_ii + V_jj - V_ij - V_ji) n for every pair with numpy, row by row.
 
 ``--before=DIR:LABEL`` adds the streamed and in-memory cases on another checkout's ``xlfuncs`` (the
-code before, ``git archive COMMIT xlfuncs | tar -x -C DIR``), alternating with the others in the
-same run.
+code before, ``mkdir -p DIR/cmmwb && git archive COMMIT xlfuncs | tar -x -C DIR/cmmwb``: the
+package must be ``DIR/cmmwb/xlfuncs``, or the editable install's ``cmmwb.xlfuncs`` is imported
+instead; every run checks which file it imported), alternating with the others in the same run.
 The 2-core machine is shared with other jobs: every row gives the 1-minute load average; the
 speed-up is the ratio of the dense reference's best (and median) wall time to the case's in the
 same run, and of the median CPU times (all threads), the measure least disturbed by the load.
@@ -94,7 +95,7 @@ check = [float(u[0]), float(u[len(u) // 2]), float(u[-1])]
 }
 
 TAIL = """
-print("RESULT", json.dumps({"seconds": seconds, "cpu": cpu,
+print("RESULT", json.dumps({"seconds": seconds, "cpu": cpu, "module": pc.__file__,
                             "peak_MB": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
                             "check": check}))
 """
@@ -107,6 +108,8 @@ def run(case: str, source: Path) -> dict:
     if p.returncode != 0:
         raise RuntimeError(p.stderr)
     r = json.loads([ln for ln in p.stdout.splitlines() if ln.startswith("RESULT")][-1][7:])
+    # the editable install maps cmmwb.xlfuncs to this checkout unless DIR/cmmwb/xlfuncs exists
+    assert Path(r["module"]).resolve().is_relative_to(source.resolve()), (source, r["module"])
     r["load"] = os.getloadavg()[0]
     return r
 

@@ -190,6 +190,10 @@ class PairWorkspace:
             b = self.flat[name] = np.empty(max(size, 1))
         return b[:size].reshape(shape)
 
+    def xyz(self, name: str, shape: tuple[int, int]) -> np.ndarray:
+        """A (3, rows, columns) buffer: the x, y and z planes of one vector per pair."""
+        return self(name, (3 * shape[0], shape[1])).reshape((3,) + tuple(shape))
+
 
 def rect_variances(cloud: PointCloud, params: Parameters, pa: dict, I: slice, J: slice,
                    ws: PairWorkspace | None = None):
@@ -214,27 +218,28 @@ def rect_variances(cloud: PointCloud, params: Parameters, pa: dict, I: slice, J:
     row = lambda A, k: A[k, I][:, None]  # noqa: E731
     mul, add, sub = np.multiply, np.add, np.subtract
     t = ws("t", shape)
-    nx, ny, nz = (sub(col(X, k), row(X, k), out=ws("n" + "xyz"[k], shape)) for k in range(3))
-    d = mul(nx, nx, out=ws("d", shape))
-    d += mul(ny, ny, out=t)
-    d += mul(nz, nz, out=t)
+    # dot products over x, y, z as one einsum of the stacked planes (one pass, not five; the
+    # products summed in the same order x, y, z)
+    n3 = ws.xyz("n", shape)
+    for k in range(3):
+        sub(col(X, k), row(X, k), out=n3[k])
+    d = np.einsum("kij,kij->ij", n3, n3, out=ws("d", shape))
     np.sqrt(d, out=d)
-    inv = np.divide(1.0, d, out=t)
-    nx *= inv
-    ny *= inv
-    nz *= inv
+    n3 *= np.divide(1.0, d, out=t)
+    nx, ny, nz = n3
     var: dict[str, np.ndarray] = {}
     var["R"] = np.broadcast_to(np.float64(2.0 * params.sigma_R_um**2), shape)
     kI = cloud.probe_index[I]
     var["PQ"] = np.take(pa["T_PQ"][:, J], kI, axis=0, out=ws("PQ", shape))
     # ram differences u_j - u_i (eq. 11: G is linear in the ram position)
     U = pa["Ut"]
-    ux, uy, uz = (sub(col(U, k), row(U, k), out=ws("u" + "xyz"[k], shape)) for k in range(3))
+    u3 = ws.xyz("u", shape)
+    for k in range(3):
+        sub(col(U, k), row(U, k), out=u3[k])
     c = V_S_diag_um_per_mm2(params)
-    a0 = mul(nx, ux, out=ws("a", shape))
-    a0 += mul(ny, uy, out=t)
-    a0 += mul(nz, uz, out=t)
-    ux2, uy2, uz2 = mul(ux, ux, out=ux), mul(uy, uy, out=uy), mul(uz, uz, out=uz)
+    a0 = np.einsum("kij,kij->ij", n3, u3, out=ws("a", shape))
+    u3 *= u3
+    ux2, uy2, uz2 = u3
     # sum_k c_k g_k^2 with g = (n.u, nx ux, ny uy, nz uz, nx uy, nx uz, ny uz), grouped by n_a^2
     S = mul(a0, c[0], out=ws("S", shape))
     S *= a0
@@ -265,11 +270,8 @@ def rect_variances(cloud: PointCloud, params: Parameters, pa: dict, I: slice, J:
         var["ET"] = np.broadcast_to(np.float64(0.0), shape)
     if params.sigma_ER_urad > 0 and pa["P_axes"]:   # (no offsets: n x p = 0, ER = 0)
         ai, aj = ws("ai", shape), ws("aj", shape)
-        n3, (k0, *ks) = (nx, ny, nz), pa["P_axes"]
-        for a, side in ((ai, row), (aj, col)):       # n.p over the axes on which some p is not 0
-            mul(n3[k0], side(P, k0), out=a)
-            for k in ks:
-                a += mul(n3[k], side(P, k), out=t)
+        np.einsum("kij,ki->ij", n3, P[:, I], out=ai)
+        np.einsum("kij,kj->ij", n3, P[:, J], out=aj)
         rho = mul(du2, -1.0 / params.lambda_ER_mm**2, out=ws("rho", shape))
         np.exp(rho, out=rho)
         er = add(pa["p2"][I][:, None], pa["p2"][J][None, :], out=ws("ER", shape))
@@ -285,11 +287,8 @@ def rect_variances(cloud: PointCloud, params: Parameters, pa: dict, I: slice, J:
         var["ER"] = er
     else:
         var["ER"] = np.broadcast_to(np.float64(0.0), shape)
-    oi, oj = ws("oi", shape), ws("oj", shape)
-    for o, side in ((oi, row), (oj, col)):
-        mul(nx, side(N, 0), out=o)
-        o += mul(ny, side(N, 1), out=t)
-        o += mul(nz, side(N, 2), out=t)
+    oi = np.einsum("kij,ki->ij", n3, N[:, I], out=ws("oi", shape))
+    oj = np.einsum("kij,kj->ij", n3, N[:, J], out=ws("oj", shape))
     # exp(-|n_i - n_j|^2 / lambda^2) = exp(2 M_i.M_j - |M_i|^2 - |M_j|^2), M = n / lambda_P;
     # only pairs of one probe (one lambda) use it
     M, M2 = pa["Mt"], pa["M2t"]
