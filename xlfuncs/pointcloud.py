@@ -158,8 +158,7 @@ def pair_arrays(cloud: PointCloud, pa: dict) -> dict:
     return {"Xt": np.ascontiguousarray(cloud.X_mm.T), "Nt": np.ascontiguousarray(cloud.N.T),
             "Ut": np.ascontiguousarray(cloud.ram_mm.T),
             "Pt": np.ascontiguousarray(P.T), "p2": np.einsum("ij,ij->i", P, P),
-            # the axes on which some probe offset is not 0 (the others add exact zeros to n.p)
-            "P_axes": tuple(k for k in range(3) if np.any(P[:, k] != 0)),
+            "any_offset": bool(np.any(P != 0)),
             "sPQ2": sPQ2, "sP2": s0 ** 2 + sp ** 2,
             # normals over lambda_P: |M_i - M_j|^2 = |n_i - n_j|^2 / lambda^2 for points of one
             # probe, formed as 2 M_i.M_j - |M_i|^2 - |M_j|^2 (outer products, no full-size reads)
@@ -190,9 +189,14 @@ class PairWorkspace:
             b = self.flat[name] = np.empty(max(size, 1))
         return b[:size].reshape(shape)
 
+    def planes(self, name: str, k: int, shape: tuple[int, int]) -> np.ndarray:
+        """A (k, rows, columns) buffer: k numbers per pair, plane by plane (the operands of one
+        einsum over the planes)."""
+        return self(name, (k * shape[0], shape[1])).reshape((k,) + tuple(shape))
+
     def xyz(self, name: str, shape: tuple[int, int]) -> np.ndarray:
-        """A (3, rows, columns) buffer: the x, y and z planes of one vector per pair."""
-        return self(name, (3 * shape[0], shape[1])).reshape((3,) + tuple(shape))
+        """The x, y and z planes of one vector per pair."""
+        return self.planes(name, 3, shape)
 
 
 def rect_variances(cloud: PointCloud, params: Parameters, pa: dict, I: slice, J: slice,
@@ -268,7 +272,7 @@ def rect_variances(cloud: PointCloud, params: Parameters, pa: dict, I: slice, J:
         var["ET"] = e
     else:
         var["ET"] = np.broadcast_to(np.float64(0.0), shape)
-    if params.sigma_ER_urad > 0 and pa["P_axes"]:   # (no offsets: n x p = 0, ER = 0)
+    if params.sigma_ER_urad > 0 and pa["any_offset"]:   # (no offsets: n x p = 0, ER = 0)
         ai, aj = ws("ai", shape), ws("aj", shape)
         np.einsum("kij,ki->ij", n3, P[:, I], out=ai)
         np.einsum("kij,kj->ij", n3, P[:, J], out=aj)
@@ -287,14 +291,12 @@ def rect_variances(cloud: PointCloud, params: Parameters, pa: dict, I: slice, J:
         var["ER"] = er
     else:
         var["ER"] = np.broadcast_to(np.float64(0.0), shape)
-    oi = np.einsum("kij,ki->ij", n3, N[:, I], out=ws("oi", shape))
-    oj = np.einsum("kij,kj->ij", n3, N[:, J], out=ws("oj", shape))
+    o2 = ws.planes("o", 2, shape)
+    oi = np.einsum("kij,ki->ij", n3, N[:, I], out=o2[0])
+    oj = np.einsum("kij,kj->ij", n3, N[:, J], out=o2[1])
     # exp(-|n_i - n_j|^2 / lambda^2) = exp(2 M_i.M_j - |M_i|^2 - |M_j|^2), M = n / lambda_P;
     # only pairs of one probe (one lambda) use it
-    M, M2 = pa["Mt"], pa["M2t"]
-    kern = mul(col(M, 0), row(M2, 0), out=ws("kern", shape))
-    kern += mul(col(M, 1), row(M2, 1), out=t)
-    kern += mul(col(M, 2), row(M2, 2), out=t)
+    kern = np.einsum("ki,kj->ij", pa["M2t"][:, I], pa["Mt"][:, J], out=ws("kern", shape))
     kern -= pa["mm"][I][:, None]
     kern -= pa["mm"][J][None, :]
     np.exp(kern, out=kern)
@@ -302,11 +304,10 @@ def rect_variances(cloud: PointCloud, params: Parameters, pa: dict, I: slice, J:
     kern *= np.take(pa["T_2sp"][:, J], kI, axis=0, out=t)
     cross = kern
     cross += np.take(pa["T_2s0"][:, J], kI, axis=0, out=t)
-    Pv = mul(oi, pa["sP2"][I][:, None], out=ws("P", shape))
-    Pv *= oi
-    t = mul(oj, pa["sP2"][J][None, :], out=t)
-    t *= oj
-    Pv += t
+    so = ws.planes("so", 2, shape)
+    mul(oi, pa["sP2"][I][:, None], out=so[0])
+    mul(oj, pa["sP2"][J][None, :], out=so[1])
+    Pv = np.einsum("kij,kij->ij", so, o2, out=ws("P", shape))
     cross *= oi
     cross *= oj
     Pv -= cross
