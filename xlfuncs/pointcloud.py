@@ -328,10 +328,12 @@ def row_blocks(m: int, block: int) -> list[tuple[int, int, int]]:
     return blocks
 
 
-#: pairs per block of the all-pairs kernel: the 22 buffers of a thread's :class:`PairWorkspace`
-#: (2.9 MB) stay in the cache while the Python overhead per block (about 130 numpy calls) stays
-#: small (measured at m = 3,000, one thread, CPU time per pair under load: 76 ns with blocks of
-#: 4,096 pairs, 69 ns 8,192, 62 ns 16,384, 63 ns 32,768, 69 ns 65,536; bench/results/pairs.md)
+#: pairs per block of the all-pairs kernel: the 24 planes of a thread's :class:`PairWorkspace`
+#: (3.1 MB) stay near the cache while the Python overhead per block (about 80 numpy calls) stays
+#: small (measured at m = 3,000, one thread, CPU time per pair under load, before the einsum
+#: dot products: 76 ns with blocks of 4,096 pairs, 69 ns 8,192, 62 ns 16,384, 63 ns 32,768, 69 ns
+#: 65,536; after them, without output writes, min of 9 at load 7: 68 ns 8,192, 64 ns 12,288,
+#: 66 ns 16,384, 64 ns 24,576, 64 ns 32,768; bench/results/pairs.md)
 PAIR_BLOCK = 16_384
 
 
