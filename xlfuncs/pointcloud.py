@@ -204,7 +204,9 @@ def rect_variances(cloud: PointCloud, params: Parameters, pa: dict, I: slice, J:
     """Distances and per-factor variances (µm²) for every (i in I, j in J), as 2-D arrays.
 
     The quadratic form of eq. (29) with g = [-n_ij; n_ij], factor by factor, written per
-    coordinate so that everything is a broadcast of row slices (no gathers):
+    coordinate so that everything is a broadcast of row slices (no gathers); the vectors per pair
+    (n, u_j - u_i) are stacked x, y, z planes and their dot products one ``np.einsum`` each
+    (no BLAS; the products summed in the order x, y, z, as the passes they replace):
     S: n^T G(u_j - u_i) (eq. 11); ET: 2 sigma^2 (1 - rho); ER: m = n x p (section 6.5), with
     |n x p|^2 = |p|^2 - (n.p)^2 and (n x p_i).(n x p_j) = p_i.p_j - (n.p_i)(n.p_j);
     P: o_i = n_i.n_ij, o_j = n_j.n_ij (section 6.6).  R (eq. 8) is one number for every pair
