@@ -6,15 +6,18 @@ alternately so that each sees the same load:
 
 * ``streamed``  :func:`xlfuncs.pointcloud.iter_distance_components`: blocks of 16,384 pairs in
                 float64, each written to eight raw float64 files (all 8 m(m-1)/2 numbers kept,
-                on disk) -- memory a few blocks (goal <= 300 MB);
+                on disk) -- memory a few blocks (goal <= 300 MB); the default threads (now one);
+* ``streamed, 2 threads``  the same with ``workers=2`` (the thread policy: is the second core
+                worth its GIL hand-offs?);
 * ``arrays``    :func:`xlfuncs.pointcloud.distance_components`: the eight arrays in memory
-                (288 MB of output by themselves);
+                (288 MB of output by themselves); the default threads (now one);
 * ``dense``     the reference: V_X formed densely (:func:`xlfuncs.pointcloud.V_X`, 3m x 3m) and
                 u(d_ij)^2 = n^T (V_ii + V_jj - V_ij - V_ji) n for every pair with numpy, row by row.
 
 ``--before=DIR:LABEL`` adds the streamed and in-memory cases on another checkout's ``xlfuncs`` (the
-code before, ``git archive COMMIT xlfuncs | tar -x -C DIR``), alternating with the others in the
-same run.
+code before, ``mkdir -p DIR/cmmwb && git archive COMMIT xlfuncs | tar -x -C DIR/cmmwb``: the
+package must be ``DIR/cmmwb/xlfuncs``, or the editable install's ``cmmwb.xlfuncs`` is imported
+instead; every run checks which file it imported), alternating with the others in the same run.
 The 2-core machine is shared with other jobs: every row gives the 1-minute load average; the
 speed-up is the ratio of the dense reference's best (and median) wall time to the case's in the
 same run, and of the median CPU times (all threads), the measure least disturbed by the load.
@@ -32,6 +35,8 @@ import textwrap
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
+#: the line of bench/results/pairs.md from which on the text is kept when the table is rewritten
+NOTES = "<!-- notes: not written by bench_pairs.py -->"
 
 SETUP = """
 import time, resource, json, os, tempfile
@@ -45,13 +50,12 @@ cloud = pc.PointCloud(X, N, np.arange(m) % 2, probes)
 params = pc.Parameters(0.2, 0.7, 0.7, 0.7, 0.2, 0.2, 200, 4.0, 400, 0.1, 0.1, 0.5)
 """
 
-CASES = {
-    "streamed": SETUP + """
+STREAMED = """
 tmp = tempfile.mkdtemp()
 t = time.perf_counter(); c = time.process_time()
 files = None
 count = 0
-for sl, part in pc.iter_distance_components(cloud, params):
+for sl, part in pc.iter_distance_components(cloud, params, workers=WORKERS):
     if files is None:
         files = {k: open(os.path.join(tmp, k + ".f64"), "wb") for k in part}
     for k, v in part.items():
@@ -66,7 +70,11 @@ check = [float(u[0]), float(u[count // 2]), float(u[-1])]
 for k in files:
     os.remove(os.path.join(tmp, k + ".f64"))
 os.rmdir(tmp)
-""",
+"""
+
+CASES = {
+    "streamed": SETUP + "WORKERS = None" + STREAMED,          # the default of the code measured
+    "streamed, 2 threads": SETUP + "WORKERS = 2" + STREAMED,
     "arrays": SETUP + """
 t = time.perf_counter(); c = time.process_time()
 r = pc.distance_components(cloud, params)
@@ -94,7 +102,7 @@ check = [float(u[0]), float(u[len(u) // 2]), float(u[-1])]
 }
 
 TAIL = """
-print("RESULT", json.dumps({"seconds": seconds, "cpu": cpu,
+print("RESULT", json.dumps({"seconds": seconds, "cpu": cpu, "module": pc.__file__,
                             "peak_MB": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
                             "check": check}))
 """
@@ -107,13 +115,16 @@ def run(case: str, source: Path) -> dict:
     if p.returncode != 0:
         raise RuntimeError(p.stderr)
     r = json.loads([ln for ln in p.stdout.splitlines() if ln.startswith("RESULT")][-1][7:])
+    # the editable install maps cmmwb.xlfuncs to this checkout unless DIR/cmmwb/xlfuncs exists
+    assert Path(r["module"]).resolve().is_relative_to(source.resolve()), (source, r["module"])
     r["load"] = os.getloadavg()[0]
     return r
 
 
 def main(argv: list[str]) -> int:
     repeats = int(os.environ.get("BENCH_REPEATS", "3"))
-    runs = [("streamed", ROOT, "this checkout"), ("arrays", ROOT, "this checkout")]
+    runs = [("streamed", ROOT, "this checkout"), ("streamed, 2 threads", ROOT, "this checkout"),
+            ("arrays", ROOT, "this checkout")]
     for a in argv:
         if a.startswith("--before="):       # a checkout of the code before, e.g. git archive COMMIT xlfuncs
             src, _, label = a.split("=", 1)[1].partition(":")
@@ -151,7 +162,9 @@ def main(argv: list[str]) -> int:
                      f"{statistics.median(cs):.2f} | {cpu_dense / statistics.median(cs):.1f}x | "
                      f"{max(r['load'] for r in rs):.1f} |")
     out = ROOT / "bench" / "results" / "pairs.md"
-    out.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    old = out.read_text(encoding="utf-8") if out.exists() else ""
+    notes = old[old.index(NOTES):] if NOTES in old else NOTES + "\n"   # the hand-written profile
+    out.write_text("\n".join(lines) + "\n\n" + notes, encoding="utf-8")
     print("\n".join(lines))
     return 0
 

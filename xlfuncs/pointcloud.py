@@ -14,7 +14,6 @@ Two evaluation paths give the same numbers:
 
 from __future__ import annotations
 
-import os
 import threading
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
@@ -154,18 +153,25 @@ def pair_arrays(cloud: PointCloud, pa: dict) -> dict:
     sPQ2 = pa["sigma_PQ_um"] ** 2
     s0, sp = pa["sigma_P0_um"], pa["sigma_P_um"]
     Pk = P[first] if cloud.m else np.zeros((K, 3))
+    ilam = 1.0 / np.where(lam > 0, lam, 1.0)
+    M = cloud.N * ilam[:, None]
     return {"Xt": np.ascontiguousarray(cloud.X_mm.T), "Nt": np.ascontiguousarray(cloud.N.T),
             "Ut": np.ascontiguousarray(cloud.ram_mm.T),
             "Pt": np.ascontiguousarray(P.T), "p2": np.einsum("ij,ij->i", P, P),
+            "any_offset": bool(np.any(P != 0)),
             "sPQ2": sPQ2, "sP2": s0 ** 2 + sp ** 2,
-            "ilamP": 1.0 / np.where(lam > 0, lam, 1.0),
+            # normals over lambda_P: |M_i - M_j|^2 = |n_i - n_j|^2 / lambda^2 for points of one
+            # probe, formed as 2 M_i.M_j - |M_i|^2 - |M_j|^2 (outer products, no full-size reads)
+            "Mt": np.ascontiguousarray(M.T), "M2t": np.ascontiguousarray(2.0 * M.T),
+            "mm": np.einsum("ij,ij->i", M, M),
             # per probe pair (eq. 9, section 6.5, section 6.6): PQ is sigma_PQ,i^2 + sigma_PQ,j^2
             # for different probes, p_i.p_j, and the same-probe factors of the probing covariance
             "T_PQ": np.where(same, 0.0, sPQ2[first][:, None] + sPQ2[None, :]),
             "T_pij": (Pk[:, 0][:, None] * P[:, 0][None, :] + Pk[:, 1][:, None] * P[:, 1][None, :]
                       + Pk[:, 2][:, None] * P[:, 2][None, :]),
-            "T_s0": np.where(same, s0[first][:, None] * s0[None, :], 0.0),
-            "T_sp": np.where(same, sp[first][:, None] * sp[None, :], 0.0)}
+            # (doubled, exactly: the factor 2 of the cross term 2 C o_i o_j)
+            "T_2s0": np.where(same, 2.0 * (s0[first][:, None] * s0[None, :]), 0.0),
+            "T_2sp": np.where(same, 2.0 * (sp[first][:, None] * sp[None, :]), 0.0)}
 
 
 class PairWorkspace:
@@ -183,13 +189,24 @@ class PairWorkspace:
             b = self.flat[name] = np.empty(max(size, 1))
         return b[:size].reshape(shape)
 
+    def planes(self, name: str, k: int, shape: tuple[int, int]) -> np.ndarray:
+        """A (k, rows, columns) buffer: k numbers per pair, plane by plane (the operands of one
+        einsum over the planes)."""
+        return self(name, (k * shape[0], shape[1])).reshape((k,) + tuple(shape))
+
+    def xyz(self, name: str, shape: tuple[int, int]) -> np.ndarray:
+        """The x, y and z planes of one vector per pair."""
+        return self.planes(name, 3, shape)
+
 
 def rect_variances(cloud: PointCloud, params: Parameters, pa: dict, I: slice, J: slice,
                    ws: PairWorkspace | None = None):
     """Distances and per-factor variances (µm²) for every (i in I, j in J), as 2-D arrays.
 
     The quadratic form of eq. (29) with g = [-n_ij; n_ij], factor by factor, written per
-    coordinate so that everything is a broadcast of row slices (no gathers):
+    coordinate so that everything is a broadcast of row slices (no gathers); the vectors per pair
+    (n, u_j - u_i) are stacked x, y, z planes and their dot products one ``np.einsum`` each
+    (no BLAS; the products summed in the order x, y, z, as the passes they replace):
     S: n^T G(u_j - u_i) (eq. 11); ET: 2 sigma^2 (1 - rho); ER: m = n x p (section 6.5), with
     |n x p|^2 = |p|^2 - (n.p)^2 and (n x p_i).(n x p_j) = p_i.p_j - (n.p_i)(n.p_j);
     P: o_i = n_i.n_ij, o_j = n_j.n_ij (section 6.6).  R (eq. 8) is one number for every pair
@@ -207,27 +224,28 @@ def rect_variances(cloud: PointCloud, params: Parameters, pa: dict, I: slice, J:
     row = lambda A, k: A[k, I][:, None]  # noqa: E731
     mul, add, sub = np.multiply, np.add, np.subtract
     t = ws("t", shape)
-    nx, ny, nz = (sub(col(X, k), row(X, k), out=ws("n" + "xyz"[k], shape)) for k in range(3))
-    d = mul(nx, nx, out=ws("d", shape))
-    d += mul(ny, ny, out=t)
-    d += mul(nz, nz, out=t)
+    # dot products over x, y, z as one einsum of the stacked planes (one pass, not five; the
+    # products summed in the same order x, y, z)
+    n3 = ws.xyz("n", shape)
+    for k in range(3):
+        sub(col(X, k), row(X, k), out=n3[k])
+    d = np.einsum("kij,kij->ij", n3, n3, out=ws("d", shape))
     np.sqrt(d, out=d)
-    inv = np.divide(1.0, d, out=t)
-    nx *= inv
-    ny *= inv
-    nz *= inv
+    n3 *= np.divide(1.0, d, out=t)
+    nx, ny, nz = n3
     var: dict[str, np.ndarray] = {}
     var["R"] = np.broadcast_to(np.float64(2.0 * params.sigma_R_um**2), shape)
     kI = cloud.probe_index[I]
     var["PQ"] = np.take(pa["T_PQ"][:, J], kI, axis=0, out=ws("PQ", shape))
     # ram differences u_j - u_i (eq. 11: G is linear in the ram position)
     U = pa["Ut"]
-    ux, uy, uz = (sub(col(U, k), row(U, k), out=ws("u" + "xyz"[k], shape)) for k in range(3))
+    u3 = ws.xyz("u", shape)
+    for k in range(3):
+        sub(col(U, k), row(U, k), out=u3[k])
     c = V_S_diag_um_per_mm2(params)
-    a0 = mul(nx, ux, out=ws("a", shape))
-    a0 += mul(ny, uy, out=t)
-    a0 += mul(nz, uz, out=t)
-    ux2, uy2, uz2 = mul(ux, ux, out=ux), mul(uy, uy, out=uy), mul(uz, uz, out=uz)
+    a0 = np.einsum("kij,kij->ij", n3, u3, out=ws("a", shape))
+    u3 *= u3
+    ux2, uy2, uz2 = u3
     # sum_k c_k g_k^2 with g = (n.u, nx ux, ny uy, nz uz, nx uy, nx uz, ny uz), grouped by n_a^2
     S = mul(a0, c[0], out=ws("S", shape))
     S *= a0
@@ -256,12 +274,10 @@ def rect_variances(cloud: PointCloud, params: Parameters, pa: dict, I: slice, J:
         var["ET"] = e
     else:
         var["ET"] = np.broadcast_to(np.float64(0.0), shape)
-    if params.sigma_ER_urad > 0:
+    if params.sigma_ER_urad > 0 and pa["any_offset"]:   # (no offsets: n x p = 0, ER = 0)
         ai, aj = ws("ai", shape), ws("aj", shape)
-        for a, side in ((ai, row), (aj, col)):
-            mul(nx, side(P, 0), out=a)
-            a += mul(ny, side(P, 1), out=t)
-            a += mul(nz, side(P, 2), out=t)
+        np.einsum("kij,ki->ij", n3, P[:, I], out=ai)
+        np.einsum("kij,kj->ij", n3, P[:, J], out=aj)
         rho = mul(du2, -1.0 / params.lambda_ER_mm**2, out=ws("rho", shape))
         np.exp(rho, out=rho)
         er = add(pa["p2"][I][:, None], pa["p2"][J][None, :], out=ws("ER", shape))
@@ -277,30 +293,23 @@ def rect_variances(cloud: PointCloud, params: Parameters, pa: dict, I: slice, J:
         var["ER"] = er
     else:
         var["ER"] = np.broadcast_to(np.float64(0.0), shape)
-    oi, oj = ws("oi", shape), ws("oj", shape)
-    for o, side in ((oi, row), (oj, col)):
-        mul(nx, side(N, 0), out=o)
-        o += mul(ny, side(N, 1), out=t)
-        o += mul(nz, side(N, 2), out=t)
-    # exp(-|n_i - n_j|^2 / (lambda_i lambda_j)); only pairs of one probe (one lambda) use it
-    dn2 = ws("dn2", shape)
-    for k in range(3):
-        dk = sub(col(N, k), row(N, k), out=t if k else dn2)
-        dk *= dk
-        if k:
-            dn2 += dk
-    dn2 *= -pa["ilamP"][I][:, None]
-    dn2 *= pa["ilamP"][J][None, :]
-    kern = np.exp(dn2, out=dn2)
-    kern *= np.take(pa["T_sp"][:, J], kI, axis=0, out=t)
+    o2 = ws.planes("o", 2, shape)
+    oi = np.einsum("kij,ki->ij", n3, N[:, I], out=o2[0])
+    oj = np.einsum("kij,kj->ij", n3, N[:, J], out=o2[1])
+    # exp(-|n_i - n_j|^2 / lambda^2) = exp(2 M_i.M_j - |M_i|^2 - |M_j|^2), M = n / lambda_P;
+    # only pairs of one probe (one lambda) use it
+    kern = np.einsum("ki,kj->ij", pa["M2t"][:, I], pa["Mt"][:, J], out=ws("kern", shape))
+    kern -= pa["mm"][I][:, None]
+    kern -= pa["mm"][J][None, :]
+    np.exp(kern, out=kern)
+    # 2 C = 2 (s0_i s0_j + sp_i sp_j kern) for one probe, 0 otherwise (tables doubled exactly)
+    kern *= np.take(pa["T_2sp"][:, J], kI, axis=0, out=t)
     cross = kern
-    cross += np.take(pa["T_s0"][:, J], kI, axis=0, out=t)
-    Pv = mul(oi, pa["sP2"][I][:, None], out=ws("P", shape))
-    Pv *= oi
-    t = mul(oj, pa["sP2"][J][None, :], out=t)
-    t *= oj
-    Pv += t
-    cross *= 2.0
+    cross += np.take(pa["T_2s0"][:, J], kI, axis=0, out=t)
+    so = ws.planes("so", 2, shape)
+    mul(oi, pa["sP2"][I][:, None], out=so[0])
+    mul(oj, pa["sP2"][J][None, :], out=so[1])
+    Pv = np.einsum("kij,kij->ij", so, o2, out=ws("P", shape))
     cross *= oi
     cross *= oj
     Pv -= cross
@@ -321,10 +330,12 @@ def row_blocks(m: int, block: int) -> list[tuple[int, int, int]]:
     return blocks
 
 
-#: pairs per block of the all-pairs kernel: the 22 buffers of a thread's :class:`PairWorkspace`
-#: (2.9 MB) stay in the cache while the Python overhead per block (about 130 numpy calls) stays
-#: small (measured at m = 3,000, one thread, CPU time per pair under load: 76 ns with blocks of
-#: 4,096 pairs, 69 ns 8,192, 62 ns 16,384, 63 ns 32,768, 69 ns 65,536; bench/results/pairs.md)
+#: pairs per block of the all-pairs kernel: the 24 planes of a thread's :class:`PairWorkspace`
+#: (3.1 MB) stay near the cache while the Python overhead per block (about 80 numpy calls) stays
+#: small (measured at m = 3,000, one thread, CPU time per pair under load, before the einsum
+#: dot products: 76 ns with blocks of 4,096 pairs, 69 ns 8,192, 62 ns 16,384, 63 ns 32,768, 69 ns
+#: 65,536; after them, without output writes, min of 9 at load 7: 68 ns 8,192, 64 ns 12,288,
+#: 66 ns 16,384, 64 ns 24,576, 64 ns 32,768; bench/results/pairs.md)
 PAIR_BLOCK = 16_384
 
 
@@ -356,12 +367,12 @@ def _all_pairs_block(cloud, params, pa, b, out, base=0, ws=None):
     for q in range(rows):
         e = p + w - q
         out["d_mm"][p:e] = d[q, q:]
-        out["u_R_um"][p:e] = u_R
         for key, a in roots:
             np.sqrt(a[q, q:], out=out[key][p:e])
         p = e
+    out["u_R_um"][start:p] = u_R
     seg = out["d_mm"][start:p]
-    if np.any(seg <= 1e-9):
+    if seg.size and seg.min() <= 1e-9:
         i, j = all_pairs_index(m, i0, rows, int(np.flatnonzero(seg <= 1e-9)[0]))
         raise DegenerateGeometryError(
             f"points {cloud.labels[i]} and {cloud.labels[j]} are at the same place: "
@@ -379,12 +390,13 @@ def all_pairs_index(m: int, i0: int, rows: int, q: int) -> tuple[int, int]:
 
 
 def iter_distance_components(cloud: PointCloud, params: Parameters, *, block: int = PAIR_BLOCK,
-                             workers: int | None = None):
+                             workers: int = 1):
     """Every pair i < j streamed in blocks, in ``all_pairs`` order: yields ``(sl, part)`` with
     ``part`` the arrays of :func:`distance_components` (float64) for the pairs ``sl`` of the
     whole result.  Memory is a few blocks, whatever m: a consumer that writes or reduces the
     blocks handles m(m-1)/2 pairs without holding them.  Blocks run on ``workers`` threads
-    (default: one per core), at most two blocks ahead of the consumer per thread."""
+    (default one: on the 2-core machine a second thread made it slower, GIL hand-offs at every
+    numpy call; bench/results/pairs.md), at most two blocks ahead of the consumer per thread."""
     pa = probe_arrays(cloud, params)
     pa.update(pair_arrays(cloud, pa))
 
@@ -405,9 +417,9 @@ def iter_distance_components(cloud: PointCloud, params: Parameters, *, block: in
 
 
 def _ordered_blocks(work, blocks, workers):
-    """work(b) for every block on ``workers`` threads (default one per core), in order, at most
-    two blocks ahead of the consumer per thread."""
-    workers = min(len(blocks), workers or os.cpu_count() or 1)
+    """work(b) for every block on ``workers`` threads (at least one), in order, at most two
+    blocks ahead of the consumer per thread."""
+    workers = min(len(blocks), workers or 1)
     if workers <= 1:
         yield from map(work, blocks)
         return
@@ -425,7 +437,8 @@ def _ordered_blocks(work, blocks, workers):
 
 
 def distance_components(cloud: PointCloud, params: Parameters, pairs: np.ndarray | None = None,
-                        *, block: int = PAIR_BLOCK, progress=None) -> dict[str, np.ndarray]:
+                        *, block: int = PAIR_BLOCK, progress=None,
+                        workers: int = 1) -> dict[str, np.ndarray]:
     """d_ij (mm), u(d_ij) (µm) and the per-factor u (µm) of eq. (30) for many pairs.
 
     ``pairs=None`` means every pair i < j, in the order of ``all_pairs`` (the blocks of
@@ -433,7 +446,8 @@ def distance_components(cloud: PointCloud, params: Parameters, pairs: np.ndarray
     that function).  Evaluates the quadratic form of eq. (29) factor by factor without forming
     V_X, about ``block`` pairs at a time, so memory grows only through the outputs.  Returns a
     dict with keys ``d_mm``, ``u_um`` and ``u_<factor>_um``.  ``progress(done, total)`` is
-    called after every block.
+    called after every block.  ``workers``: threads for the blocks of all pairs (default one, as
+    :func:`iter_distance_components`).
     """
     pa = probe_arrays(cloud, params)
     m = cloud.m
@@ -452,7 +466,7 @@ def distance_components(cloud: PointCloud, params: Parameters, pairs: np.ndarray
             return _all_pairs_block(cloud, params, pa, b, out, ws=local.ws)
 
         done = 0
-        for size in _ordered_blocks(work, row_blocks(m, block), None):
+        for size in _ordered_blocks(work, row_blocks(m, block), workers):
             done += size
             if progress is not None:
                 progress(done, total)
