@@ -8,9 +8,11 @@ measured value and u its standard uncertainty (JCGM 106:2012, 7.2-7.3).  A toler
   (JCGM 106:2012, 7.3.2 eq. (9)-(10) one-sided, 7.4 eq. (12) two-sided).
 * :func:`acceptance_limits`: the acceptance interval [A_L, A_U] of a decision rule: guard band
   w = r·U inside the tolerance interval (guarded acceptance, JCGM 106:2012, 8.3.2), outside it
-  (guarded rejection, 8.3.3), none (simple acceptance, 8.2), or w = z·u with
-  z = Φ⁻¹(1 - α) for a stated largest probability of false acceptance α (specific risk, 8.3.2 and
-  9.3: an accepted item at the acceptance limit of a one-sided interval has p_c = 1 - α).
+  (guarded rejection, 8.3.3), none (simple acceptance, 8.2), or, for a stated largest probability
+  of false acceptance α (specific risk, 8.3.2 and 9.3), the w at which an item on the acceptance
+  limit has p_c = 1 - α exactly: w = z·u with z = Φ⁻¹(1 - α) for a one-sided interval, the root
+  of eq. (12) for a two-sided one (:func:`specific_risk_guard_band_um`, Newton steps that the
+  Decision sheet repeats cell by cell).
 * :func:`decide`: the outcome for one characteristic: ``conforms``, ``does not conform`` or
   ``cannot be decided``, and the zone the measured value falls in.
 * :func:`acceptance_limits_for_p_c`: the exact acceptance limits for a required p_c (one- and
@@ -215,7 +217,9 @@ def probability_of_conformance(value_mm, u_um, tolerance: Tolerance):
 def guard_band_um(rule: DecisionRule, U_um: float, k: float) -> float:
     """The guard band w (µm), positive when the acceptance interval lies inside the tolerance
     interval: r·U (guarded acceptance), -r·U (guarded rejection), 0 (simple acceptance),
-    U (ISO 14253-1 conformance zone), z·u with z = Φ⁻¹(1 - max_pfa) (specific risk)."""
+    U (ISO 14253-1 conformance zone), z·u with z = Φ⁻¹(1 - max_pfa) (specific risk: exact for a
+    one-sided interval; :func:`decide` takes the exact two-sided one from
+    :func:`specific_risk_guard_band_um`)."""
     if rule.kind == "simple":
         return 0.0
     if rule.kind == "iso14253":
@@ -225,6 +229,57 @@ def guard_band_um(rule: DecisionRule, U_um: float, k: float) -> float:
     if rule.kind == "guarded_rejection":
         return -rule.r * float(U_um)
     return norm_ppf(1.0 - rule.max_pfa) * float(U_um) / float(k)
+
+
+#: Newton steps of :func:`specific_risk_iterates` (the Decision sheet has one column per step)
+NEWTON_STEPS = 5
+
+
+def specific_risk_iterates(h: float, max_pfa: float, steps: int = NEWTON_STEPS) -> list[float]:
+    """Newton's iteration for the exact specific-risk acceptance limit of a two-sided interval.
+
+    With h = (T_U - T_L)/(2u) and the acceptance limits at the midpoint ± d·u, an item on the limit
+    has p_c = Φ(h - d) + Φ(h + d) - 1 (JCGM 106:2012, 7.4 eq. (12)); the limit is the root of
+    G(s) = Φ(h - √s) + Φ(h + √s) - 2 + α, s = d² (α = max_pfa).  In s the root is simple even where
+    the acceptance interval shrinks to the midpoint (G'(0) = -h φ(h) ≠ 0; in d it would be a
+    double root), so Newton converges quadratically from the one-sided start s₀ = max(0, h - z)²,
+    z = Φ⁻¹(1 - α): an overshoot below 0 is cut to 0, from where G is convex and the steps rise
+    monotonically to the root.  G'(s) = (φ(h + d) - φ(h - d))/(2d), -h φ(h) at s = 0.  Returns
+    [s₀, s₁, ..., s_steps].  Five steps reach the root to the conditioning of the problem (about
+    1e-7 in d at the very edge where the interval vanishes, 1e-12 and better elsewhere; measured
+    against the bisection of :func:`acceptance_limits_for_p_c` for 1 - α = 0.5001 ... 0.999999)."""
+    z = norm_ppf(1.0 - max_pfa)
+    s = max(0.0, h - z) ** 2
+    out = [s]
+    for _ in range(steps):
+        d = math.sqrt(s)
+        g = float(norm_cdf(h - d)) + float(norm_cdf(h + d)) - 2.0 + max_pfa
+        dg = -h * _pdf(h) if s == 0.0 else (_pdf(h + d) - _pdf(h - d)) / (2.0 * d)
+        s = max(0.0, s - g / dg)
+        out.append(s)
+    return out
+
+
+def _pdf(x: float) -> float:
+    return math.exp(-0.5 * x * x) / math.sqrt(2.0 * math.pi)
+
+
+def specific_risk_guard_band_um(tolerance: Tolerance, u_um: float, max_pfa: float) -> float:
+    """The guard band w (µm) of the specific-risk rule: an item on the acceptance limit has
+    p_c = 1 - max_pfa (JCGM 106:2012, 8.3.2 and 9.3).  One-sided: w = z·u, z = Φ⁻¹(1 - max_pfa)
+    (7.3 Table 1).  Two-sided: w = (h - d)·u with d = √s from :func:`specific_risk_iterates`;
+    when even the midpoint has p_c < 1 - max_pfa nothing can be accepted and w is half the
+    tolerance (1 + 1e-9), which crosses the limits (:func:`empty`), as
+    :func:`acceptance_limits_for_p_c` does."""
+    u = float(u_um)
+    if not tolerance.two_sided:
+        return norm_ppf(1.0 - max_pfa) * u
+    assert tolerance.lsl_mm is not None and tolerance.usl_mm is not None
+    half_um = (tolerance.usl_mm - tolerance.lsl_mm) * UM_PER_MM / 2.0
+    h = half_um / u
+    if float(norm_cdf(h)) - float(norm_cdf(-h)) < 1.0 - max_pfa:
+        return half_um * (1.0 + 1e-9)
+    return (h - math.sqrt(specific_risk_iterates(h, max_pfa)[-1])) * u
 
 
 def acceptance_limits(tolerance: Tolerance, w_um: float) -> tuple[float | None, float | None]:
@@ -264,7 +319,8 @@ def decide(value_mm: float, u_um: float, tolerance: Tolerance, rule: DecisionRul
         raise ModelError(f"a decision needs a finite value and u > 0, k > 0 (value {y!r} mm, u {u!r} µm, k {k!r})")
     U = k * u
     p_c = probability_of_conformance(y, u, tolerance)
-    w = guard_band_um(rule, U, k)
+    w = (specific_risk_guard_band_um(tolerance, u, rule.max_pfa) if rule.kind == "specific_risk"
+         else guard_band_um(rule, U, k))
     acc = acceptance_limits(tolerance, w)
     rej: tuple[float | None, float | None] = (None, None)
     if rule.kind == "iso14253":

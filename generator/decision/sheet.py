@@ -39,6 +39,9 @@ def column(name: str) -> int:
 #: chart data: deviations from the reference (tolerance midpoint or the one limit), µm
 CHART_COLUMNS = ["dev_um", "dev_plus_U_um", "dev_minus_U_um", "lsl_dev_um", "usl_dev_um",
                  "A_L_dev_um", "A_U_dev_um"]
+#: the specific-risk rule's exact two-sided acceptance limits: h = (T_U - T_L)/(2u) and Newton's
+#: iterates s_j = (d/u)² of xlfuncs.conformity.specific_risk_iterates, one column per step
+NEWTON_COLUMNS = ["h_half_tol_per_u"] + [f"newton_s{j}" for j in range(cf.NEWTON_STEPS + 1)]
 
 
 def _results_cols(book: Book, sheet: str = "Results") -> dict[str, int]:
@@ -78,7 +81,9 @@ def write_sheet(book: Book, kind: str, spec: DecisionSpec, results: dict, decisi
         book.text(ws, r0, 3 + 2 * j, label, font=HEADER_FONT)
         book.input(ws, r0, 4 + 2 * j, name, value, lo=lo, hi=hi, note=note)
     h = HEADER_ROW
-    book.header(ws, h, 1, COLUMNS + CHART_COLUMNS, notes=[
+    newton = rule.kind == "specific_risk"
+    extra = NEWTON_COLUMNS if newton else []
+    book.header(ws, h, 1, COLUMNS + CHART_COLUMNS + extra, notes=[
         None, "the characteristic (Results row)", "measured value (input) or the task's value (from Results)",
         "the task's standard uncertainty (type B, ν = ∞)",
         "repeatability: standard deviation of the n repeated measurements whose mean is the value (input)",
@@ -92,8 +97,11 @@ def write_sheet(book: Book, kind: str, spec: DecisionSpec, results: dict, decisi
         "below R_L: does not conform", "above R_U: does not conform",
         "probability of conformance p_c = Φ((T_U-y)/u) - Φ((T_L-y)/u) (JCGM 106:2012, eq. (12))",
         "the decision", "the zone of the measured value"] + [f"chart: {c} from the tolerance midpoint "
-                                                              "(one-sided: from the limit)" for c in CHART_COLUMNS])
-    c = {name: j + 1 for j, name in enumerate(COLUMNS + CHART_COLUMNS)}
+                                                              "(one-sided: from the limit)" for c in CHART_COLUMNS]
+        + (["two-sided tolerance: h = (T_U - T_L)/(2u), half the tolerance in units of u"]
+           + [NEWTON_NOTE + (" Start: s_0 = max(0, h - z)², z = Φ⁻¹(1 - max_pfa), the one-sided limit." if j == 0
+                             else f" Step {j}.") for j in range(cf.NEWTON_STEPS + 1)] if newton else []))
+    c = {name: j + 1 for j, name in enumerate(COLUMNS + CHART_COLUMNS + extra)}
     for i, (t, d) in enumerate(zip(spec.tolerances, decisions)):
         r = h + 1 + i
         row = rows[t.label]
@@ -168,7 +176,14 @@ def write_sheet(book: Book, kind: str, spec: DecisionSpec, results: dict, decisi
         w = {"simple": "=0", "iso14253": f"={U}", "guarded_acceptance": f"=decision_r*{U}",
              "guarded_rejection": f"=-(decision_r*{U})",
              "specific_risk": f"=_xlfn.NORM.S.INV(1-decision_max_pfa)*{u}"}[rule.kind]
-        book.formula(ws, r, c["w_um"], w, fmt=FMT_UM)
+        w_note = None
+        if newton and lsl is not None and usl is not None:
+            w, w_note = _newton_cells(book, ws, r, c, at, d, lsl, usl, u, cache)
+        elif newton:
+            for name in NEWTON_COLUMNS:
+                book.text(ws, r, c[name], "—")
+            w_note = "one-sided tolerance: w = z·u, z = Φ⁻¹(1 - max_pfa) (JCGM 106:2012, 7.3 Table 1): p_c = 1 - max_pfa on A"
+        book.formula(ws, r, c["w_um"], w, fmt=FMT_UM, note=w_note)
         cache[at("w_um")] = d["w_um"]
         wc = at("w_um")
         acc = [None, None]
@@ -255,6 +270,41 @@ def write_sheet(book: Book, kind: str, spec: DecisionSpec, results: dict, decisi
         ws.column_dimensions[col(c[name])].width = width
     book.print_setup(ws, landscape=True, title_rows=h, area=f"A1:{col(c['zone'])}{last + 26}")
     return {SHEET: cache}
+
+
+NEWTON_NOTE = ("exact specific-risk acceptance limits A = midpoint ± d·u of a two-sided tolerance: the root "
+               "s = d² of Φ(h - √s) + Φ(h + √s) - 2 + max_pfa = 0 (p_c = 1 - max_pfa on A, JCGM 106:2012, "
+               "7.4 eq. (12)) by Newton's method, s_j+1 = max(0, s_j - G/G'), G' = (φ(h+d) - φ(h-d))/(2d), "
+               "-h·φ(h) at s = 0 (xlfuncs.conformity.specific_risk_iterates; docs/errata.md).")
+
+
+def _newton_cells(book: Book, ws, r: int, c: dict[str, int], at, d: dict, lsl: str, usl: str, u: str,
+                  cache: dict[str, Any]) -> tuple[str, str]:
+    """The Newton columns of one two-sided row of the specific-risk rule and the formula of its
+    guard band w = (h - √s_N)·u (or half the tolerance when even the midpoint falls short)."""
+    hc = at("h_half_tol_per_u")
+    book.formula(ws, r, c["h_half_tol_per_u"], f"=({usl}-{lsl})*1000/(2*{u})", fmt="0.000000")
+    half_um = (d["usl_mm"] - d["lsl_mm"]) * cf.UM_PER_MM / 2.0
+    h_val = half_um / d["u_um"]
+    cache[hc] = h_val
+    iterates = cf.specific_risk_iterates(h_val, d["max_pfa"])
+    book.formula(ws, r, c["newton_s0"], f"=MAX(0,{hc}-_xlfn.NORM.S.INV(1-decision_max_pfa))^2", fmt="0.000000")
+    for j in range(1, cf.NEWTON_STEPS + 1):
+        s = at(f"newton_s{j - 1}")
+        g = (f"_xlfn.NORM.S.DIST({hc}-SQRT({s}),TRUE)+_xlfn.NORM.S.DIST({hc}+SQRT({s}),TRUE)"
+             f"-2+decision_max_pfa")
+        dg = (f"IF({s}>0,(_xlfn.NORM.S.DIST({hc}+SQRT({s}),FALSE)-_xlfn.NORM.S.DIST({hc}-SQRT({s}),FALSE))"
+              f"/(2*SQRT({s})),-{hc}*_xlfn.NORM.S.DIST({hc},FALSE))")
+        book.formula(ws, r, c[f"newton_s{j}"], f"=MAX(0,{s}-({g})/({dg}))", fmt="0.000000")
+    for j, v in enumerate(iterates):
+        cache[at(f"newton_s{j}")] = v
+    last = at(f"newton_s{cf.NEWTON_STEPS}")
+    w = (f"=IF(_xlfn.NORM.S.DIST({hc},TRUE)-_xlfn.NORM.S.DIST(-{hc},TRUE)<1-decision_max_pfa,"
+         f"({usl}-{lsl})*1000/2*(1+1E-9),({hc}-SQRT({last}))*{u})")
+    note = ("two-sided tolerance: w = (h - √s_N)·u from the Newton columns at the right, so that p_c = 1 - max_pfa "
+            "exactly on A (JCGM 106:2012, 7.4 eq. (12)); half the tolerance (nothing accepted) when even the "
+            "midpoint has p_c < 1 - max_pfa")
+    return w, note
 
 
 def mm_format(U_um: float) -> str:

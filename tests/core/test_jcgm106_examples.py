@@ -256,3 +256,92 @@ def test_bearing_acceptance_limit_in_the_workbook(bearing_book, engine):
         assert printed((got - 50.0) / scale[d["characteristic"]], 1.67, 2)
         assert close(v[at(8 + i, "p_c")], d["p_c"], rel=1e-9)
         assert v[at(8 + i, "outcome")] == d["outcome"]
+
+
+# -- the specific-risk rule's exact two-sided acceptance limits (7.4 eq. (12), 9.3) ---------------
+
+@pytest.mark.parametrize("max_pfa", [0.4, 0.2, 0.05, 0.01, 1e-3, 1e-4])
+@pytest.mark.parametrize("c_m", [0.9, 0.99, 1.0, 1.2, 1.5, 2.0, 4.0, 50.0])
+def test_newtons_specific_risk_limit_is_the_bisections_root(c_m, max_pfa):
+    """The five Newton steps the Decision sheet repeats (xlfuncs.conformity.specific_risk_iterates)
+    land on the root that acceptance_limits_for_p_c finds by bisection, to 1e-9 u, and an item on
+    that limit has p_c = 1 - max_pfa; where the interval is empty both say so."""
+    u_um = 1.5
+    tol = cf.Tolerance.symmetric(50.0, 4 * c_m * u_um / 2 / 1000)
+    w = cf.specific_risk_guard_band_um(tol, u_um, max_pfa)
+    lo, hi = cf.acceptance_limits_for_p_c(tol, u_um, 1 - max_pfa)
+    assert abs(w - (tol.usl_mm - hi) * 1000) <= 1e-9 * u_um
+    got = cf.acceptance_limits(tol, w)
+    assert cf.empty(got) == cf.empty((lo, hi))
+    if not cf.empty(got):
+        assert cf.probability_of_conformance(got[1], u_um, tol) == pytest.approx(1 - max_pfa, abs=1e-12)
+        assert w >= cf.norm_ppf(1 - max_pfa) * u_um - 1e-12      # never outside the one-sided limit
+
+
+def test_newton_reaches_the_conditioning_floor_where_the_interval_vanishes():
+    """At h = Φ⁻¹((1 + p)/2) the acceptance interval is the midpoint alone (d = 0, a double root in
+    d); in s = d² the root is simple, and the iterates reach d = 0 to within the conditioning of the
+    problem (p_c is known to 1e-16, so d to about 1e-7)."""
+    for p in (0.6, 0.95, 0.999):
+        h = cf.norm_ppf((1 + p) / 2)
+        s = cf.specific_risk_iterates(h, 1 - p)
+        assert math.sqrt(s[-1]) <= 1e-6 and s[0] > 0
+
+
+@pytest.fixture(scope="module")
+def specific_risk_book(tmp_path_factory):
+    """Knuckle characteristics with two-sided tolerances of C_m = 0.9 (nothing can be accepted),
+    1.0 and 1.5 around 50 mm, specific-risk rule with max_pfa = 0.05, measured values at the
+    one-sided limit T_U - z·u (inside the approximate acceptance interval, outside the exact one)."""
+    from tests.helpers import EXAMPLES
+    from tests.helpers.decision import build
+
+    knuckle = EXAMPLES / "knuckle.toml"
+    tmp = tmp_path_factory.mktemp("specific_risk")
+    plain, _ = build(tmp, knuckle, name="plain.toml")
+    u = {c["name"]: c["u_um"] for c in plain["characteristics"]}
+    names = ["S1_S2_distance", "S3_from_S1S2", "S4_from_ABC"]
+    c_ms = [0.9, 1.0, 1.5]
+    z = cf.norm_ppf(0.95)
+
+    def edit(doc):
+        doc["task"]["name"] = "specific"
+        doc["decision"] = {"rule": "specific_risk", "max_pfa": 0.05, "tolerances": [
+            {"characteristic": n, "nominal_mm": 50.0, "tol_mm": 2 * c_m * u[n] / 1000,
+             "measured_mm": 50.0 + (2 * c_m - z) * u[n] / 1000}
+            for n, c_m in zip(names, c_ms)]}
+    results, book = build(tmp, knuckle, edit, name="specific.toml")
+    return results, book, c_ms
+
+
+def test_specific_risk_limits_in_the_json_are_exact(specific_risk_book):
+    results, _, c_ms = specific_risk_book
+    d0, d1, d2 = results["decisions"]
+    assert d0["acceptance_interval_empty"] and d0["outcome"] == cf.DOES_NOT_CONFORM
+    for d in (d1, d2):
+        tol = cf.Tolerance(d["lsl_mm"], d["usl_mm"])
+        lo, hi = cf.acceptance_limits_for_p_c(tol, d["u_um"], 0.95)
+        assert close(d["acceptance_limits_mm"][1], hi, rel=1e-12) and close(d["acceptance_limits_mm"][0], lo, rel=1e-12)
+        assert cf.probability_of_conformance(d["acceptance_limits_mm"][1], d["u_um"], tol) == pytest.approx(0.95, abs=1e-9)
+        # the value at the one-sided limit T_U - z·u: inside T_U - z·u, beyond the exact limit, p_c < 0.95
+        assert d["value_mm"] > d["acceptance_limits_mm"][1] and d["p_c"] < 0.95 and d["outcome"] == cf.DOES_NOT_CONFORM
+    assert d1["w_um"] > cf.norm_ppf(0.95) * d1["u_um"] * 1.01      # C_m = 1: the far tail matters
+
+
+@pytest.mark.parametrize("engine", ENGINES)
+def test_specific_risk_limits_in_the_workbook_are_exact(specific_risk_book, engine):
+    from cmmwb.generator.workbook.recalc import recalculate
+
+    from tests.helpers.decision import assert_engine_agrees, at
+
+    results, book, _ = specific_risk_book
+    assert assert_engine_agrees(book, engine) > 30
+    v = recalculate(book, engine)["Decision"]
+    for i, d in enumerate(results["decisions"]):
+        tol = cf.Tolerance(d["lsl_mm"], d["usl_mm"])
+        a_l, a_u = v[at(8 + i, "A_L_mm")], v[at(8 + i, "A_U_mm")]
+        lo, hi = cf.acceptance_limits_for_p_c(tol, d["u_um"], 0.95)
+        assert close(a_u, hi, rel=1e-9) and close(a_l, lo, rel=1e-9)
+        if i:
+            assert cf.probability_of_conformance(a_u, d["u_um"], tol) == pytest.approx(0.95, abs=1e-6)
+        assert v[at(8 + i, "outcome")] == d["outcome"] == cf.DOES_NOT_CONFORM
