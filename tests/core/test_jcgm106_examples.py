@@ -13,6 +13,8 @@ What each number is, and where it comes from (docs/errata.md, "JCGM 106:2012 wor
   reproduces this example; the printed pages of JCGM 106 9.5.4 themselves could not be read here,
   so those are the reference, to suncal's full printed precision, and the prior's non-conforming
   fraction is also checked against its closed form.
+* 7.4 eq. (12) / 9.3, the specific-risk rule's two-sided acceptance limits: the Newton iteration
+  of the core and of the Decision sheet against bisection, and p_c = 1 - max_pfa on the limits.
 * 9.5 (normal process and measuring system): no printed numbers at hand; checked against
   closed forms (the probability of acceptance) and the other order of integration (JCGM 106:2012,
   9.5: R_C is also the integral over accepted measured values of the specific risk 1 - p_c under
