@@ -535,3 +535,101 @@ def guard_band_for_global_risk(prior: Prior, u_m: float, tolerance_limits, max_c
         else:
             hi = m
     return 0.5 * (lo + hi)
+
+
+# -- global risks of a normal process in closed quadrature (what the Decision sheet computes) -------
+
+#: Gauss-Legendre points per panel of :func:`global_risks_normal` (the Decision sheet's node table)
+GL_POINTS = 48
+#: the standardised integration variable runs over [-GL_RANGE, GL_RANGE] (φ beyond: below 1e-31)
+GL_RANGE = 12.0
+GL_NODES, GL_WEIGHTS = (tuple(float(v) for v in a) for a in np.polynomial.legendre.leggauss(GL_POINTS))
+
+
+def risk_panels(mean_mm: float, sd_um: float, u_um: float, tolerance: Tolerance,
+                acceptance_mm: tuple[float | None, float | None]) -> dict:
+    """The panels of :func:`global_risks_normal`: which variable is integrated and, per risk
+    piece, the intervals [a, b] (clamped to ±GL_RANGE) and the integrand's kind.
+
+    A missing limit (one-sided tolerance) stands in at mean ∓ 1000·(σ₀ + u), where every normal
+    probability beyond it is 0 in double precision."""
+    far = 1000.0 * (sd_um + u_um) / UM_PER_MM
+    t_l = tolerance.lsl_mm if tolerance.lsl_mm is not None else mean_mm - far
+    t_u = tolerance.usl_mm if tolerance.usl_mm is not None else mean_mm + far
+    a_l = acceptance_mm[0] if acceptance_mm[0] is not None else mean_mm - far
+    a_u = acceptance_mm[1] if acceptance_mm[1] is not None else mean_mm + far
+    return {"T_L": t_l, "T_U": t_u, "A_L": a_l, "A_U": a_u, "over_error": u_um <= sd_um}
+
+
+def _clamp(a: float, b: float) -> tuple[float, float]:
+    a = min(max(a, -GL_RANGE), GL_RANGE)
+    b = min(max(b, -GL_RANGE), GL_RANGE)
+    return a, max(a, b)
+
+
+def _gl(f, a: float, b: float) -> float:
+    """Σ w_i f(m + h x_i) h on [a, b] (clamped), the sum one SUMPRODUCT of the sheet forms."""
+    a, b = _clamp(a, b)
+    h = (b - a) / 2.0
+    x = (a + b) / 2.0 + h * np.asarray(GL_NODES)
+    return float(np.sum(np.asarray(GL_WEIGHTS) * f(x)) * h)
+
+
+def _phi(x):
+    return np.exp(-0.5 * np.asarray(x) ** 2) / math.sqrt(2.0 * math.pi)
+
+
+def global_risks_normal(mean_mm: float, sd_um: float, u_um: float, tolerance: Tolerance,
+                        acceptance_mm: tuple[float | None, float | None]) -> GlobalRisks:
+    """Global consumer's and producer's risks (JCGM 106:2012, 9.5) of a normal process
+    η ~ N(μ, σ₀²) measured with a normal error e ~ N(0, u²) and accepted when η_m = η + e lies in
+    [A_L, A_U], by fixed Gauss-Legendre panels that the Decision sheet repeats with SUMPRODUCT.
+
+    The integral runs over the standardised variable with the smaller standard deviation, so that
+    the other one's distribution function, the integrand's second factor, varies no faster than the
+    normal density: over v = e/u when u <= σ₀, over x = (η - μ)/σ₀ otherwise.  Each risk is the sum
+    of its own small pieces, written with the tail (Φ or Q = 1 - Φ) in which they are small, so
+    that no difference of numbers near 1 loses the digits of a small risk:
+
+    * over v: R_C = P(η > T_U, η_m ∈ A) + P(η < T_L, η_m ∈ A),
+      R_P = P(η ∈ C, η_m > A_U) + P(η ∈ C, η_m < A_L), each an integral of φ(v) times a difference
+      of prior tails at A - u v, T, split where the integrand's form changes (v = (A - T)/u);
+    * over x: R_C = ∫_{x ∉ C} φ(x) Pr(η_m ∈ A | η) dx, R_P = ∫_{x ∈ C} φ(x) Pr(η_m ∉ A | η) dx.
+
+    An empty acceptance interval accepts nothing: R_C = 0, R_P = Pr(η ∈ C).  Lengths in mm, σ₀
+    and u in µm.  Checked against :func:`global_risks` (adaptive quadrature) in the tests."""
+    if not (math.isfinite(sd_um) and sd_um > 0 and math.isfinite(u_um) and u_um > 0):
+        raise ModelError(f"a normal process needs sd > 0 and u > 0 (got {sd_um!r} µm, {u_um!r} µm)")
+    p = risk_panels(mean_mm, sd_um, u_um, tolerance, acceptance_mm)
+    t_l, t_u, a_l, a_u = p["T_L"], p["T_U"], p["A_L"], p["A_U"]
+    s0, u = sd_um / UM_PER_MM, u_um / UM_PER_MM
+    x_l, x_u = (t_l - mean_mm) / s0, (t_u - mean_mm) / s0
+    nonconforming = float(norm_cdf(x_l)) + float(norm_cdf(-x_u))
+    if a_l > a_u:
+        return GlobalRisks(consumer=0.0, producer=1.0 - nonconforming, nonconforming=nonconforming)
+    if p["over_error"]:
+        def P0(t):    # prior distribution function Φ((t - μ)/σ₀)
+            return norm_cdf((np.asarray(t) - mean_mm) / s0)
+
+        def Q0(t):    # its upper tail
+            return norm_cdf((mean_mm - np.asarray(t)) / s0)
+
+        v1, v2, v3, v4 = (a_l - t_l) / u, (a_u - t_u) / u, (a_u - t_l) / u, (a_l - t_u) / u
+        V = GL_RANGE
+        r_c = (_gl(lambda v: _phi(v) * (Q0(a_l - u * v) - Q0(a_u - u * v)), -V, v4)
+               + _gl(lambda v: _phi(v) * (Q0(t_u) - Q0(a_u - u * v)), v4, v2)
+               + _gl(lambda v: _phi(v) * (P0(t_l) - P0(a_l - u * v)), v1, v3)
+               + _gl(lambda v: _phi(v) * (P0(a_u - u * v) - P0(a_l - u * v)), v3, V))
+        r_p = (_gl(lambda v: _phi(v) * (Q0(a_u - u * v) - Q0(t_u)), v2, v3)
+               + _gl(lambda v: _phi(v) * (Q0(t_l) - Q0(t_u)), v3, V)
+               + _gl(lambda v: _phi(v) * (P0(t_u) - P0(t_l)), -V, v4)
+               + _gl(lambda v: _phi(v) * (P0(a_l - u * v) - P0(t_l)), v4, v1))
+    else:
+        def eta(x):
+            return mean_mm + s0 * np.asarray(x)
+
+        V = GL_RANGE
+        r_c = (_gl(lambda x: _phi(x) * (norm_cdf((eta(x) - a_l) / u) - norm_cdf((eta(x) - a_u) / u)), -V, x_l)
+               + _gl(lambda x: _phi(x) * (norm_cdf((a_u - eta(x)) / u) - norm_cdf((a_l - eta(x)) / u)), x_u, V))
+        r_p = _gl(lambda x: _phi(x) * (norm_cdf((a_l - eta(x)) / u) + norm_cdf((eta(x) - a_u) / u)), x_l, x_u)
+    return GlobalRisks(consumer=r_c, producer=r_p, nonconforming=nonconforming)

@@ -347,3 +347,85 @@ def test_specific_risk_limits_in_the_workbook_are_exact(specific_risk_book, engi
         if i:
             assert cf.probability_of_conformance(a_u, d["u_um"], tol) == pytest.approx(0.95, abs=1e-6)
         assert v[at(8 + i, "outcome")] == d["outcome"] == cf.DOES_NOT_CONFORM
+
+
+# -- 9.5: global risks of a normal process in the Decision sheet ---------------------------------
+
+@pytest.mark.parametrize("mean_off_um, sd_um, u_um, w_in_u, side", [
+    (0.0, 3.0, 1.0, 0.0, "two"), (0.0, 3.0, 1.0, 2.0, "two"), (2.0, 1.5, 0.5, -1.0, "two"),
+    (0.0, 0.5, 1.0, 1.0, "two"), (3.0, 0.5, 1.0, 0.0, "two"), (1.0, 2.0, 2.0, 0.5, "two"),
+    (0.0, 3.0, 1.0, 1.0, "up"), (-2.0, 0.7, 1.2, 0.0, "low"), (0.0, 10.0, 0.1, 0.0, "two"),
+])
+def test_fixed_panel_global_risks_match_the_adaptive_quadrature(mean_off_um, sd_um, u_um, w_in_u, side):
+    """global_risks_normal (the Decision sheet's Gauss-Legendre panels) against global_risks
+    (adaptive, any prior): the same R_C, R_P and non-conforming fraction to 1e-9 relative (or
+    1e-16 absolute for the smallest), for u below and above σ₀, guarded acceptance and rejection,
+    one- and two-sided tolerances (a tolerance of ± 5 µm around 50 mm)."""
+    half = 5.0
+    tol = {"two": cf.Tolerance(50 - half / 1000, 50 + half / 1000), "up": cf.Tolerance(usl_mm=50 + half / 1000),
+           "low": cf.Tolerance(lsl_mm=50 - half / 1000)}[side]
+    acc = cf.acceptance_limits(tol, w_in_u * u_um)
+    mean = 50 + mean_off_um / 1000
+    fixed = cf.global_risks_normal(mean, sd_um, u_um, tol, acc)
+    um = lambda x: None if x is None else (x - 50) * 1000      # noqa: E731  (µm about 50 mm)
+    ref = cf.global_risks(cf.normal_prior(mean_off_um, sd_um), u_um, (um(tol.lsl_mm), um(tol.usl_mm)),
+                          (um(acc[0]), um(acc[1])))
+    for got, want in ((fixed.consumer, ref.consumer), (fixed.producer, ref.producer),
+                      (fixed.nonconforming, ref.nonconforming)):
+        assert abs(got - want) <= 1e-9 * abs(want) + 1e-16, (got, want)
+
+
+@pytest.fixture(scope="module")
+def process_book(tmp_path_factory):
+    """Knuckle characteristics with tolerances ± 2.5 u and a normal process prior each: u below
+    σ₀ (ISO 14253-1 rule's conformance zone accepted), u above σ₀, and an off-centre process."""
+    from tests.helpers import EXAMPLES
+    from tests.helpers.decision import build
+
+    knuckle = EXAMPLES / "knuckle.toml"
+    tmp = tmp_path_factory.mktemp("process")
+    plain, _ = build(tmp, knuckle, name="plain.toml")
+    u = {c["name"]: c["u_um"] for c in plain["characteristics"]}
+    names = ["S1_S2_distance", "S3_from_S1S2", "S4_from_ABC"]
+    priors = [(0.0, 3.0), (0.0, 0.5), (1.0, 1.5)]         # (mean offset, σ₀) in units of u
+
+    def edit(doc):
+        doc["task"]["name"] = "process"
+        doc["decision"] = {"rule": "simple", "tolerances": [
+            {"characteristic": n, "nominal_mm": 50.0, "tol_mm": 2.5 * u[n] / 1000, "measured_mm": 50.0,
+             "process_mean_mm": 50.0 + off * u[n] / 1000, "process_sd_um": sd * u[n]}
+            for n, (off, sd) in zip(names, priors)]}
+    results, book = build(tmp, knuckle, edit, name="process.toml")
+    return results, book
+
+
+def test_global_risks_in_the_json(process_book):
+    results, _ = process_book
+    for d in results["decisions"]:
+        tol = cf.Tolerance(d["lsl_mm"], d["usl_mm"])
+        g = cf.global_risks_normal(d["process_mean_mm"], d["process_sd_um"], d["u_um"], tol,
+                                   tuple(d["acceptance_limits_mm"]))
+        assert d["global_consumer_risk"] == g.consumer and d["global_producer_risk"] == g.producer
+        assert 0 < d["global_consumer_risk"] < d["process_nonconforming"] < 1
+        assert 0 < d["global_producer_risk"] < 1 - d["process_nonconforming"]
+        # the probability of acceptance in closed form: Pr(η_m ∈ A), η_m ~ N(μ, σ₀² + u²)
+        s = math.hypot(d["process_sd_um"], d["u_um"]) / 1000
+        a_l, a_u = d["acceptance_limits_mm"]
+        p_acc = cf.norm_cdf((a_u - d["process_mean_mm"]) / s) - cf.norm_cdf((a_l - d["process_mean_mm"]) / s)
+        accepted = d["global_consumer_risk"] + (1 - d["process_nonconforming"] - d["global_producer_risk"])
+        assert accepted == pytest.approx(p_acc, abs=1e-13)
+
+
+@pytest.mark.parametrize("engine", ENGINES)
+def test_global_risks_in_the_workbook(process_book, engine):
+    from cmmwb.generator.workbook.recalc import recalculate
+
+    from tests.helpers.decision import assert_engine_agrees
+
+    results, book = process_book
+    assert assert_engine_agrees(book, engine) > 60
+    v = recalculate(book, engine)["Decision"]
+    got = sorted(x for x in v.values() if isinstance(x, float) and 0 < x < 1)
+    for d in results["decisions"]:
+        for key in ("global_consumer_risk", "global_producer_risk", "process_nonconforming"):
+            assert any(close(x, d[key], rel=1e-9) for x in got), key
