@@ -429,3 +429,24 @@ def test_global_risks_in_the_workbook(process_book, engine):
     for d in results["decisions"]:
         for key in ("global_consumer_risk", "global_producer_risk", "process_nonconforming"):
             assert any(close(x, d[key], rel=1e-9) for x in got), key
+
+
+def test_a_process_prior_typed_in_the_sheet_reads_back_into_the_task(process_book, tmp_path):
+    """`cmmwb read`: the risk table's inputs go back into [[decision.tolerances]]."""
+    import tomllib
+
+    import openpyxl
+
+    from cmmwb.generator.reader import read_to_files
+
+    results, book = process_book
+    wb = openpyxl.load_workbook(book)
+    (sheet, coord), = wb.defined_names["tol2_process_sd_um"].destinations
+    wb[sheet][coord.replace("$", "")].value = 0.75
+    edited = tmp_path / "edited.xlsx"
+    wb.save(edited)
+    read_to_files(edited, tmp_path / "back.toml")
+    doc = tomllib.loads((tmp_path / "back.toml").read_text(encoding="utf-8"))
+    tols = doc["decision"]["tolerances"]
+    assert tols[1]["process_sd_um"] == 0.75
+    assert tols[0]["process_sd_um"] == results["decisions"][0]["process_sd_um"]     # untouched
