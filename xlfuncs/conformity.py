@@ -8,9 +8,11 @@ measured value and u its standard uncertainty (JCGM 106:2012, 7.2-7.3).  A toler
   (JCGM 106:2012, 7.3.2 eq. (9)-(10) one-sided, 7.4 eq. (12) two-sided).
 * :func:`acceptance_limits`: the acceptance interval [A_L, A_U] of a decision rule: guard band
   w = r·U inside the tolerance interval (guarded acceptance, JCGM 106:2012, 8.3.2), outside it
-  (guarded rejection, 8.3.3), none (simple acceptance, 8.2), or w = z·u with
-  z = Φ⁻¹(1 - α) for a stated largest probability of false acceptance α (specific risk, 8.3.2 and
-  9.3: an accepted item at the acceptance limit of a one-sided interval has p_c = 1 - α).
+  (guarded rejection, 8.3.3), none (simple acceptance, 8.2), or, for a stated largest probability
+  of false acceptance α (specific risk, 8.3.2 and 9.3), the w at which an item on the acceptance
+  limit has p_c = 1 - α exactly: w = z·u with z = Φ⁻¹(1 - α) for a one-sided interval, the root
+  of eq. (12) for a two-sided one (:func:`specific_risk_guard_band_um`, Newton steps that the
+  Decision sheet repeats cell by cell).
 * :func:`decide`: the outcome for one characteristic: ``conforms``, ``does not conform`` or
   ``cannot be decided``, and the zone the measured value falls in.
 * :func:`acceptance_limits_for_p_c`: the exact acceptance limits for a required p_c (one- and
@@ -215,7 +217,9 @@ def probability_of_conformance(value_mm, u_um, tolerance: Tolerance):
 def guard_band_um(rule: DecisionRule, U_um: float, k: float) -> float:
     """The guard band w (µm), positive when the acceptance interval lies inside the tolerance
     interval: r·U (guarded acceptance), -r·U (guarded rejection), 0 (simple acceptance),
-    U (ISO 14253-1 conformance zone), z·u with z = Φ⁻¹(1 - max_pfa) (specific risk)."""
+    U (ISO 14253-1 conformance zone), z·u with z = Φ⁻¹(1 - max_pfa) (specific risk: exact for a
+    one-sided interval; :func:`decide` takes the exact two-sided one from
+    :func:`specific_risk_guard_band_um`)."""
     if rule.kind == "simple":
         return 0.0
     if rule.kind == "iso14253":
@@ -225,6 +229,57 @@ def guard_band_um(rule: DecisionRule, U_um: float, k: float) -> float:
     if rule.kind == "guarded_rejection":
         return -rule.r * float(U_um)
     return norm_ppf(1.0 - rule.max_pfa) * float(U_um) / float(k)
+
+
+#: Newton steps of :func:`specific_risk_iterates` (the Decision sheet has one column per step)
+NEWTON_STEPS = 5
+
+
+def specific_risk_iterates(h: float, max_pfa: float, steps: int = NEWTON_STEPS) -> list[float]:
+    """Newton's iteration for the exact specific-risk acceptance limit of a two-sided interval.
+
+    With h = (T_U - T_L)/(2u) and the acceptance limits at the midpoint ± d·u, an item on the limit
+    has p_c = Φ(h - d) + Φ(h + d) - 1 (JCGM 106:2012, 7.4 eq. (12)); the limit is the root of
+    G(s) = Φ(h - √s) + Φ(h + √s) - 2 + α, s = d² (α = max_pfa).  In s the root is simple even where
+    the acceptance interval shrinks to the midpoint (G'(0) = -h φ(h) ≠ 0; in d it would be a
+    double root), so Newton converges quadratically from the one-sided start s₀ = max(0, h - z)²,
+    z = Φ⁻¹(1 - α): an overshoot below 0 is cut to 0, from where G is convex and the steps rise
+    monotonically to the root.  G'(s) = (φ(h + d) - φ(h - d))/(2d), -h φ(h) at s = 0.  Returns
+    [s₀, s₁, ..., s_steps].  Five steps reach the root to the conditioning of the problem (about
+    1e-7 in d at the very edge where the interval vanishes, 1e-12 and better elsewhere; measured
+    against the bisection of :func:`acceptance_limits_for_p_c` for 1 - α = 0.5001 ... 0.999999)."""
+    z = norm_ppf(1.0 - max_pfa)
+    s = max(0.0, h - z) ** 2
+    out = [s]
+    for _ in range(steps):
+        d = math.sqrt(s)
+        g = float(norm_cdf(h - d)) + float(norm_cdf(h + d)) - 2.0 + max_pfa
+        dg = -h * _pdf(h) if s == 0.0 else (_pdf(h + d) - _pdf(h - d)) / (2.0 * d)
+        s = max(0.0, s - g / dg)
+        out.append(s)
+    return out
+
+
+def _pdf(x: float) -> float:
+    return math.exp(-0.5 * x * x) / math.sqrt(2.0 * math.pi)
+
+
+def specific_risk_guard_band_um(tolerance: Tolerance, u_um: float, max_pfa: float) -> float:
+    """The guard band w (µm) of the specific-risk rule: an item on the acceptance limit has
+    p_c = 1 - max_pfa (JCGM 106:2012, 8.3.2 and 9.3).  One-sided: w = z·u, z = Φ⁻¹(1 - max_pfa)
+    (7.3 Table 1).  Two-sided: w = (h - d)·u with d = √s from :func:`specific_risk_iterates`;
+    when even the midpoint has p_c < 1 - max_pfa nothing can be accepted and w is half the
+    tolerance (1 + 1e-9), which crosses the limits (:func:`empty`), as
+    :func:`acceptance_limits_for_p_c` does."""
+    u = float(u_um)
+    if not tolerance.two_sided:
+        return norm_ppf(1.0 - max_pfa) * u
+    assert tolerance.lsl_mm is not None and tolerance.usl_mm is not None
+    half_um = (tolerance.usl_mm - tolerance.lsl_mm) * UM_PER_MM / 2.0
+    h = half_um / u
+    if float(norm_cdf(h)) - float(norm_cdf(-h)) < 1.0 - max_pfa:
+        return half_um * (1.0 + 1e-9)
+    return (h - math.sqrt(specific_risk_iterates(h, max_pfa)[-1])) * u
 
 
 def acceptance_limits(tolerance: Tolerance, w_um: float) -> tuple[float | None, float | None]:
@@ -264,7 +319,8 @@ def decide(value_mm: float, u_um: float, tolerance: Tolerance, rule: DecisionRul
         raise ModelError(f"a decision needs a finite value and u > 0, k > 0 (value {y!r} mm, u {u!r} µm, k {k!r})")
     U = k * u
     p_c = probability_of_conformance(y, u, tolerance)
-    w = guard_band_um(rule, U, k)
+    w = (specific_risk_guard_band_um(tolerance, u, rule.max_pfa) if rule.kind == "specific_risk"
+         else guard_band_um(rule, U, k))
     acc = acceptance_limits(tolerance, w)
     rej: tuple[float | None, float | None] = (None, None)
     if rule.kind == "iso14253":
@@ -479,3 +535,101 @@ def guard_band_for_global_risk(prior: Prior, u_m: float, tolerance_limits, max_c
         else:
             hi = m
     return 0.5 * (lo + hi)
+
+
+# -- global risks of a normal process in closed quadrature (what the Decision sheet computes) -------
+
+#: Gauss-Legendre points per panel of :func:`global_risks_normal` (the Decision sheet's node table)
+GL_POINTS = 48
+#: the standardised integration variable runs over [-GL_RANGE, GL_RANGE] (φ beyond: below 1e-31)
+GL_RANGE = 12.0
+GL_NODES, GL_WEIGHTS = (tuple(float(v) for v in a) for a in np.polynomial.legendre.leggauss(GL_POINTS))
+
+
+def risk_panels(mean_mm: float, sd_um: float, u_um: float, tolerance: Tolerance,
+                acceptance_mm: tuple[float | None, float | None]) -> dict:
+    """The panels of :func:`global_risks_normal`: which variable is integrated and, per risk
+    piece, the intervals [a, b] (clamped to ±GL_RANGE) and the integrand's kind.
+
+    A missing limit (one-sided tolerance) stands in at mean ∓ 1000·(σ₀ + u), where every normal
+    probability beyond it is 0 in double precision."""
+    far = 1000.0 * (sd_um + u_um) / UM_PER_MM
+    t_l = tolerance.lsl_mm if tolerance.lsl_mm is not None else mean_mm - far
+    t_u = tolerance.usl_mm if tolerance.usl_mm is not None else mean_mm + far
+    a_l = acceptance_mm[0] if acceptance_mm[0] is not None else mean_mm - far
+    a_u = acceptance_mm[1] if acceptance_mm[1] is not None else mean_mm + far
+    return {"T_L": t_l, "T_U": t_u, "A_L": a_l, "A_U": a_u, "over_error": u_um <= sd_um}
+
+
+def _clamp(a: float, b: float) -> tuple[float, float]:
+    a = min(max(a, -GL_RANGE), GL_RANGE)
+    b = min(max(b, -GL_RANGE), GL_RANGE)
+    return a, max(a, b)
+
+
+def _gl(f, a: float, b: float) -> float:
+    """Σ w_i f(m + h x_i) h on [a, b] (clamped), the sum one SUMPRODUCT of the sheet forms."""
+    a, b = _clamp(a, b)
+    h = (b - a) / 2.0
+    x = (a + b) / 2.0 + h * np.asarray(GL_NODES)
+    return float(np.sum(np.asarray(GL_WEIGHTS) * f(x)) * h)
+
+
+def _phi(x):
+    return np.exp(-0.5 * np.asarray(x) ** 2) / math.sqrt(2.0 * math.pi)
+
+
+def global_risks_normal(mean_mm: float, sd_um: float, u_um: float, tolerance: Tolerance,
+                        acceptance_mm: tuple[float | None, float | None]) -> GlobalRisks:
+    """Global consumer's and producer's risks (JCGM 106:2012, 9.5) of a normal process
+    η ~ N(μ, σ₀²) measured with a normal error e ~ N(0, u²) and accepted when η_m = η + e lies in
+    [A_L, A_U], by fixed Gauss-Legendre panels that the Decision sheet repeats with SUMPRODUCT.
+
+    The integral runs over the standardised variable with the smaller standard deviation, so that
+    the other one's distribution function, the integrand's second factor, varies no faster than the
+    normal density: over v = e/u when u <= σ₀, over x = (η - μ)/σ₀ otherwise.  Each risk is the sum
+    of its own small pieces, written with the tail (Φ or Q = 1 - Φ) in which they are small, so
+    that no difference of numbers near 1 loses the digits of a small risk:
+
+    * over v: R_C = P(η > T_U, η_m ∈ A) + P(η < T_L, η_m ∈ A),
+      R_P = P(η ∈ C, η_m > A_U) + P(η ∈ C, η_m < A_L), each an integral of φ(v) times a difference
+      of prior tails at A - u v, T, split where the integrand's form changes (v = (A - T)/u);
+    * over x: R_C = ∫_{x ∉ C} φ(x) Pr(η_m ∈ A | η) dx, R_P = ∫_{x ∈ C} φ(x) Pr(η_m ∉ A | η) dx.
+
+    An empty acceptance interval accepts nothing: R_C = 0, R_P = Pr(η ∈ C).  Lengths in mm, σ₀
+    and u in µm.  Checked against :func:`global_risks` (adaptive quadrature) in the tests."""
+    if not (math.isfinite(sd_um) and sd_um > 0 and math.isfinite(u_um) and u_um > 0):
+        raise ModelError(f"a normal process needs sd > 0 and u > 0 (got {sd_um!r} µm, {u_um!r} µm)")
+    p = risk_panels(mean_mm, sd_um, u_um, tolerance, acceptance_mm)
+    t_l, t_u, a_l, a_u = p["T_L"], p["T_U"], p["A_L"], p["A_U"]
+    s0, u = sd_um / UM_PER_MM, u_um / UM_PER_MM
+    x_l, x_u = (t_l - mean_mm) / s0, (t_u - mean_mm) / s0
+    nonconforming = float(norm_cdf(x_l)) + float(norm_cdf(-x_u))
+    if a_l > a_u:
+        return GlobalRisks(consumer=0.0, producer=1.0 - nonconforming, nonconforming=nonconforming)
+    if p["over_error"]:
+        def P0(t):    # prior distribution function Φ((t - μ)/σ₀)
+            return norm_cdf((np.asarray(t) - mean_mm) / s0)
+
+        def Q0(t):    # its upper tail
+            return norm_cdf((mean_mm - np.asarray(t)) / s0)
+
+        v1, v2, v3, v4 = (a_l - t_l) / u, (a_u - t_u) / u, (a_u - t_l) / u, (a_l - t_u) / u
+        V = GL_RANGE
+        r_c = (_gl(lambda v: _phi(v) * (Q0(a_l - u * v) - Q0(a_u - u * v)), -V, v4)
+               + _gl(lambda v: _phi(v) * (Q0(t_u) - Q0(a_u - u * v)), v4, v2)
+               + _gl(lambda v: _phi(v) * (P0(t_l) - P0(a_l - u * v)), v1, v3)
+               + _gl(lambda v: _phi(v) * (P0(a_u - u * v) - P0(a_l - u * v)), v3, V))
+        r_p = (_gl(lambda v: _phi(v) * (Q0(a_u - u * v) - Q0(t_u)), v2, v3)
+               + _gl(lambda v: _phi(v) * (Q0(t_l) - Q0(t_u)), v3, V)
+               + _gl(lambda v: _phi(v) * (P0(t_u) - P0(t_l)), -V, v4)
+               + _gl(lambda v: _phi(v) * (P0(a_l - u * v) - P0(t_l)), v4, v1))
+    else:
+        def eta(x):
+            return mean_mm + s0 * np.asarray(x)
+
+        V = GL_RANGE
+        r_c = (_gl(lambda x: _phi(x) * (norm_cdf((eta(x) - a_l) / u) - norm_cdf((eta(x) - a_u) / u)), -V, x_l)
+               + _gl(lambda x: _phi(x) * (norm_cdf((a_u - eta(x)) / u) - norm_cdf((a_l - eta(x)) / u)), x_u, V))
+        r_p = _gl(lambda x: _phi(x) * (norm_cdf((a_l - eta(x)) / u) + norm_cdf((eta(x) - a_u) / u)), x_l, x_u)
+    return GlobalRisks(consumer=r_c, producer=r_p, nonconforming=nonconforming)

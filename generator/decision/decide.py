@@ -34,7 +34,8 @@ IDENT_KEYS = {"budget": ("characteristic",), "pointcloud": ("from", "to"), "feat
 K_KINDS = ("feature", "characteristic")
 #: kinds whose tolerances are fields of their own characteristics, not ``[[decision.tolerances]]``
 OWN_TOLERANCES = ("characteristic",)
-LIMIT_KEYS = {"nominal_mm", "tol_mm", "lsl_mm", "usl_mm", "measured_mm", "s_um", "n_repeats"}
+LIMIT_KEYS = {"nominal_mm", "tol_mm", "lsl_mm", "usl_mm", "measured_mm", "s_um", "n_repeats",
+              "process_mean_mm", "process_sd_um"}
 
 
 @dataclass
@@ -51,6 +52,8 @@ class ToleranceSpec:
     measured_mm: float | None = None
     s_um: float | None = None        #: standard deviation of n repeated measurements (type A)
     n_repeats: float | None = None   #: the number of repeated measurements whose mean is the value
+    process_mean_mm: float | None = None   #: a normal prior of the production process (JCGM 106:2012, 9.5)
+    process_sd_um: float | None = None
     #: limits that are cells of the kind's own sheets ({"lsl_mm": formula text}), not inputs here
     limit_cells: dict[str, str] = field(default_factory=dict)
 
@@ -176,6 +179,13 @@ def read_spec(path: Path, doc: dict, kind: str) -> DecisionSpec | None:
         if t.n_repeats is not None and not (t.n_repeats == int(t.n_repeats) and 2 <= t.n_repeats <= 1e6):
             raise InputError(f"must be a whole number of repeated measurements >= 2, got {t.n_repeats!r}",
                              file=path, where=tolerance_where(n, "n_repeats"))
+        if (t.process_mean_mm is None) != (t.process_sd_um is None):
+            raise InputError("a process prior needs both process_mean_mm and process_sd_um (the mean and the "
+                             "standard deviation of the characteristic over the production process)", file=path,
+                             where=tolerance_where(n, "process_sd_um" if t.process_sd_um is None else "process_mean_mm"))
+        if t.process_sd_um is not None and not t.process_sd_um > 0:
+            raise InputError(f"must be positive, got {t.process_sd_um!r}", file=path,
+                             where=tolerance_where(n, "process_sd_um"))
         if t.nominal_mm is not None and t.tol_mm is None:
             raise InputError("nominal_mm is the centre of tol_mm; with lsl_mm/usl_mm leave it out", file=path,
                              where=tolerance_where(n, "nominal_mm"))
@@ -348,6 +358,11 @@ def decide_all(path: Path, kind: str, spec: DecisionSpec, results: dict) -> list
                  "value_source": "measured_mm" if t.measured_mm is not None else "task", **d.as_dict(),
                  **{k_: v for k_, v in unc.items() if k_ not in ("u_um", "k")},
                  "statement": statement(symbol(kind, t.label), value, "mm", d.U_um, "µm", d.k)}
+        if t.process_sd_um is not None:
+            g = cf.global_risks_normal(t.process_mean_mm, t.process_sd_um, d.u_um, tol, d.acceptance_mm)
+            entry.update(process_mean_mm=t.process_mean_mm, process_sd_um=t.process_sd_um,
+                         process_nonconforming=g.nonconforming, global_consumer_risk=g.consumer,
+                         global_producer_risk=g.producer)
         out.append(entry)
     return out
 

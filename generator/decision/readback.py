@@ -45,12 +45,12 @@ def read_back(cells, rt) -> None:
         if not isinstance(t, dict):
             continue
         got = {}
-        for key in ("lsl_mm", "usl_mm", "measured_mm", "s_um", "n_repeats"):
+        for key in ("lsl_mm", "usl_mm", "measured_mm", "s_um", "n_repeats", "process_mean_mm", "process_sd_um"):
             name = f"tol{n}_{key}"
             if name in cells.wb.defined_names:
                 got[key] = value(name)
                 rt.sources[tolerance_where(n, key)] = got[key][2]
-        for key in ("measured_mm", "s_um", "n_repeats"):
+        for key in ("measured_mm", "s_um", "n_repeats", "process_mean_mm", "process_sd_um"):
             if key in got and got[key][0] != got[key][1]:
                 t[key] = got[key][0]
         limits = {k_: v for k_, v in got.items() if k_ in ("lsl_mm", "usl_mm")}

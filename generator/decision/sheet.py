@@ -21,6 +21,7 @@ from cmmwb.xlfuncs.statement import decimals_for
 from ..workbook.book import Book, ChartSeries
 from ..workbook.styles import FMT_MM, FMT_UM, HEADER_FONT, TITLE_FONT
 from ..workbook.xlref import cell, col, quote_sheet
+from . import risks
 from .decide import DecisionSpec, rows_of
 
 SHEET = "Decision"
@@ -36,9 +37,16 @@ COLUMNS = ["item", "characteristic", "value_mm", "u_task_um", "s_um", "n_repeats
 def column(name: str) -> int:
     """1-based column of the Decision table (``COLUMNS``)."""
     return COLUMNS.index(name) + 1
-#: chart data: deviations from the reference (tolerance midpoint or the one limit), µm
-CHART_COLUMNS = ["dev_um", "dev_plus_U_um", "dev_minus_U_um", "lsl_dev_um", "usl_dev_um",
-                 "A_L_dev_um", "A_U_dev_um"]
+#: chart data, each row on the scale of its own tolerance (``chart_scale``): two-sided
+#: (x - midpoint)/(half the tolerance), limits at ±1; one-sided ±1 + (x - T)/max(4U, |value - T|)
+CHART_COLUMNS = ["y_rel", "y_plus_U_rel", "y_minus_U_rel", "lsl_rel", "usl_rel", "A_L_rel", "A_U_rel"]
+CHART_NOTE = ("chart: {name}, on the row's own scale: two-sided tolerance (x − midpoint)/(half the tolerance), "
+              "the limits at −1 and +1; one-sided +1 + (x − T_U)/s or −1 + (x − T_L)/s, s = max(4U, |value − T|) (a "
+              "one-sided tolerance has no width: the limit at ±1, a value within 4U of it on a linear scale, one "
+              "farther inside at 0, one farther outside at ±2)")
+#: the specific-risk rule's exact two-sided acceptance limits: h = (T_U - T_L)/(2u) and Newton's
+#: iterates s_j = (d/u)² of xlfuncs.conformity.specific_risk_iterates, one column per step
+NEWTON_COLUMNS = ["h_half_tol_per_u"] + [f"newton_s{j}" for j in range(cf.NEWTON_STEPS + 1)]
 
 
 def _results_cols(book: Book, sheet: str = "Results") -> dict[str, int]:
@@ -78,7 +86,9 @@ def write_sheet(book: Book, kind: str, spec: DecisionSpec, results: dict, decisi
         book.text(ws, r0, 3 + 2 * j, label, font=HEADER_FONT)
         book.input(ws, r0, 4 + 2 * j, name, value, lo=lo, hi=hi, note=note)
     h = HEADER_ROW
-    book.header(ws, h, 1, COLUMNS + CHART_COLUMNS, notes=[
+    newton = rule.kind == "specific_risk"
+    extra = NEWTON_COLUMNS if newton else []
+    book.header(ws, h, 1, COLUMNS + CHART_COLUMNS + extra, notes=[
         None, "the characteristic (Results row)", "measured value (input) or the task's value (from Results)",
         "the task's standard uncertainty (type B, ν = ∞)",
         "repeatability: standard deviation of the n repeated measurements whose mean is the value (input)",
@@ -91,9 +101,12 @@ def write_sheet(book: Book, kind: str, spec: DecisionSpec, results: dict, decisi
         "lower acceptance limit A_L = T_L + w (JCGM 106:2012, 8.3)", "upper acceptance limit A_U = T_U - w",
         "below R_L: does not conform", "above R_U: does not conform",
         "probability of conformance p_c = Φ((T_U-y)/u) - Φ((T_L-y)/u) (JCGM 106:2012, eq. (12))",
-        "the decision", "the zone of the measured value"] + [f"chart: {c} from the tolerance midpoint "
-                                                              "(one-sided: from the limit)" for c in CHART_COLUMNS])
-    c = {name: j + 1 for j, name in enumerate(COLUMNS + CHART_COLUMNS)}
+        "the decision", "the zone of the measured value"] + [CHART_NOTE.format(name=c) for c in CHART_COLUMNS]
+        + (["two-sided tolerance: h = (T_U - T_L)/(2u), half the tolerance in units of u"]
+           + [NEWTON_NOTE + (" Start: s_0 = max(0, h - z)², z = Φ⁻¹(1 - max_pfa), the one-sided limit." if j == 0
+                             else f" Step {j}.") for j in range(cf.NEWTON_STEPS + 1)] if newton else []))
+    c = {name: j + 1 for j, name in enumerate(COLUMNS + CHART_COLUMNS + extra)}
+    prior_rows: list[dict] = []
     for i, (t, d) in enumerate(zip(spec.tolerances, decisions)):
         r = h + 1 + i
         row = rows[t.label]
@@ -168,7 +181,14 @@ def write_sheet(book: Book, kind: str, spec: DecisionSpec, results: dict, decisi
         w = {"simple": "=0", "iso14253": f"={U}", "guarded_acceptance": f"=decision_r*{U}",
              "guarded_rejection": f"=-(decision_r*{U})",
              "specific_risk": f"=_xlfn.NORM.S.INV(1-decision_max_pfa)*{u}"}[rule.kind]
-        book.formula(ws, r, c["w_um"], w, fmt=FMT_UM)
+        w_note = None
+        if newton and lsl is not None and usl is not None:
+            w, w_note = _newton_cells(book, ws, r, c, at, d, lsl, usl, u, cache)
+        elif newton:
+            for name in NEWTON_COLUMNS:
+                book.text(ws, r, c[name], "—")
+            w_note = "one-sided tolerance: w = z·u, z = Φ⁻¹(1 - max_pfa) (JCGM 106:2012, 7.3 Table 1): p_c = 1 - max_pfa on A"
+        book.formula(ws, r, c["w_um"], w, fmt=FMT_UM, note=w_note)
         cache[at("w_um")] = d["w_um"]
         wc = at("w_um")
         acc = [None, None]
@@ -219,21 +239,28 @@ def write_sheet(book: Book, kind: str, spec: DecisionSpec, results: dict, decisi
         book.formula(ws, r, c["zone"], zone, fmt=None)
         cache[at("outcome")] = d["outcome"]
         cache[at("zone")] = d["zone"]
-        # chart data: deviations (µm) from the reference
-        ref = f"({lsl}+{usl})/2" if (lsl and usl) else (lsl or usl)
-        ref_v = (d["lsl_mm"] + d["usl_mm"]) / 2 if (lsl and usl) else (d["lsl_mm"] if lsl else d["usl_mm"])
-        dev = (d["value_mm"] - ref_v) * 1000
-        book.formula(ws, r, c["dev_um"], f"=({y}-{ref})*1000", fmt=FMT_UM)
-        book.formula(ws, r, c["dev_plus_U_um"], f"={at('dev_um')}+{U}", fmt=FMT_UM)
-        book.formula(ws, r, c["dev_minus_U_um"], f"={at('dev_um')}-{U}", fmt=FMT_UM)
-        cache.update({at("dev_um"): dev, at("dev_plus_U_um"): dev + d["U_um"], at("dev_minus_U_um"): dev - d["U_um"]})
-        for lim, j, name, aname in ((lsl, 0, "lsl_dev_um", "A_L_dev_um"), (usl, 1, "usl_dev_um", "A_U_dev_um")):
+        if t.process_sd_um is not None:
+            prior_rows.append({"item": i + 1, "label": t.label, "prefix": t.name_prefix, "decision": d,
+                               "u": u, "lsl": lsl, "usl": usl, "A_L": acc[0], "A_U": acc[1]})
+        # chart data: each row on the scale of its own tolerance (CHART_NOTE)
+        off, ref, scale, off_v, ref_v, scale_v = chart_scale(lsl, usl, U, y, d)
+
+        def rel(x: str) -> str:
+            return f"={off}({x}-{ref})/{scale}" if off else f"=({x}-{ref})/{scale}"
+
+        y_v = off_v + (d["value_mm"] - ref_v) / scale_v
+        u_rel = d["U_um"] / cf.UM_PER_MM / scale_v
+        book.formula(ws, r, c["y_rel"], rel(y), fmt="0.000")
+        book.formula(ws, r, c["y_plus_U_rel"], f"={at('y_rel')}+{U}/1000/{scale}", fmt="0.000")
+        book.formula(ws, r, c["y_minus_U_rel"], f"={at('y_rel')}-{U}/1000/{scale}", fmt="0.000")
+        cache.update({at("y_rel"): y_v, at("y_plus_U_rel"): y_v + u_rel, at("y_minus_U_rel"): y_v - u_rel})
+        for lim, j, name, aname in ((lsl, 0, "lsl_rel", "A_L_rel"), (usl, 1, "usl_rel", "A_U_rel")):
             if lim is None:
                 continue
-            book.formula(ws, r, c[name], f"=({lim}-{ref})*1000", fmt=FMT_UM)
-            book.formula(ws, r, c[aname], f"=({acc[j]}-{ref})*1000", fmt=FMT_UM)
-            cache[at(name)] = (d["lsl_mm" if j == 0 else "usl_mm"] - ref_v) * 1000
-            cache[at(aname)] = (d["acceptance_limits_mm"][j] - ref_v) * 1000
+            book.formula(ws, r, c[name], rel(lim), fmt="0.000")
+            book.formula(ws, r, c[aname], rel(acc[j]), fmt="0.000")
+            cache[at(name)] = off_v + (d["lsl_mm" if j == 0 else "usl_mm"] - ref_v) / scale_v
+            cache[at(aname)] = off_v + (d["acceptance_limits_mm"][j] - ref_v) / scale_v
     n = len(spec.tolerances)
     last = h + n
     xs = Reference(ws, min_col=c["item"], min_row=h + 1, max_row=last)
@@ -241,20 +268,76 @@ def write_sheet(book: Book, kind: str, spec: DecisionSpec, results: dict, decisi
     def ref_of(name):
         return Reference(ws, min_col=c[name], min_row=h + 1, max_row=last)
 
-    series = [ChartSeries("measured value", xs, ref_of("dev_um"), colour="000000"),
-              ChartSeries("value + U", xs, ref_of("dev_plus_U_um"), colour="1F77B4"),
-              ChartSeries("value − U", xs, ref_of("dev_minus_U_um"), colour="1F77B4"),
-              ChartSeries("lower specification limit", xs, ref_of("lsl_dev_um"), colour="D62728", symbol="dash"),
-              ChartSeries("upper specification limit", xs, ref_of("usl_dev_um"), colour="D62728", symbol="dash"),
-              ChartSeries("lower acceptance limit", xs, ref_of("A_L_dev_um"), colour="2CA02C", symbol="dash"),
-              ChartSeries("upper acceptance limit", xs, ref_of("A_U_dev_um"), colour="2CA02C", symbol="dash")]
+    series = [ChartSeries("measured value", xs, ref_of("y_rel"), colour="000000"),
+              ChartSeries("value + U", xs, ref_of("y_plus_U_rel"), colour="1F77B4"),
+              ChartSeries("value − U", xs, ref_of("y_minus_U_rel"), colour="1F77B4"),
+              ChartSeries("lower specification limit", xs, ref_of("lsl_rel"), colour="D62728", symbol="dash"),
+              ChartSeries("upper specification limit", xs, ref_of("usl_rel"), colour="D62728", symbol="dash"),
+              ChartSeries("lower acceptance limit", xs, ref_of("A_L_rel"), colour="2CA02C", symbol="dash"),
+              ChartSeries("upper acceptance limit", xs, ref_of("A_U_rel"), colour="2CA02C", symbol="dash")]
     book.scatter(ws, f"B{last + 3}", "Measured value ± U against the specification (red) and acceptance (green) "
-                 "limits", "item (row of the table)", "deviation from the tolerance midpoint (µm)",
-                 series, width=24, height=11, x_min=0)
+                 "limits, each row on its own tolerance's scale", "item (row of the table)",
+                 "position in the tolerance (limits at ±1)", series, width=24, height=11, x_min=0)
     for name, width in (("characteristic", 18), ("outcome", 18), ("zone", 22)):
         ws.column_dimensions[col(c[name])].width = width
-    book.print_setup(ws, landscape=True, title_rows=h, area=f"A1:{col(c['zone'])}{last + 26}")
+    bottom = last + 26
+    if prior_rows:
+        top = last + 28
+        risks.write_node_table(book, ws, top + 1, len(COLUMNS) + 2)
+        bottom = risks.write_rows(book, ws, top, prior_rows, cache)
+    book.print_setup(ws, landscape=True, title_rows=h, area=f"A1:{col(c['zone'])}{bottom}")
     return {SHEET: cache}
+
+
+NEWTON_NOTE = ("exact specific-risk acceptance limits A = midpoint ± d·u of a two-sided tolerance: the root "
+               "s = d² of Φ(h - √s) + Φ(h + √s) - 2 + max_pfa = 0 (p_c = 1 - max_pfa on A, JCGM 106:2012, "
+               "7.4 eq. (12)) by Newton's method, s_j+1 = max(0, s_j - G/G'), G' = (φ(h+d) - φ(h-d))/(2d), "
+               "-h·φ(h) at s = 0 (xlfuncs.conformity.specific_risk_iterates; docs/errata.md).")
+
+
+def _newton_cells(book: Book, ws, r: int, c: dict[str, int], at, d: dict, lsl: str, usl: str, u: str,
+                  cache: dict[str, Any]) -> tuple[str, str]:
+    """The Newton columns of one two-sided row of the specific-risk rule and the formula of its
+    guard band w = (h - √s_N)·u (or half the tolerance when even the midpoint falls short)."""
+    hc = at("h_half_tol_per_u")
+    book.formula(ws, r, c["h_half_tol_per_u"], f"=({usl}-{lsl})*1000/(2*{u})", fmt="0.000000")
+    half_um = (d["usl_mm"] - d["lsl_mm"]) * cf.UM_PER_MM / 2.0
+    h_val = half_um / d["u_um"]
+    cache[hc] = h_val
+    iterates = cf.specific_risk_iterates(h_val, d["max_pfa"])
+    book.formula(ws, r, c["newton_s0"], f"=MAX(0,{hc}-_xlfn.NORM.S.INV(1-decision_max_pfa))^2", fmt="0.000000")
+    for j in range(1, cf.NEWTON_STEPS + 1):
+        s = at(f"newton_s{j - 1}")
+        g = (f"_xlfn.NORM.S.DIST({hc}-SQRT({s}),TRUE)+_xlfn.NORM.S.DIST({hc}+SQRT({s}),TRUE)"
+             f"-2+decision_max_pfa")
+        dg = (f"IF({s}>0,(_xlfn.NORM.S.DIST({hc}+SQRT({s}),FALSE)-_xlfn.NORM.S.DIST({hc}-SQRT({s}),FALSE))"
+              f"/(2*SQRT({s})),-{hc}*_xlfn.NORM.S.DIST({hc},FALSE))")
+        book.formula(ws, r, c[f"newton_s{j}"], f"=MAX(0,{s}-({g})/({dg}))", fmt="0.000000")
+    for j, v in enumerate(iterates):
+        cache[at(f"newton_s{j}")] = v
+    last = at(f"newton_s{cf.NEWTON_STEPS}")
+    w = (f"=IF(_xlfn.NORM.S.DIST({hc},TRUE)-_xlfn.NORM.S.DIST(-{hc},TRUE)<1-decision_max_pfa,"
+         f"({usl}-{lsl})*1000/2*(1+1E-9),({hc}-SQRT({last}))*{u})")
+    note = ("two-sided tolerance: w = (h - √s_N)·u from the Newton columns at the right, so that p_c = 1 - max_pfa "
+            "exactly on A (JCGM 106:2012, 7.4 eq. (12)); half the tolerance (nothing accepted) when even the "
+            "midpoint has p_c < 1 - max_pfa")
+    return w, note
+
+
+def chart_scale(lsl: str | None, usl: str | None, U: str, y: str, d: dict
+                ) -> tuple[str, str, str, float, float, float]:
+    """The chart's scale of one row, y = off + (x - ref)/scale (x, ref, scale in mm): two-sided
+    ref = the midpoint, scale = half the tolerance (limits at ±1); one-sided ref = the limit,
+    off = ±1, scale = max(4U, |value - limit|) (a one-sided tolerance has no width: a value
+    within 4U of its limit on a linear scale, one farther inside at 0, one farther outside at ±2).
+    Formula texts and values."""
+    if lsl is not None and usl is not None:
+        return ("", f"({lsl}+{usl})/2", f"(({usl}-{lsl})/2)", 0.0, (d["lsl_mm"] + d["usl_mm"]) / 2,
+                (d["usl_mm"] - d["lsl_mm"]) / 2)
+    four_u = 4 * d["U_um"] / cf.UM_PER_MM
+    t, t_v, off, off_v = (usl, d["usl_mm"], "1+", 1.0) if usl is not None else (lsl, d["lsl_mm"], "-1+", -1.0)
+    assert t is not None
+    return (off, t, f"MAX(4*{U}/1000,ABS({y}-{t}))", off_v, t_v, max(four_u, abs(d["value_mm"] - t_v)))
 
 
 def mm_format(U_um: float) -> str:

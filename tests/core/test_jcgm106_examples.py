@@ -13,6 +13,8 @@ What each number is, and where it comes from (docs/errata.md, "JCGM 106:2012 wor
   reproduces this example; the printed pages of JCGM 106 9.5.4 themselves could not be read here,
   so those are the reference, to suncal's full printed precision, and the prior's non-conforming
   fraction is also checked against its closed form.
+* 7.4 eq. (12) / 9.3, the specific-risk rule's two-sided acceptance limits: the Newton iteration
+  of the core and of the Decision sheet against bisection, and p_c = 1 - max_pfa on the limits.
 * 9.5 (normal process and measuring system): no printed numbers at hand; checked against
   closed forms (the probability of acceptance) and the other order of integration (JCGM 106:2012,
   9.5: R_C is also the integral over accepted measured values of the specific risk 1 - p_c under
@@ -256,3 +258,195 @@ def test_bearing_acceptance_limit_in_the_workbook(bearing_book, engine):
         assert printed((got - 50.0) / scale[d["characteristic"]], 1.67, 2)
         assert close(v[at(8 + i, "p_c")], d["p_c"], rel=1e-9)
         assert v[at(8 + i, "outcome")] == d["outcome"]
+
+
+# -- the specific-risk rule's exact two-sided acceptance limits (7.4 eq. (12), 9.3) ---------------
+
+@pytest.mark.parametrize("max_pfa", [0.4, 0.2, 0.05, 0.01, 1e-3, 1e-4])
+@pytest.mark.parametrize("c_m", [0.9, 0.99, 1.0, 1.2, 1.5, 2.0, 4.0, 50.0])
+def test_newtons_specific_risk_limit_is_the_bisections_root(c_m, max_pfa):
+    """The five Newton steps the Decision sheet repeats (xlfuncs.conformity.specific_risk_iterates)
+    land on the root that acceptance_limits_for_p_c finds by bisection, to 1e-9 u, and an item on
+    that limit has p_c = 1 - max_pfa; where the interval is empty both say so."""
+    u_um = 1.5
+    tol = cf.Tolerance.symmetric(50.0, 4 * c_m * u_um / 2 / 1000)
+    w = cf.specific_risk_guard_band_um(tol, u_um, max_pfa)
+    lo, hi = cf.acceptance_limits_for_p_c(tol, u_um, 1 - max_pfa)
+    assert abs(w - (tol.usl_mm - hi) * 1000) <= 1e-9 * u_um
+    got = cf.acceptance_limits(tol, w)
+    assert cf.empty(got) == cf.empty((lo, hi))
+    if not cf.empty(got):
+        assert cf.probability_of_conformance(got[1], u_um, tol) == pytest.approx(1 - max_pfa, abs=1e-12)
+        assert w >= cf.norm_ppf(1 - max_pfa) * u_um - 1e-12      # never outside the one-sided limit
+
+
+def test_newton_reaches_the_conditioning_floor_where_the_interval_vanishes():
+    """At h = Φ⁻¹((1 + p)/2) the acceptance interval is the midpoint alone (d = 0, a double root in
+    d); in s = d² the root is simple, and the iterates reach d = 0 to within the conditioning of the
+    problem (p_c is known to 1e-16, so d to about 1e-7)."""
+    for p in (0.6, 0.95, 0.999):
+        h = cf.norm_ppf((1 + p) / 2)
+        s = cf.specific_risk_iterates(h, 1 - p)
+        assert math.sqrt(s[-1]) <= 1e-6 and s[0] > 0
+
+
+@pytest.fixture(scope="module")
+def specific_risk_book(tmp_path_factory):
+    """Knuckle characteristics with two-sided tolerances of C_m = 0.9 (nothing can be accepted),
+    1.0 and 1.5 around 50 mm, specific-risk rule with max_pfa = 0.05, measured values at the
+    one-sided limit T_U - z·u (inside the approximate acceptance interval, outside the exact one)."""
+    from tests.helpers import EXAMPLES
+    from tests.helpers.decision import build
+
+    knuckle = EXAMPLES / "knuckle.toml"
+    tmp = tmp_path_factory.mktemp("specific_risk")
+    plain, _ = build(tmp, knuckle, name="plain.toml")
+    u = {c["name"]: c["u_um"] for c in plain["characteristics"]}
+    names = ["S1_S2_distance", "S3_from_S1S2", "S4_from_ABC"]
+    c_ms = [0.9, 1.0, 1.5]
+    z = cf.norm_ppf(0.95)
+
+    def edit(doc):
+        doc["task"]["name"] = "specific"
+        doc["decision"] = {"rule": "specific_risk", "max_pfa": 0.05, "tolerances": [
+            {"characteristic": n, "nominal_mm": 50.0, "tol_mm": 2 * c_m * u[n] / 1000,
+             "measured_mm": 50.0 + (2 * c_m - z) * u[n] / 1000}
+            for n, c_m in zip(names, c_ms)]}
+    results, book = build(tmp, knuckle, edit, name="specific.toml")
+    return results, book, c_ms
+
+
+def test_specific_risk_limits_in_the_json_are_exact(specific_risk_book):
+    results, _, c_ms = specific_risk_book
+    d0, d1, d2 = results["decisions"]
+    assert d0["acceptance_interval_empty"] and d0["outcome"] == cf.DOES_NOT_CONFORM
+    for d in (d1, d2):
+        tol = cf.Tolerance(d["lsl_mm"], d["usl_mm"])
+        lo, hi = cf.acceptance_limits_for_p_c(tol, d["u_um"], 0.95)
+        assert close(d["acceptance_limits_mm"][1], hi, rel=1e-12) and close(d["acceptance_limits_mm"][0], lo, rel=1e-12)
+        assert cf.probability_of_conformance(d["acceptance_limits_mm"][1], d["u_um"], tol) == pytest.approx(0.95, abs=1e-9)
+        # the value at the one-sided limit T_U - z·u: inside T_U - z·u, beyond the exact limit, p_c < 0.95
+        assert d["value_mm"] > d["acceptance_limits_mm"][1] and d["p_c"] < 0.95 and d["outcome"] == cf.DOES_NOT_CONFORM
+    assert d1["w_um"] > cf.norm_ppf(0.95) * d1["u_um"] * 1.01      # C_m = 1: the far tail matters
+
+
+@pytest.mark.parametrize("engine", ENGINES)
+def test_specific_risk_limits_in_the_workbook_are_exact(specific_risk_book, engine):
+    from cmmwb.generator.workbook.recalc import recalculate
+
+    from tests.helpers.decision import assert_engine_agrees, at
+
+    results, book, _ = specific_risk_book
+    assert assert_engine_agrees(book, engine) > 30
+    v = recalculate(book, engine)["Decision"]
+    for i, d in enumerate(results["decisions"]):
+        tol = cf.Tolerance(d["lsl_mm"], d["usl_mm"])
+        a_l, a_u = v[at(8 + i, "A_L_mm")], v[at(8 + i, "A_U_mm")]
+        lo, hi = cf.acceptance_limits_for_p_c(tol, d["u_um"], 0.95)
+        assert close(a_u, hi, rel=1e-9) and close(a_l, lo, rel=1e-9)
+        if i:
+            assert cf.probability_of_conformance(a_u, d["u_um"], tol) == pytest.approx(0.95, abs=1e-6)
+        assert v[at(8 + i, "outcome")] == d["outcome"] == cf.DOES_NOT_CONFORM
+
+
+# -- 9.5: global risks of a normal process in the Decision sheet ---------------------------------
+
+@pytest.mark.parametrize("mean_off_um, sd_um, u_um, w_in_u, side", [
+    (0.0, 3.0, 1.0, 0.0, "two"), (0.0, 3.0, 1.0, 2.0, "two"), (2.0, 1.5, 0.5, -1.0, "two"),
+    (0.0, 0.5, 1.0, 1.0, "two"), (3.0, 0.5, 1.0, 0.0, "two"), (1.0, 2.0, 2.0, 0.5, "two"),
+    (0.0, 3.0, 1.0, 1.0, "up"), (-2.0, 0.7, 1.2, 0.0, "low"), (0.0, 10.0, 0.1, 0.0, "two"),
+])
+def test_fixed_panel_global_risks_match_the_adaptive_quadrature(mean_off_um, sd_um, u_um, w_in_u, side):
+    """global_risks_normal (the Decision sheet's Gauss-Legendre panels) against global_risks
+    (adaptive, any prior): the same R_C, R_P and non-conforming fraction to 1e-9 relative (or
+    1e-16 absolute for the smallest), for u below and above σ₀, guarded acceptance and rejection,
+    one- and two-sided tolerances (a tolerance of ± 5 µm around 50 mm)."""
+    half = 5.0
+    tol = {"two": cf.Tolerance(50 - half / 1000, 50 + half / 1000), "up": cf.Tolerance(usl_mm=50 + half / 1000),
+           "low": cf.Tolerance(lsl_mm=50 - half / 1000)}[side]
+    acc = cf.acceptance_limits(tol, w_in_u * u_um)
+    mean = 50 + mean_off_um / 1000
+    fixed = cf.global_risks_normal(mean, sd_um, u_um, tol, acc)
+    um = lambda x: None if x is None else (x - 50) * 1000      # noqa: E731  (µm about 50 mm)
+    ref = cf.global_risks(cf.normal_prior(mean_off_um, sd_um), u_um, (um(tol.lsl_mm), um(tol.usl_mm)),
+                          (um(acc[0]), um(acc[1])))
+    for got, want in ((fixed.consumer, ref.consumer), (fixed.producer, ref.producer),
+                      (fixed.nonconforming, ref.nonconforming)):
+        assert abs(got - want) <= 1e-9 * abs(want) + 1e-16, (got, want)
+
+
+@pytest.fixture(scope="module")
+def process_book(tmp_path_factory):
+    """Knuckle characteristics with tolerances ± 2.5 u and a normal process prior each: u below
+    σ₀ (ISO 14253-1 rule's conformance zone accepted), u above σ₀, and an off-centre process."""
+    from tests.helpers import EXAMPLES
+    from tests.helpers.decision import build
+
+    knuckle = EXAMPLES / "knuckle.toml"
+    tmp = tmp_path_factory.mktemp("process")
+    plain, _ = build(tmp, knuckle, name="plain.toml")
+    u = {c["name"]: c["u_um"] for c in plain["characteristics"]}
+    names = ["S1_S2_distance", "S3_from_S1S2", "S4_from_ABC"]
+    priors = [(0.0, 3.0), (0.0, 0.5), (1.0, 1.5)]         # (mean offset, σ₀) in units of u
+
+    def edit(doc):
+        doc["task"]["name"] = "process"
+        doc["decision"] = {"rule": "simple", "tolerances": [
+            {"characteristic": n, "nominal_mm": 50.0, "tol_mm": 2.5 * u[n] / 1000, "measured_mm": 50.0,
+             "process_mean_mm": 50.0 + off * u[n] / 1000, "process_sd_um": sd * u[n]}
+            for n, (off, sd) in zip(names, priors)]}
+    results, book = build(tmp, knuckle, edit, name="process.toml")
+    return results, book
+
+
+def test_global_risks_in_the_json(process_book):
+    results, _ = process_book
+    for d in results["decisions"]:
+        tol = cf.Tolerance(d["lsl_mm"], d["usl_mm"])
+        g = cf.global_risks_normal(d["process_mean_mm"], d["process_sd_um"], d["u_um"], tol,
+                                   tuple(d["acceptance_limits_mm"]))
+        assert d["global_consumer_risk"] == g.consumer and d["global_producer_risk"] == g.producer
+        assert 0 < d["global_consumer_risk"] < d["process_nonconforming"] < 1
+        assert 0 < d["global_producer_risk"] < 1 - d["process_nonconforming"]
+        # the probability of acceptance in closed form: Pr(η_m ∈ A), η_m ~ N(μ, σ₀² + u²)
+        s = math.hypot(d["process_sd_um"], d["u_um"]) / 1000
+        a_l, a_u = d["acceptance_limits_mm"]
+        p_acc = cf.norm_cdf((a_u - d["process_mean_mm"]) / s) - cf.norm_cdf((a_l - d["process_mean_mm"]) / s)
+        accepted = d["global_consumer_risk"] + (1 - d["process_nonconforming"] - d["global_producer_risk"])
+        assert accepted == pytest.approx(p_acc, abs=1e-13)
+
+
+@pytest.mark.parametrize("engine", ENGINES)
+def test_global_risks_in_the_workbook(process_book, engine):
+    from cmmwb.generator.workbook.recalc import recalculate
+
+    from tests.helpers.decision import assert_engine_agrees
+
+    results, book = process_book
+    assert assert_engine_agrees(book, engine) > 60
+    v = recalculate(book, engine)["Decision"]
+    got = sorted(x for x in v.values() if isinstance(x, float) and 0 < x < 1)
+    for d in results["decisions"]:
+        for key in ("global_consumer_risk", "global_producer_risk", "process_nonconforming"):
+            assert any(close(x, d[key], rel=1e-9) for x in got), key
+
+
+def test_a_process_prior_typed_in_the_sheet_reads_back_into_the_task(process_book, tmp_path):
+    """`cmmwb read`: the risk table's inputs go back into [[decision.tolerances]]."""
+    import tomllib
+
+    import openpyxl
+
+    from cmmwb.generator.reader import read_to_files
+
+    results, book = process_book
+    wb = openpyxl.load_workbook(book)
+    (sheet, coord), = wb.defined_names["tol2_process_sd_um"].destinations
+    wb[sheet][coord.replace("$", "")].value = 0.75
+    edited = tmp_path / "edited.xlsx"
+    wb.save(edited)
+    read_to_files(edited, tmp_path / "back.toml")
+    doc = tomllib.loads((tmp_path / "back.toml").read_text(encoding="utf-8"))
+    tols = doc["decision"]["tolerances"]
+    assert tols[1]["process_sd_um"] == 0.75
+    assert tols[0]["process_sd_um"] == results["decisions"][0]["process_sd_um"]     # untouched

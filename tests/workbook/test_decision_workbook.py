@@ -223,6 +223,12 @@ def test_libreoffice_agrees_for_each_rule(rule_books, label):
     (lambda d: d["decision"]["tolerances"][2].pop("n_repeats"), "#3 key 'n_repeats'", "both s_um"),
     (lambda d: d["decision"]["tolerances"][2].update(n_repeats=1), "#3 key 'n_repeats'", ">= 2"),
     (lambda d: d["decision"].update(k_from_dof="yes"), "[decision] k_from_dof", "true or false"),
+    (lambda d: d["decision"]["tolerances"][0].update(process_mean_mm=90.0), "#1 key 'process_sd_um'",
+     "both process_mean_mm and process_sd_um"),
+    (lambda d: d["decision"]["tolerances"][0].update(process_mean_mm=90.0, process_sd_um=0.0),
+     "#1 key 'process_sd_um'", "positive"),
+    (lambda d: d["decision"]["tolerances"][0].update(process_mean_mm="90", process_sd_um=2.0),
+     "#1 key 'process_mean_mm'", "finite number"),
 ])
 def test_bad_decision_input_names_the_key(tmp_path, edit, where, message):
     with pytest.raises(InputError) as e:
