@@ -67,6 +67,17 @@ def log_scale(ax, axis: str = "y") -> None:
     target.set_minor_formatter(FuncFormatter(minor))
 
 
+def _finish(plt, fig, ax, path: Path) -> Path:
+    """The line plots' common ending: a light grid, the legend, a tight layout, the PNG written
+    and the figure closed."""
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+    return Path(path)
+
+
 def distance_plot(results: dict, path: Path) -> Path:
     """K u(d) against d per group (Forbes 2025 Figures 6/7), with the MPE line when known."""
     plt = _plt()
@@ -87,12 +98,7 @@ def distance_plot(results: dict, path: Path) -> Path:
     ax.set_xlabel("d / mm")
     ax.set_ylabel(f"U = K u / µm (K = {results.get('K', 2):g})")
     ax.set_title(results["name"])
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(path)
-    plt.close(fig)
-    return Path(path)
+    return _finish(plt, fig, ax, path)
 
 
 def mpe_plot(d, mpe, comp: dict, K: float, path: Path, title: str) -> Path:
@@ -108,12 +114,7 @@ def mpe_plot(d, mpe, comp: dict, K: float, path: Path, title: str) -> Path:
     ax.set_xlabel("d / mm")
     ax.set_ylabel("µm")
     ax.set_title(f"{title}: MPE check")
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(path)
-    plt.close(fig)
-    return Path(path)
+    return _finish(plt, fig, ax, path)
 
 
 def factor_share_plot(labels, shares: dict, title: str, path: Path, *, width: float = 7.0,
