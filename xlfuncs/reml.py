@@ -186,11 +186,21 @@ class DenseRecordCovariance:
         return RemlTerms(ll, g, F, q, n - p)
 
 
-def record_covariance(prep: Prepared) -> DenseRecordCovariance:
-    """The operator C(theta) of one record set (dense).  A structured operator plugs in here: it
-    gives ``cloud`` (the probings), ``n`` (observations), ``reml(y, Q, values, free, fisher) ->
-    RemlTerms`` (the fit) and ``evaluate(values, []) -> (C, [])`` (GLS of the effects and the
-    standardized residuals; dense there)."""
+def record_covariance(prep: Prepared, structured: bool | None = None):
+    """The operator C(theta) of one record set: dense (:class:`DenseRecordCovariance`) up to
+    DENSE_MAX_OBS observations, else (or with ``structured`` True, or when ``prep`` already holds
+    the structured operator of ``diagnose``) the structured operator
+    (:class:`xlfuncs.reml_structured.StructuredRecordCovariance`, C = D + U U^T never formed).
+    Either gives ``cloud`` (the probings), ``n`` (observations), ``reml(y, Q, values, free,
+    fisher) -> RemlTerms`` (the fit); the dense one ``evaluate(values, []) -> (C, [])``, the
+    structured one ``gls_fit`` and ``standardized_residuals`` (the checks)."""
+    if structured is None:
+        structured = is_structured(prep) or prep.r_um.shape[0] > DENSE_MAX_OBS
+    if structured:
+        from .reml_structured import StructuredRecordCovariance, check_structure
+
+        check_structure(prep)
+        return StructuredRecordCovariance(prep, _plain_probes(prep.cloud))
     return DenseRecordCovariance(prep)
 
 
@@ -206,7 +216,7 @@ class RecordSet:
     prep: Prepared
     X: np.ndarray
     X_labels: list[str]
-    op: DenseRecordCovariance
+    op: object           # DenseRecordCovariance or reml_structured.StructuredRecordCovariance
     Q: np.ndarray = field(init=False)
 
     def __post_init__(self):
@@ -225,13 +235,14 @@ class RecordSet:
 
 
 def record_set(prep: Prepared, name: str = "records", effect_X: np.ndarray | None = None,
-               effect_labels: list[str] | None = None) -> RecordSet:
-    """The records with their fixed effects: the alignment (point records) and ``effect_X``."""
+               effect_labels: list[str] | None = None, structured: bool | None = None) -> RecordSet:
+    """The records with their fixed effects: the alignment (point records) and ``effect_X``;
+    ``structured``: the operator (:func:`record_covariance`)."""
     X, labels = prep.A, list(prep.A_labels)
     if effect_X is not None and effect_X.shape[1]:
         X = np.column_stack([X, effect_X])
         labels += list(effect_labels or [f"effect {j + 1}" for j in range(effect_X.shape[1])])
-    return RecordSet(name, prep, X, labels, record_covariance(prep))
+    return RecordSet(name, prep, X, labels, record_covariance(prep, structured))
 
 
 @dataclass
