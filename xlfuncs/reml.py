@@ -186,6 +186,19 @@ class DenseRecordCovariance:
         return RemlTerms(ll, g, F, q, n - p)
 
 
+def use_structured(rec, covariance: str = "auto") -> bool:
+    """Whether the fit takes the structured record covariance for these records: ``covariance``
+    ``structured``, ``dense``, or ``auto`` (above DENSE_MAX_OBS observations)."""
+    if covariance not in ("auto", "dense", "structured"):
+        raise ModelError(f"--covariance must be auto, dense or structured, got {covariance!r}")
+    if covariance != "auto":
+        return covariance == "structured"
+    from .locator.recordings import LengthRecords
+
+    dims = 1 if isinstance(rec, LengthRecords) else 2 if rec.planar else 3
+    return rec.n * dims > DENSE_MAX_OBS
+
+
 def record_covariance(prep: Prepared, structured: bool | None = None):
     """The operator C(theta) of one record set: dense (:class:`DenseRecordCovariance`) up to
     DENSE_MAX_OBS observations, else (or with ``structured`` True, or when ``prep`` already holds

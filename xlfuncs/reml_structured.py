@@ -51,6 +51,7 @@ import math
 
 import numpy as np
 from scipy.linalg import cho_factor, cho_solve, solve_triangular
+from scipy.linalg.blas import dsyrk
 
 from . import lowrank as lr
 from . import pointcloud as pc
@@ -204,94 +205,22 @@ class StructuredRecordCovariance:
             dop.facs = {k: (DerivativeFactor(v[0]), v[1]) for k, v in op.facs.items()}
         return dop
 
-    # -- the REML terms -----------------------------------------------------------------------
-    def reml(self, y: np.ndarray, Q: np.ndarray, values: dict[str, float], free: list[str],
-             fisher: bool = True):
-        """The REML terms of this record set (module docstring), as
-        :meth:`xlfuncs.reml.DenseRecordCovariance.reml`."""
-        from .reml import PARTNER, RemlTerms
+    def _S(self, op, values, free, gps, e_off):
+        """[(J_k, S_k[J_k, J_k])] and c_k of dC/dphi_k = c_k D + Z S_k Z^T (module docstring)."""
+        from .reml import PARTNER
 
-        op = self.operator(_params(values))
-        self.eps_C, self.ranks, self.chi2_bound = op.eps_C, dict(op.ranks), op.chi2_bound()
-        n, p = len(y), Q.shape[1]
-        k = op.k
-        gps = self._gp_factors(op)
-        lam_free = [(s, lm, f) for s, lm, f in GP if lm in free and values[s] > 0 and gps[f]]
-        dop = self._derivative_operator(op) if lam_free else None
-        need_dU = any(f != "ET" or self.prep.ends is None for _s, _lm, f in lam_free)
-        # column layout of Z: U | E_f ... | Q
-        e_off, o = {}, k
-        for s, lm, f in lam_free:
-            w = sum(fac.rank * c for fac, _off, c in gps[f])
-            e_off[f] = (o, o + w)
-            o += w
-        q0 = o
-        K = q0 + p
-        G = np.zeros((K, K))
-        b = np.zeros(K)
-        yDy = 0.0
-        logD = 0.0
-        for i0, i1, r0, r1 in self._blocks():
-            parts = [self._rows(op, i0, i1)]
-            dU = self._rows(dop, i0, i1) if need_dU else None
-            for s, lm, f in lam_free:
-                parts.append(self._derivative_rows(op, dop, f, i0, i1, dU))
-            parts.append(Q[r0:r1])
-            Zb = np.concatenate(parts, axis=1)
-            Db = self._D(op, r0, r1)
-            W = Zb / np.sqrt(Db)[:, None]
-            G += W.T @ W
-            b += Zb.T @ (y[r0:r1] / Db)
-            yDy += float(y[r0:r1] @ (y[r0:r1] / Db))
-            logD += float(np.sum(np.log(Db)))
-        G = 0.5 * (G + G.T)
-        iU = np.arange(k)
-        iQ = np.arange(q0, K)
-        A = np.eye(k) + G[:k, :k]
-        cA = cho_factor(A, lower=True)
-        logdetA = 2.0 * float(np.sum(np.log(np.diag(cA[0]))))
-        AiG = cho_solve(cA, G[:k, :])                      # A^-1 G_U:  (k x K)
-        H = np.zeros((K, K))
-        H[np.ix_(iU, iU)] = cho_solve(cA, np.eye(k))
-        if p:
-            T = G - G[:, :k] @ AiG                          # Z^T C^-1 Z
-            M = 0.5 * (T[np.ix_(iQ, iQ)] + T[np.ix_(iQ, iQ)].T)
-            cM = cho_factor(M, lower=True)
-            logdetM = 2.0 * float(np.sum(np.log(np.diag(cM[0]))))
-            Wq = np.zeros((K, p))
-            Wq[:k] = -AiG[:, iQ]
-            Wq[iQ] = np.eye(p)
-            H += Wq @ cho_solve(cM, Wq.T)
-        else:
-            logdetM = 0.0
-        H = 0.5 * (H + H.T)
-        HG = H @ G
-        Hb = H @ b
-        q = yDy - float(b @ Hb)
-        ll = -0.5 * (logD + logdetA + logdetM + q + (n - p) * math.log(2 * math.pi))
-        kf = len(free)
-        g = np.zeros(kf)
-        F = np.zeros((kf, kf)) if fisher else None
-        if not kf:
-            return RemlTerms(ll, g, F, q, n - p)
-        Phi = G - G @ HG
-        Phi = 0.5 * (Phi + Phi.T)
-        u = b - G @ Hb                                       # Z^T P y
-        trHG = float(np.trace(HG))
-        trPD = n - trHG
-        yPDPy = yDy - 2.0 * float(b @ Hb) + float(Hb @ G @ Hb)
         cols = self._columns(op)
-        c, S = [], []                  # S_k as (its index set J, the block S_k[J, J])
+        S, c = [], []
         for name in free:
             J, Sk, ck = np.zeros(0, dtype=int), np.zeros((0, 0)), 0.0
+            f = next((f for _s, lm, f in GP if lm == name), None)
             if name in cols:
                 if values[name] > 0:
                     J = cols[name]
                     Sk = 2.0 * np.eye(len(J))
                 if name == "sigma_R_um":
                     ck = 2.0
-            elif values[PARTNER[name]] > 0 and next(f for s, lm, f in GP if lm == name) in e_off:
-                f = next(f for s, lm, f in GP if lm == name)
+            elif values[PARTNER[name]] > 0 and f in e_off:
                 e0, _e1 = e_off[f]
                 Js, blocks = [], []
                 for fac, off, per in gps[f]:
@@ -310,22 +239,111 @@ class StructuredRecordCovariance:
                     o += len(blk)
             c.append(ck)
             S.append((J, Sk))
+        return S, c
+
+    # -- the REML terms -----------------------------------------------------------------------
+    def reml(self, y: np.ndarray, Q: np.ndarray, values: dict[str, float], free: list[str],
+             fisher: bool = True):
+        """The REML terms of this record set (module docstring), as
+        :meth:`xlfuncs.reml.DenseRecordCovariance.reml`."""
+        from .reml import RemlTerms
+
+        op = self.operator(_params(values))
+        self.eps_C, self.ranks, self.chi2_bound = op.eps_C, dict(op.ranks), op.chi2_bound()
+        n, p = len(y), Q.shape[1]
+        k = op.k
+        gps = self._gp_factors(op)
+        lam_free = [(s, lm, f) for s, lm, f in GP if lm in free and values[s] > 0 and gps[f]]
+        dop = self._derivative_operator(op) if lam_free else None
+        need_dU = any(f != "ET" or self.prep.ends is None for _s, _lm, f in lam_free)
+        # column layout of Z: U | E_f ... | Q
+        e_off, o = {}, k
+        for s, lm, f in lam_free:
+            w = sum(fac.rank * c for fac, _off, c in gps[f])
+            e_off[f] = (o, o + w)
+            o += w
+        q0 = o
+        K = q0 + p
+        G = np.zeros((K, K), order="F")
+        b = np.zeros(K)
+        yDy = 0.0
+        logD = 0.0
+        for i0, i1, r0, r1 in self._blocks():
+            parts = [self._rows(op, i0, i1)]
+            dU = self._rows(dop, i0, i1) if need_dU else None
+            for s, lm, f in lam_free:
+                parts.append(self._derivative_rows(op, dop, f, i0, i1, dU))
+            parts.append(Q[r0:r1])
+            Zb = np.concatenate(parts, axis=1)
+            Db = self._D(op, r0, r1)
+            W = Zb / np.sqrt(Db)[:, None]
+            G = dsyrk(1.0, W, beta=1.0, c=G, trans=1, lower=1, overwrite_c=1)    # += W^T W (lower)
+            b += Zb.T @ (y[r0:r1] / Db)
+            yDy += float(y[r0:r1] @ (y[r0:r1] / Db))
+            logD += float(np.sum(np.log(Db)))
+        iu = np.triu_indices(K, 1)
+        G[iu] = G.T[iu]
+        # H is zero outside the columns of U and Q (index set h): every product runs on blocks
+        iQ = np.arange(q0, K)
+        h = np.concatenate([np.arange(k), iQ])
+        cA = cho_factor(np.eye(k) + G[:k, :k], lower=True)
+        logdetA = 2.0 * float(np.sum(np.log(np.diag(cA[0]))))
+        Hs = np.zeros((k + p, k + p))                      # H[h, h]
+        Hs[:k, :k] = cho_solve(cA, np.eye(k))
+        if p:
+            AiGq = cho_solve(cA, G[:k, iQ])                 # A^-1 G_UQ
+            M = G[np.ix_(iQ, iQ)] - G[:k, iQ].T @ AiGq       # Q^T C^-1 Q
+            cM = cho_factor(0.5 * (M + M.T), lower=True)
+            logdetM = 2.0 * float(np.sum(np.log(np.diag(cM[0]))))
+            Wq = np.vstack([-AiGq, np.eye(p)])
+            Hs += Wq @ cho_solve(cM, Wq.T)
+        else:
+            logdetM = 0.0
+        Hs = 0.5 * (Hs + Hs.T)
+        bh = b[h]
+        Hb = Hs @ bh                                        # (H b)[h]
+        q = yDy - float(bh @ Hb)
+        ll = -0.5 * (logD + logdetA + logdetM + q + (n - p) * math.log(2 * math.pi))
+        kf = len(free)
+        g = np.zeros(kf)
+        F = np.zeros((kf, kf)) if fisher else None
+        if not kf:
+            return RemlTerms(ll, g, F, q, n - p)
+        S, c = self._S(op, values, free, gps, e_off)
+        Jall = np.unique(np.concatenate([J for J, _ in S] + [np.zeros(0, dtype=int)]))
+        loc = np.full(K, -1)
+        loc[Jall] = np.arange(len(Jall))
+        Ghh = G[np.ix_(h, h)]
+        GhJ = G[np.ix_(h, Jall)]
+        X = Hs @ GhJ                                        # (H G)[h, J]
+        Phi = G[np.ix_(Jall, Jall)] - GhJ.T @ X             # (Z^T P Z)[J, J]
+        Phi = 0.5 * (Phi + Phi.T)
+        u = b[Jall] - GhJ.T @ Hb                            # (Z^T P y)[J]
+        HGhh = Hs @ Ghh
+        trHG = float(np.trace(HGhh))
+        trPD = n - trHG
+        yPDPy = yDy - 2.0 * float(bh @ Hb) + float(Hb @ Ghh @ Hb)
+        S = [(loc[J], Sk) for J, Sk in S]
         for a, (J, Sk) in enumerate(S):
             g[a] = (-0.5 * (c[a] * trPD + float(np.sum(Sk * Phi[np.ix_(J, J)])))
                     + 0.5 * (c[a] * yPDPy + float(u[J] @ Sk @ u[J])))
         if fisher:
-            R = np.eye(K) - HG
-            Psi = R.T @ G @ R
-            trPDPD = n - 2.0 * trHG + float(np.sum(HG * HG.T))
-            trSPsi = [float(np.sum(Sk * Psi[np.ix_(J, J)])) for J, Sk in S]
+            trPDPD = n - 2.0 * trHG + float(np.sum(HGhh * HGhh.T))
+            if any(c):
+                # Psi = (Z^T P D P Z)[J, J] = G - G H G - (H G)^T G + (H G)^T G (H G) on J
+                GX = GhJ.T @ X
+                Psi = G[np.ix_(Jall, Jall)] - GX - GX.T + X.T @ Ghh @ X
+                trSPsi = [float(np.sum(Sk * Psi[np.ix_(J, J)])) for J, Sk in S]
+            else:
+                trSPsi = [0.0] * kf
             for a in range(kf):
                 Ja, Sa = S[a]
                 for b_ in range(a + 1):
                     Jb, Sb = S[b_]
-                    X = Sa @ Phi[np.ix_(Ja, Jb)]
-                    Y = Sb @ Phi[np.ix_(Jb, Ja)]
+                    Xa = Sa @ Phi[np.ix_(Ja, Jb)]
+                    Yb = Sb @ Phi[np.ix_(Jb, Ja)]
                     F[a, b_] = F[b_, a] = 0.5 * (c[a] * c[b_] * trPDPD + c[a] * trSPsi[b_] + c[b_] * trSPsi[a]
-                                                 + float(np.sum(X * Y.T)))
+                                                 + float(np.sum(Xa * Yb.T)))
         return RemlTerms(ll, g, F, q, n - p)
 
     # -- GLS at given hyper-parameters (what the checks need) ---------------------------------
