@@ -2,7 +2,9 @@
 structured record covariance (:mod:`xlfuncs.reml_structured`, C = D + U U^T of ``diagnose``, never
 n x n) for length records far above ``reml.DENSE_MAX_OBS`` = 4,000 observations.
 
-Usage: ``python bench/calibrate_large.py [--records 20000]``.
+Usage: ``python bench/calibrate_large.py [--records=20000] [--hold=lambda_ET_mm,lambda_ER_mm,lambda_P]``
+(``--hold``: hyper-parameters held at their start in the fit, ``fixed`` of
+:func:`xlfuncs.calibrate.calibrate`; the one evaluation is always in all twelve).
 
 ISO 10360-2 style runs (7 positions x 10 lengths, three probes with offsets, as
 ``bench/bench_lengths.py``) simulated from Forbes 2025 Table 3 MPE1 (no planted effect), then
@@ -48,7 +50,7 @@ t = time.perf_counter()
 t0 = reml.reml_terms([s], v, list(reml.NAMES))
 one_s = time.perf_counter() - t
 t = time.perf_counter()
-cal = cb.calibrate([s], MPE1)
+cal = cb.calibrate([s], MPE1, fixed={hold!r})
 fit_s = time.perf_counter() - t
 t = time.perf_counter()
 beta, cov, chi2, dof = checks.gls_fit(s, cal.params)
@@ -65,9 +67,9 @@ print("RESULT", json.dumps(out))
 """
 
 
-def run(n: int) -> dict:
+def run(n: int, hold: tuple) -> dict:
     env = dict(os.environ, OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1", MKL_NUM_THREADS="1")
-    p = subprocess.run([sys.executable, "-c", textwrap.dedent(CODE.format(n=n))], cwd=ROOT, capture_output=True,
+    p = subprocess.run([sys.executable, "-c", textwrap.dedent(CODE.format(n=n, hold=hold))], cwd=ROOT, capture_output=True,
                        text=True, env=env)
     if p.returncode != 0:
         raise RuntimeError(p.stderr)
@@ -78,7 +80,10 @@ def run(n: int) -> dict:
 
 def main(argv: list[str]) -> int:
     sizes = [20_000]
+    hold: tuple = ()
     for a in argv:
+        if a.startswith("--hold="):
+            hold = tuple(v for v in a.split("=", 1)[1].split(",") if v)
         if a.startswith("--records="):
             sizes = [int(v) for v in a.split("=", 1)[1].split(",")]
     lines = ["Measured by `python bench/calibrate_large.py` on the 2-core machine shared with other jobs "
@@ -87,15 +92,16 @@ def main(argv: list[str]) -> int:
              "",
              "## REML fit of the hyper-parameters on ISO 10360-2 style length records (simulated from MPE1)",
              "",
-             "| records | covariance | prepare / s | one REML evaluation (12 parameters) / s | fit / s (iterations) | "
+             "| records | covariance | held at the start | prepare / s | one REML evaluation (12 parameters) / s | fit / s (iterations) | "
              "GLS checks / s | CPU / s | peak MB | load | k (ranks) | chi2 rel. bound | chi2/dof, rms z |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     fits = []
     for n in sizes:
-        r = run(n)
+        r = run(n, hold)
+        r["hold"] = hold
         print(r, flush=True)
         ranks = ", ".join(f"{k} {v}" for k, v in (r["ranks"] or {}).items())
-        lines.append(f"| {r['n']:,} | {r['op']} | {r['prep_s']:.1f} | {r['one_s']:.1f} | {r['fit_s']:.0f} "
+        lines.append(f"| {r['n']:,} | {r['op']} | {', '.join(hold) or '—'} | {r['prep_s']:.1f} | {r['one_s']:.1f} | {r['fit_s']:.0f} "
                      f"({r['iterations']}) | {r['checks_s']:.1f} | {r['cpu_s']:.0f} | {r['peak_MB']:.0f} | "
                      f"{r['load']:.1f} | {ranks} | {r['bound'] or 0:.1e} | {r['chi2_dof']:.3f}, {r['z_rms']:.3f} |")
         fits.append(r)

@@ -32,8 +32,10 @@ F_kl = 1/2 tr(P dC_k P dC_l) for Fisher scoring.  The covariance of the estimate
 of the observed information (the Hessian of -l, central differences of the closed-form gradient).
 
 The dense operator (:class:`DenseRecordCovariance`) keeps C and its derivatives as n x n
-matrices; :func:`record_covariance` is where a structured operator plugs in (it must give
-``reml(y, Q, values, free, fisher)``, the REML terms of its records, and ``evaluate(values, [])``).
+matrices (at most DENSE_MAX_OBS observations); the structured one
+(:class:`xlfuncs.reml_structured.StructuredRecordCovariance`) computes the same terms through the
+operator C = D + U U^T of ``diagnose`` (Woodbury, the Nyström factors' derivatives), never n x n;
+:func:`record_covariance` chooses (dense up to DENSE_MAX_OBS observations, structured above).
 
 numpy only.
 """
@@ -276,6 +278,8 @@ def reml_terms(sets: list[RecordSet], values: dict[str, float], free: list[str],
     for s in sets:
         try:
             t = s.op.reml(s.y, s.Q, values, free, fisher)
+            if isinstance(t, tuple):          # the structured operator's terms
+                t = RemlTerms(*t)
         except np.linalg.LinAlgError:
             raise ModelError(f"{s.name}: the record covariance is not positive definite at "
                              + ", ".join(f"{n} = {values[n]:.4g}" for n in free)) from None
@@ -301,6 +305,28 @@ class Bounds:
     hi: np.ndarray
 
 
+def closest_spacing(U: np.ndarray, below: float = 1e-9) -> float:
+    """The smallest distance (mm) between two of the positions U farther apart than ``below``
+    (inf if none): dense for a few thousand positions, a k-d tree beyond (never m x m)."""
+    if len(U) <= 2000:
+        D = np.sqrt(sq_dists(U, U))
+        D[D < below] = np.inf
+        return float(np.min(D))
+    from scipy.spatial import cKDTree
+
+    U = np.unique(U, axis=0)
+    tree = cKDTree(U)
+    k = 2
+    while True:
+        d, _ = tree.query(U, k=min(k, len(U)))
+        d = np.where(d < below, np.inf, d)
+        best = float(np.min(d))
+        # every position whose k-1 neighbours all lie within ``below`` needs more neighbours
+        if k >= len(U) or np.all(np.isfinite(d[:, -1]) | np.isfinite(np.min(d, axis=1))):
+            return best
+        k *= 2
+
+
 def bounds(sets: list[RecordSet], start: dict[str, float], free: list[str]) -> Bounds:
     """Search box in phi: sigmas from ZERO_SHARE x start to 1e3 x start, length scales from a
     tenth of the closest spacing to a hundred times the travel seen."""
@@ -310,9 +336,7 @@ def bounds(sets: list[RecordSet], start: dict[str, float], free: list[str]) -> B
         U = s.op.cloud.ram_mm
         travel = max(travel, float(np.max(np.ptp(U, axis=0))))
         if len(U) > 1:
-            D = np.sqrt(sq_dists(U, U))
-            D[D < 1e-9] = np.inf
-            spacing = min(spacing, float(np.min(D)))
+            spacing = min(spacing, closest_spacing(U))
     travel = travel or 1.0
     spacing = spacing if math.isfinite(spacing) else travel
     for name in free:

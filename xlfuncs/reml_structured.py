@@ -207,8 +207,6 @@ class StructuredRecordCovariance:
 
     def _S(self, op, values, free, gps, e_off):
         """[(J_k, S_k[J_k, J_k])] and c_k of dC/dphi_k = c_k D + Z S_k Z^T (module docstring)."""
-        from .reml import PARTNER
-
         cols = self._columns(op)
         S, c = [], []
         for name in free:
@@ -220,7 +218,7 @@ class StructuredRecordCovariance:
                     Sk = 2.0 * np.eye(len(J))
                 if name == "sigma_R_um":
                     ck = 2.0
-            elif values[PARTNER[name]] > 0 and f in e_off:
+            elif f is not None and values[next(s_ for s_, lm, _f in GP if lm == name)] > 0 and f in e_off:
                 e0, _e1 = e_off[f]
                 Js, blocks = [], []
                 for fac, off, per in gps[f]:
@@ -245,9 +243,8 @@ class StructuredRecordCovariance:
     def reml(self, y: np.ndarray, Q: np.ndarray, values: dict[str, float], free: list[str],
              fisher: bool = True):
         """The REML terms of this record set (module docstring), as
-        :meth:`xlfuncs.reml.DenseRecordCovariance.reml`."""
-        from .reml import RemlTerms
-
+        :meth:`xlfuncs.reml.DenseRecordCovariance.reml`: (loglik, gradient, expected information,
+        y^T P y, n - p), which :func:`xlfuncs.reml.reml_terms` takes as its ``RemlTerms``."""
         op = self.operator(_params(values))
         self.eps_C, self.ranks, self.chi2_bound = op.eps_C, dict(op.ranks), op.chi2_bound()
         n, p = len(y), Q.shape[1]
@@ -308,7 +305,7 @@ class StructuredRecordCovariance:
         g = np.zeros(kf)
         F = np.zeros((kf, kf)) if fisher else None
         if not kf:
-            return RemlTerms(ll, g, F, q, n - p)
+            return ll, g, F, q, n - p
         S, c = self._S(op, values, free, gps, e_off)
         Jall = np.unique(np.concatenate([J for J, _ in S] + [np.zeros(0, dtype=int)]))
         loc = np.full(K, -1)
@@ -344,7 +341,7 @@ class StructuredRecordCovariance:
                     Yb = Sb @ Phi[np.ix_(Jb, Ja)]
                     F[a, b_] = F[b_, a] = 0.5 * (c[a] * c[b_] * trPDPD + c[a] * trSPsi[b_] + c[b_] * trSPsi[a]
                                                  + float(np.sum(Xa * Yb.T)))
-        return RemlTerms(ll, g, F, q, n - p)
+        return ll, g, F, q, n - p
 
     # -- GLS at given hyper-parameters (what the checks need) ---------------------------------
     def _solve(self, op, B: np.ndarray) -> np.ndarray:
