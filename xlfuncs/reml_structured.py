@@ -379,7 +379,7 @@ class StructuredRecordCovariance:
     def standardized_residuals(self, params: pc.Parameters, y: np.ndarray, Q: np.ndarray):
         """GLS residual, its u and z (:func:`xlfuncs.calibration_checks.standardized_residuals`)."""
         op = self.operator(_params({n: float(getattr(params, n)) for n in pc.Parameters.__dataclass_fields__}))
-        dC = op.diagonal() if isinstance(op, LengthCovariance) else op.diagonal()
+        dC = op.diagonal()
         if Q.shape[1]:
             CiQ = self._solve(op, np.column_stack([Q, y]))
             M = Q.T @ CiQ[:, :-1]
@@ -394,8 +394,10 @@ class StructuredRecordCovariance:
 
 
 def _independent(G: np.ndarray) -> np.ndarray:
-    """Which columns stay in a QR of the whitened columns without pivoting: |R_jj| > 1e-10 max |R_jj|
-    (R_jj^2 from the Gram matrix by a Cholesky that skips the dependent columns)."""
+    """Which columns stay, as in the QR of the whitened columns without pivoting of the dense path:
+    |R_jj| > 1e-10 max |R_jj|, R_jj^2 from the Gram matrix by a Cholesky that skips the dependent
+    columns (from the Gram matrix R_jj is resolved to about sqrt(eps) ~ 1e-8 of the column's norm: a
+    column dependent to rounding can stay in with a tiny pivot, where the dense QR drops it)."""
     p = G.shape[0]
     rjj = np.zeros(p)
     L = np.zeros((p, p))

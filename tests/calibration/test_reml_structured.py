@@ -14,6 +14,7 @@ import pytest
 from cmmwb.xlfuncs import calibrate as cb
 from cmmwb.xlfuncs import calibration_checks as checks
 from cmmwb.xlfuncs import reml
+from cmmwb.xlfuncs.errors import ModelError
 from cmmwb.xlfuncs.locator import diagnose as dg
 from cmmwb.xlfuncs.locator import simulate as sm
 from cmmwb.xlfuncs.reml_structured import StructuredRecordCovariance
@@ -123,7 +124,7 @@ def test_calibrate_takes_the_structured_covariance_above_the_dense_cap():
     p = dg.prepare(rec, dg.Model(MPE1, THREE, True), reml.use_structured(rec))
     s = reml.record_set(p, "iso")
     assert isinstance(s.op, StructuredRecordCovariance)
-    with pytest.raises(Exception, match="at most 4000"):
+    with pytest.raises(ModelError, match="at most 4000"):
         reml.record_set(p, "iso", structured=False)
 
 
