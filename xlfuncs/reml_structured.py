@@ -393,17 +393,24 @@ class StructuredRecordCovariance:
         return e, u, e / u
 
 
+#: a fixed-effect column is dependent on those before it when its part orthogonal to them (in the
+#: metric C^-1) is below this share of its norm (the resolution of a Gram matrix, ~ sqrt(eps))
+RESOLVED = 1e-7
+
+
 def _independent(G: np.ndarray) -> np.ndarray:
     """Which columns stay, as in the QR of the whitened columns without pivoting of the dense path:
     |R_jj| > 1e-10 max |R_jj|, R_jj^2 from the Gram matrix by a Cholesky that skips the dependent
     columns (from the Gram matrix R_jj is resolved to about sqrt(eps) ~ 1e-8 of the column's norm: a
-    column dependent to rounding can stay in with a tiny pivot, where the dense QR drops it)."""
+    column whose |R_jj| is below RESOLVED of its norm is dropped as dependent)."""
     p = G.shape[0]
     rjj = np.zeros(p)
     L = np.zeros((p, p))
     for j in range(p):
         v = G[j, j] - L[j, :j] @ L[j, :j]
-        rjj[j] = math.sqrt(max(v, 0.0))
+        if v <= RESOLVED ** 2 * G[j, j]:
+            continue                      # dependent to the Gram matrix's resolution: dropped
+        rjj[j] = math.sqrt(v)
         if rjj[j] > 0:
             L[j + 1:, j] = (G[j + 1:, j] - L[j + 1:, :j] @ L[j, :j]) / rjj[j]
             L[j, j] = rjj[j]
