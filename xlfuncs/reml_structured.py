@@ -106,7 +106,9 @@ def _params(values: dict[str, float]) -> pc.Parameters:
 class StructuredRecordCovariance:
     """C(theta) of one prepared record set as the structured operator of ``diagnose`` (the same
     interface as :class:`xlfuncs.reml.DenseRecordCovariance`: ``cloud``, ``n``, ``reml``; GLS
-    through :meth:`gls_fit` and :meth:`standardized_residuals`, never n x n)."""
+    through :meth:`gls_fit` and :meth:`standardized_residuals`, never n x n).  ``ranks``, ``eps_C``
+    and ``chi2_bound``: the operator's at the last evaluation (the pivots, the bound
+    ||C - C_lowrank||_2 and the first-order relative chi-square bound of ``diagnose``)."""
 
     structured = True
 
@@ -119,6 +121,7 @@ class StructuredRecordCovariance:
         self.eps_C = 0.0
         self.ranks: dict = {}
         self.chi2_bound = 0.0
+        # records the operator cannot take are refused here (with the reason), not in the fit
         self.operator(_params({n: 0.0 for n in pc.Parameters.__dataclass_fields__} | {"sigma_R_um": 1.0}))
 
     # -- the operator of diagnose at these values ------------------------------------------------
