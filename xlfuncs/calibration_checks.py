@@ -21,6 +21,8 @@ from .reml import NAMES, UNIT, RecordSet, bounds, maximize, reml_terms
 def standardized_residuals(s: RecordSet, params: pc.Parameters) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """GLS residual e = r - X beta (µm), its standard uncertainty sqrt(diag(C - X cov(beta) X^T))
     and z = e/u, with C the fitted model's covariance."""
+    if getattr(s.op, "structured", False):
+        return s.op.standardized_residuals(params, s.y, s.Q)
     values = {n: float(getattr(params, n)) for n in NAMES}
     C, _ = s.op.evaluate(values, [])
     L = np.linalg.cholesky(C)
@@ -97,10 +99,12 @@ def gls_fit(s: RecordSet, params: pc.Parameters, y: np.ndarray | None = None,
     """GLS of ``y`` (default: the records' residual) on ``X`` (default: the set's fixed effects)
     with the covariance of ``params``: (beta, cov(beta), chi2, dof).  The fixed-effect estimates
     at the fitted hyper-parameters and the chi-square of the records against a model."""
-    values = {n: float(getattr(params, n)) for n in NAMES}
-    C, _ = s.op.evaluate(values, [])
     y = s.y if y is None else y
     X = s.X if X is None else X
+    if getattr(s.op, "structured", False):
+        return s.op.gls_fit(params, y, X)
+    values = {n: float(getattr(params, n)) for n in NAMES}
+    C, _ = s.op.evaluate(values, [])
     Li = np.linalg.inv(np.linalg.cholesky(C))
     yw, Xw = Li @ y, Li @ X
     if X.shape[1]:

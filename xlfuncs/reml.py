@@ -32,8 +32,10 @@ F_kl = 1/2 tr(P dC_k P dC_l) for Fisher scoring.  The covariance of the estimate
 of the observed information (the Hessian of -l, central differences of the closed-form gradient).
 
 The dense operator (:class:`DenseRecordCovariance`) keeps C and its derivatives as n x n
-matrices; :func:`record_covariance` is where a structured operator plugs in (it must give
-``reml(y, Q, values, free, fisher)``, the REML terms of its records, and ``evaluate(values, [])``).
+matrices (at most DENSE_MAX_OBS observations); the structured one
+(:class:`xlfuncs.reml_structured.StructuredRecordCovariance`) computes the same terms through the
+operator C = D + U U^T of ``diagnose`` (Woodbury, the Nyström factors' derivatives), never n x n;
+:func:`record_covariance` chooses (dense up to DENSE_MAX_OBS observations, structured above).
 
 numpy only.
 """
@@ -186,11 +188,34 @@ class DenseRecordCovariance:
         return RemlTerms(ll, g, F, q, n - p)
 
 
-def record_covariance(prep: Prepared) -> DenseRecordCovariance:
-    """The operator C(theta) of one record set (dense).  A structured operator plugs in here: it
-    gives ``cloud`` (the probings), ``n`` (observations), ``reml(y, Q, values, free, fisher) ->
-    RemlTerms`` (the fit) and ``evaluate(values, []) -> (C, [])`` (GLS of the effects and the
-    standardized residuals; dense there)."""
+def use_structured(rec, covariance: str = "auto") -> bool:
+    """Whether the fit takes the structured record covariance for these records: ``covariance``
+    ``structured``, ``dense``, or ``auto`` (above DENSE_MAX_OBS observations)."""
+    if covariance not in ("auto", "dense", "structured"):
+        raise ModelError(f"--covariance must be auto, dense or structured, got {covariance!r}")
+    if covariance != "auto":
+        return covariance == "structured"
+    from .locator.recordings import LengthRecords
+
+    dims = 1 if isinstance(rec, LengthRecords) else 2 if rec.planar else 3
+    return rec.n * dims > DENSE_MAX_OBS
+
+
+def record_covariance(prep: Prepared, structured: bool | None = None):
+    """The operator C(theta) of one record set: dense (:class:`DenseRecordCovariance`) up to
+    DENSE_MAX_OBS observations, else (or with ``structured`` True, or when ``prep`` already holds
+    the structured operator of ``diagnose``) the structured operator
+    (:class:`xlfuncs.reml_structured.StructuredRecordCovariance`, C = D + U U^T never formed).
+    Either gives ``cloud`` (the probings), ``n`` (observations), ``reml(y, Q, values, free,
+    fisher) -> RemlTerms`` (the fit); the dense one ``evaluate(values, []) -> (C, [])``, the
+    structured one ``gls_fit`` and ``standardized_residuals`` (the checks)."""
+    if structured is None:
+        structured = is_structured(prep) or prep.r_um.shape[0] > DENSE_MAX_OBS
+    if structured:
+        from .reml_structured import StructuredRecordCovariance, check_structure
+
+        check_structure(prep)
+        return StructuredRecordCovariance(prep, _plain_probes(prep.cloud))
     return DenseRecordCovariance(prep)
 
 
@@ -206,7 +231,7 @@ class RecordSet:
     prep: Prepared
     X: np.ndarray
     X_labels: list[str]
-    op: DenseRecordCovariance
+    op: object           # DenseRecordCovariance or reml_structured.StructuredRecordCovariance
     Q: np.ndarray = field(init=False)
 
     def __post_init__(self):
@@ -225,13 +250,14 @@ class RecordSet:
 
 
 def record_set(prep: Prepared, name: str = "records", effect_X: np.ndarray | None = None,
-               effect_labels: list[str] | None = None) -> RecordSet:
-    """The records with their fixed effects: the alignment (point records) and ``effect_X``."""
+               effect_labels: list[str] | None = None, structured: bool | None = None) -> RecordSet:
+    """The records with their fixed effects: the alignment (point records) and ``effect_X``;
+    ``structured``: the operator (:func:`record_covariance`)."""
     X, labels = prep.A, list(prep.A_labels)
     if effect_X is not None and effect_X.shape[1]:
         X = np.column_stack([X, effect_X])
         labels += list(effect_labels or [f"effect {j + 1}" for j in range(effect_X.shape[1])])
-    return RecordSet(name, prep, X, labels, record_covariance(prep))
+    return RecordSet(name, prep, X, labels, record_covariance(prep, structured))
 
 
 @dataclass
@@ -252,6 +278,8 @@ def reml_terms(sets: list[RecordSet], values: dict[str, float], free: list[str],
     for s in sets:
         try:
             t = s.op.reml(s.y, s.Q, values, free, fisher)
+            if isinstance(t, tuple):          # the structured operator's terms
+                t = RemlTerms(*t)
         except np.linalg.LinAlgError:
             raise ModelError(f"{s.name}: the record covariance is not positive definite at "
                              + ", ".join(f"{n} = {values[n]:.4g}" for n in free)) from None
@@ -277,6 +305,28 @@ class Bounds:
     hi: np.ndarray
 
 
+def closest_spacing(U: np.ndarray, below: float = 1e-9) -> float:
+    """The smallest distance (mm) between two of the positions U farther apart than ``below``
+    (inf if none): dense for a few thousand positions, a k-d tree beyond (never m x m)."""
+    if len(U) <= 2000:
+        D = np.sqrt(sq_dists(U, U))
+        D[D < below] = np.inf
+        return float(np.min(D))
+    from scipy.spatial import cKDTree
+
+    U = np.unique(U, axis=0)
+    tree = cKDTree(U)
+    k = 2
+    while True:
+        d, _ = tree.query(U, k=min(k, len(U)))
+        d = np.where(d < below, np.inf, d)
+        best = float(np.min(d))
+        # every position whose k-1 neighbours all lie within ``below`` needs more neighbours
+        if k >= len(U) or np.all(np.isfinite(d[:, -1]) | np.isfinite(np.min(d, axis=1))):
+            return best
+        k *= 2
+
+
 def bounds(sets: list[RecordSet], start: dict[str, float], free: list[str]) -> Bounds:
     """Search box in phi: sigmas from ZERO_SHARE x start to 1e3 x start, length scales from a
     tenth of the closest spacing to a hundred times the travel seen."""
@@ -286,9 +336,7 @@ def bounds(sets: list[RecordSet], start: dict[str, float], free: list[str]) -> B
         U = s.op.cloud.ram_mm
         travel = max(travel, float(np.max(np.ptp(U, axis=0))))
         if len(U) > 1:
-            D = np.sqrt(sq_dists(U, U))
-            D[D < 1e-9] = np.inf
-            spacing = min(spacing, float(np.min(D)))
+            spacing = min(spacing, closest_spacing(U))
     travel = travel or 1.0
     spacing = spacing if math.isfinite(spacing) else travel
     for name in free:

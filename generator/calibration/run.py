@@ -87,8 +87,10 @@ def _effect_columns(prep, names: list[str], path: Path):
 def run_calibrate(paths: list[Path], model: dg.Model, out_dir: Path, *, task_path: Path | None = None,
                   task_label: str = "", effects: str = "auto", feedback: str = "compensate",
                   mpe: dict | None = None, alpha: float = 0.01, workbook: bool = True, force: bool = False,
-                  profiles: bool = True) -> tuple[dict, list[Path]]:
-    """Calibrate from ``paths`` into ``out_dir`` (all or nothing); returns the JSON and the files."""
+                  profiles: bool = True, covariance: str = "auto") -> tuple[dict, list[Path]]:
+    """Calibrate from ``paths`` into ``out_dir`` (all or nothing); returns the JSON and the files.
+    ``covariance``: the record covariance of the fit, ``dense``, ``structured`` or ``auto`` (dense
+    up to ``reml.DENSE_MAX_OBS`` observations per file, structured above)."""
     from ..taskfile import read_toml
 
     if not (0.0 < alpha < 1.0):
@@ -105,10 +107,11 @@ def run_calibrate(paths: list[Path], model: dg.Model, out_dir: Path, *, task_pat
         rec = read_recordings(path)
         with model_errors_named(path):
             try:
-                prep = dg.prepare(rec, model, False)
-                if prep.r_um.shape[0] > reml.DENSE_MAX_OBS:
-                    raise ModelError(f"{prep.r_um.shape[0]} observations: calibrate uses the dense record "
-                                     f"covariance, at most {reml.DENSE_MAX_OBS} per file (split the file)")
+                structured = reml.use_structured(rec, covariance)
+                prep = dg.prepare(rec, model, structured)
+                if not structured and prep.r_um.shape[0] > reml.DENSE_MAX_OBS:
+                    raise ModelError(f"{prep.r_um.shape[0]} observations: the dense record covariance takes "
+                                     f"at most {reml.DENSE_MAX_OBS} per file (--covariance structured or auto)")
                 chosen, diag = [], None
                 if effects == "auto":
                     diag = dg.diagnose_prepared(prep, alpha)
@@ -119,7 +122,7 @@ def run_calibrate(paths: list[Path], model: dg.Model, out_dir: Path, *, task_pat
                 else:
                     chosen = [e.strip() for e in effects.split(",") if e.strip()]
                     X, labels = _effect_columns(prep, chosen, path)
-                s = reml.RecordSet(stem, prep, X, [f"{a} {b}" for a, b in labels], reml.record_covariance(prep))
+                s = reml.RecordSet(stem, prep, X, [f"{a} {b}" for a, b in labels], reml.record_covariance(prep, structured))
             except RecordingsError as e:     # a ModelError too, named by the recordings' line
                 raise InputError(e.message, file=path, where=e.where) from None
         sets.append(s)

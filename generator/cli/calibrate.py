@@ -48,6 +48,10 @@ def register(sub) -> None:
                    help="starting values: the task's [parameters] (a zero there leaves the factor out), or "
                         "Forbes 2025 Table 3 MPE1 for every factor (default: task)")
     s.add_argument("--alpha", type=float, default=0.01, help="significance level of the locator (default: 0.01)")
+    s.add_argument("--covariance", default="auto", choices=("auto", "dense", "structured"),
+                   help="record covariance of the fit: dense n x n, structured (C = D + U U^T of diagnose, "
+                        "never n x n: large files), or auto (dense up to 4000 observations per file, "
+                        "structured above; default: auto)")
     s.add_argument("--no-workbook", action="store_true", help="skip the workbook (default: write it)")
     s.add_argument("--force", action="store_true",
                    help="replace outputs edited since cmmwb wrote them, keeping a backup (default: refuse)")
@@ -66,7 +70,8 @@ def run(args) -> int:
     mpe = parse_mpe(args.mpe, doc, model.probes)
     result, files = run_calibrate([Path(p) for p in args.recordings], model, Path(args.out), task_path=task_path,
                                   task_label=label, effects=args.effects, feedback=args.feedback, mpe=mpe,
-                                  alpha=args.alpha, workbook=not args.no_workbook, force=args.force)
+                                  alpha=args.alpha, workbook=not args.no_workbook, force=args.force,
+                                  covariance=args.covariance)
     print(result["summary"])
     for f in files:
         print(f"  -> {f}")
