@@ -101,14 +101,14 @@ class DenseRecordCovariance:
 
     def __init__(self, prep: Prepared):
         if is_structured(prep):
-            raise ModelError("calibrate uses the dense record covariance: give at most "
-                             f"{DENSE_MAX_OBS} observations per file (or use diagnose for larger files)")
+            raise ModelError("the dense record covariance holds at most "
+                             f"{DENSE_MAX_OBS} observations per file: use --covariance structured (or auto)")
         self.prep = prep
         self.cloud = _plain_probes(prep.cloud)
         self.n = prep.r_um.shape[0]
         if self.n > DENSE_MAX_OBS:
-            raise ModelError(f"calibrate uses the dense record covariance: {self.n} observations, at most "
-                             f"{DENSE_MAX_OBS} per file")
+            raise ModelError(f"the dense record covariance holds at most {DENSE_MAX_OBS} observations per "
+                             f"file, this one has {self.n}: use --covariance structured (or auto)")
         if prep.ends is None:
             dims = 2 if prep.design.dims == 2 else 3
             self.keep = np.array([3 * i + a for i in range(prep.rec.n) for a in range(dims)])
@@ -247,6 +247,11 @@ class RecordSet:
     @property
     def y(self) -> np.ndarray:
         return self.prep.r_um
+
+    @property
+    def structured(self) -> bool:
+        """True when C(theta) is the structured operator (never n x n), False when dense."""
+        return not isinstance(self.op, DenseRecordCovariance)
 
 
 def record_set(prep: Prepared, name: str = "records", effect_X: np.ndarray | None = None,

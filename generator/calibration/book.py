@@ -54,7 +54,8 @@ def _instructions(book: Book, result: dict) -> None:
               "before and after and u(d) before (the task) and after (the fitted task), with a chart.",
               "Records: residuals after the fixed effects, standardized by the fitted model.",
               "Profiles: the REML log-likelihood of each estimated hyper-parameter, the others re-optimized "
-              "(the drop of 2 marks about the 95 % interval).")
+              "(the drop of 2 marks about the 95 % interval)"
+              + (f"; {result['profiles_note']}." if result.get("profiles_note") else "."))
     book.gap()
     book.para("Summary", bold=True)
     book.para(result["summary"])

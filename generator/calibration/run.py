@@ -87,14 +87,19 @@ def _effect_columns(prep, names: list[str], path: Path):
 def run_calibrate(paths: list[Path], model: dg.Model, out_dir: Path, *, task_path: Path | None = None,
                   task_label: str = "", effects: str = "auto", feedback: str = "compensate",
                   mpe: dict | None = None, alpha: float = 0.01, workbook: bool = True, force: bool = False,
-                  profiles: bool = True, covariance: str = "auto") -> tuple[dict, list[Path]]:
+                  profiles: str = "auto", covariance: str = "auto") -> tuple[dict, list[Path]]:
     """Calibrate from ``paths`` into ``out_dir`` (all or nothing); returns the JSON and the files.
     ``covariance``: the record covariance of the fit, ``dense``, ``structured`` or ``auto`` (dense
-    up to ``reml.DENSE_MAX_OBS`` observations per file, structured above)."""
+    up to ``reml.DENSE_MAX_OBS`` observations per file, structured above).  ``profiles``: the
+    likelihood profiles (about 9 refits per estimated hyper-parameter), ``yes``, ``no`` or
+    ``auto`` (only when every file has the dense covariance: on a structured one each refit is a
+    large fit of its own)."""
     from ..taskfile import read_toml
 
     if not (0.0 < alpha < 1.0):
         raise InputError(f"--alpha must be between 0 and 1, got {alpha!r}")
+    if profiles not in ("auto", "yes", "no"):
+        raise InputError(f"--profiles must be auto, yes or no, got {profiles!r}")
     doc = read_toml(task_path) if task_path is not None else None
     sets, per_file = [], []
     names = {}
@@ -190,7 +195,14 @@ def run_calibrate(paths: list[Path], model: dg.Model, out_dir: Path, *, task_pat
                                                  cal if feedback == "none" or not changes else None, GRID_POINTS),
                     "task": checks.mpe_consistency(model.params, mpe["A_um"], mpe["B_mm"], mpe["K"], P_mm, L_max,
                                                None, GRID_POINTS)}
-    prof = [checks.profile(cal, n) for n in cal.free] if profiles else []
+    large = [s.name for s in sets if s.structured]
+    profiles_note = None
+    if profiles == "no":
+        profiles_note = "not computed (--profiles no)"
+    elif profiles == "auto" and large:
+        profiles_note = ("not computed: " + ", ".join(large) + " use the structured covariance, where each "
+                         "profile point is a large refit (--profiles yes computes them)")
+    prof = [checks.profile(cal, n) for n in cal.free] if profiles_note is None else []
 
     resid = []
     for s in sets:
@@ -211,7 +223,8 @@ def run_calibrate(paths: list[Path], model: dg.Model, out_dir: Path, *, task_pat
               "chi2": chi2,
               "u_d": {"P_mm": P_mm, "d_mm": d.tolist(), "before_um": u_before.tolist(),
                       "after_um": u_after.tolist(), "uncompensated_um": u_uncomp},
-              "mpe_check": mpe_json, "profiles": prof, "residuals": resid}
+              "mpe_check": mpe_json, "profiles": prof,
+              "profiles_note": profiles_note, "residuals": resid}
     result["summary"] = summary(result)
     with Staging(out_dir, force=force) as tmp:
         (tmp / "calibration.json").write_text(json.dumps(result, indent=1, ensure_ascii=False, allow_nan=False)

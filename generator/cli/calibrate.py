@@ -52,6 +52,9 @@ def register(sub) -> None:
                    help="record covariance of the fit: dense n x n, structured (C = D + U U^T of diagnose, "
                         "never n x n: large files), or auto (dense up to 4000 observations per file, "
                         "structured above; default: auto)")
+    s.add_argument("--profiles", default="auto", choices=("auto", "yes", "no"),
+                   help="REML likelihood profiles of the estimates (about 9 refits each): yes, no, or auto "
+                        "(only when every file has the dense covariance; default: auto)")
     s.add_argument("--no-workbook", action="store_true", help="skip the workbook (default: write it)")
     s.add_argument("--force", action="store_true",
                    help="replace outputs edited since cmmwb wrote them, keeping a backup (default: refuse)")
@@ -71,7 +74,7 @@ def run(args) -> int:
     result, files = run_calibrate([Path(p) for p in args.recordings], model, Path(args.out), task_path=task_path,
                                   task_label=label, effects=args.effects, feedback=args.feedback, mpe=mpe,
                                   alpha=args.alpha, workbook=not args.no_workbook, force=args.force,
-                                  covariance=args.covariance)
+                                  covariance=args.covariance, profiles=args.profiles)
     print(result["summary"])
     for f in files:
         print(f"  -> {f}")

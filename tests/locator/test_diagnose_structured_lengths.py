@@ -124,7 +124,7 @@ def test_records_without_a_probing_of_their_own_are_refused_with_the_reason(monk
     L.ids, L.group = [f"c{a}" for a in range(m - 1)], ["x"] * (m - 1)
     L.time_s = L.time_s[:1].repeat(m - 1)
     rec = sm.simulate(L, MPE1, {}, seed=2)
-    with pytest.raises(ModelError, match=r"have both probings shared.*\(--exact\)"):
+    with pytest.raises(ModelError, match=r"have both probings shared.*\(diagnose --exact, calibrate --covariance dense\)"):
         dg.prepare(rec, MODEL, True)
     monkeypatch.setattr(locator_model, "STRUCTURED_MIN_OBS", 0)
     assert isinstance(dg.prepare(rec, MODEL).C, np.ndarray)

@@ -205,7 +205,7 @@ def prepare(rec: LengthRecords | PointRecords, model: Model, structured: bool | 
             if why is None:
                 C = sl.LengthCovariance(cloud, model.params, I, J)
             elif structured:
-                raise ModelError(why + "; diagnose with the dense covariance (--exact)")
+                raise ModelError(why + "; use the dense covariance (diagnose --exact, calibrate --covariance dense)")
             else:
                 C = length_covariance(cloud, model.params, I, J)
         else:

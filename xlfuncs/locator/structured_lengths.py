@@ -157,7 +157,8 @@ class LengthCovariance:
                 f"the structured length covariance would need {self.k:,} columns (ranks "
                 + ", ".join(f"{f} {r}" for f, r in self.ranks.items())
                 + f"; at most {MAX_COLUMNS:,} fit): the correlation lengths are short against the "
-                "extent of the probings; diagnose a section of the recordings or use --exact on fewer records")
+                "extent of the probings; take a section of the recordings, or fewer records with the dense "
+                "covariance (diagnose --exact, calibrate --covariance dense)")
         self._core = None
 
     @property
