@@ -130,7 +130,9 @@ def library_match(diag, r0_um, steps: int = 3) -> tuple[bool, float]:
         best, best_q = 0.0, None
         for n, blocks in cols.items():
             for Xw in blocks:
-                Qc, kept = orth(project_out(Q, Xw))
+                # dependence judged against the column before the projection: a column already in
+                # the span leaves rounding noise, which orth would otherwise normalize and count
+                Qc, kept = orth(project_out(Q, Xw), ref_norms=np.linalg.norm(Xw, axis=0))
                 if kept:
                     got = float(np.sum((Qc.T @ sw) ** 2))
                     if got > best:
