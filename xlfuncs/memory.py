@@ -18,6 +18,11 @@ import os
 
 from .errors import ModelError
 
+#: point and length records with more observations than this use the structured covariance
+#: (:mod:`xlfuncs.locator.structured`, :mod:`xlfuncs.locator.structured_lengths`: C = D + U U^T
+#: never formed) unless asked otherwise (``diagnose --exact``)
+STRUCTURED_MIN_OBS = 6000
+
 #: n x n matrices alive at the peak of a length-record diagnosis (6 factors, sum, factor, spare)
 LENGTH_MATRICES = 10
 #: (dims n) x (dims n) matrices alive at the peak of a point-record diagnosis, besides V_X

@@ -9,8 +9,6 @@ from pathlib import Path
 
 from cmmwb.xlfuncs.model import MPE1
 
-from ..calibration.run import parse_mpe, run_calibrate
-from ..diagnosis.run import load_model
 from ..taskfile import read_toml
 from .common import add_command
 
@@ -62,6 +60,9 @@ def register(sub) -> None:
 
 
 def run(args) -> int:
+    from ..calibration.run import parse_mpe, run_calibrate  # the REML fit (scipy): only when run
+    from ..diagnosis.run import load_model
+
     model, label = load_model(args.task, args.sigma_um)
     if args.start == "mpe1":
         model = replace(model, params=MPE1)

@@ -8,7 +8,6 @@ from pathlib import Path
 
 from .. import __version__
 from ..build import build_task
-from ..diagnosis.run import demo as diagnosis_demo
 from ..jobs import JOBS
 from .build import print_built
 from .common import add_command
@@ -28,6 +27,8 @@ def register(sub) -> None:
 
 
 def run(args) -> int:
+    from ..diagnosis.run import demo as diagnosis_demo  # the locator (scipy): only when run
+
     out = Path(args.out)
     if args.pdf:
         from ..workbook.pdf import require_libreoffice

@@ -8,10 +8,8 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from cmmwb.xlfuncs.locator import diagnose as dg
+from cmmwb.xlfuncs.memory import STRUCTURED_MIN_OBS
 
-from ..diagnosis.run import load_model, run_diagnose
-from ..taskfile import collecting_notes
 from .common import add_command
 
 
@@ -43,11 +41,14 @@ def register(sub) -> None:
     s.add_argument("--exact", action="store_true",
                    help="the dense record covariance (exact, memory ~ n^2) even for large point records "
                         "(default: above %d observations the structured operator, error bound in the "
-                        "JSON's approximation)" % dg.STRUCTURED_MIN_OBS)
+                        "JSON's approximation)" % STRUCTURED_MIN_OBS)
     s.set_defaults(func=run)
 
 
 def run(args) -> int:
+    from ..diagnosis.run import load_model, run_diagnose  # the locator (scipy): only when run
+    from ..taskfile import collecting_notes
+
     with collecting_notes() as notes:
         model, label = load_model(args.task, args.sigma_um)
     result, files = run_diagnose(Path(args.recordings), model, Path(args.out), alpha=args.alpha,

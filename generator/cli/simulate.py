@@ -11,7 +11,6 @@ from cmmwb.xlfuncs.locator import simulate as sm
 from cmmwb.xlfuncs.locator.recordings import write_recordings
 
 from .. import __version__
-from ..diagnosis.run import load_model
 from ..errors import InputError, model_errors_named
 from ..workbook.atomic import write_text
 from .common import add_command
@@ -49,6 +48,8 @@ def register(sub) -> None:
 
 
 def run(args) -> int:
+    from ..diagnosis.run import load_model  # the locator (scipy): only when run
+
     model, label = load_model(args.task, args.sigma_um, default_mpe1=True)
     probes = model.probes
     planted: dict = {}

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .. import blocked as bl
+from .. import memory
 from .. import pointcloud as pc
 from ..errors import ModelError
 from . import effects as fx
@@ -166,9 +167,9 @@ def kabsch(X_nom: np.ndarray, X: np.ndarray, planar: bool) -> tuple[np.ndarray, 
     return R, t
 
 
-#: point records with more observations than this use the structured covariance
-#: (:mod:`xlfuncs.locator.structured`, C = D + U U^T never formed) unless asked otherwise
-STRUCTURED_MIN_OBS = 6000
+#: records with more observations than this use the structured covariance (defined in
+#: :mod:`xlfuncs.memory`, which the command line reads without importing the locator)
+STRUCTURED_MIN_OBS = memory.STRUCTURED_MIN_OBS
 
 
 def uses_structured(rec: LengthRecords | PointRecords, model: Model, structured: bool | None = None) -> bool:
