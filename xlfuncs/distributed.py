@@ -2,7 +2,7 @@
 ``pip install "cmmwb[dask]"``).
 
 The blocked functions (:func:`~xlfuncs.blocked.V_A_components`,
-:func:`~xlfuncs.blocked.distance_components`, :func:`~xlfuncs.blocked.record_covariance`, ...)
+:func:`~xlfuncs.blocked.distance_components`, :func:`~xlfuncs.record_covariance.record_covariance`, ...)
 split their work into independent row blocks and hand them to a *backend*: any object with
 ``map(fn, items, shared)`` that returns ``fn(item, shared)`` for every item, in order.  Without
 a backend they run on a local thread pool.  :class:`DaskBackend` runs the same blocks as Dask

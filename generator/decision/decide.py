@@ -18,6 +18,7 @@ from pathlib import Path
 
 from cmmwb.xlfuncs import conformity as cf
 from cmmwb.xlfuncs import dof
+from cmmwb.xlfuncs import global_risk as gr
 from cmmwb.xlfuncs.errors import ModelError
 from cmmwb.xlfuncs.statement import statement
 
@@ -359,7 +360,7 @@ def decide_all(path: Path, kind: str, spec: DecisionSpec, results: dict) -> list
                  **{k_: v for k_, v in unc.items() if k_ not in ("u_um", "k")},
                  "statement": statement(symbol(kind, t.label), value, "mm", d.U_um, "µm", d.k)}
         if t.process_sd_um is not None:
-            g = cf.global_risks_normal(t.process_mean_mm, t.process_sd_um, d.u_um, tol, d.acceptance_mm)
+            g = gr.global_risks_normal(t.process_mean_mm, t.process_sd_um, d.u_um, tol, d.acceptance_mm)
             entry.update(process_mean_mm=t.process_mean_mm, process_sd_um=t.process_sd_um,
                          process_nonconforming=g.nonconforming, global_consumer_risk=g.consumer,
                          global_producer_risk=g.producer)

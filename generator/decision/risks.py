@@ -3,7 +3,7 @@ production process (``process_mean_mm``, ``process_sd_um``), the non-conforming 
 global consumer's and producer's risks of the decision rule (JCGM 106:2012, 9.5), as live
 formulas.
 
-The integrals are the fixed Gauss-Legendre panels of :func:`xlfuncs.conformity.global_risks_normal`,
+The integrals are the fixed Gauss-Legendre panels of :func:`xlfuncs.global_risk.global_risks_normal`,
 one ``SUMPRODUCT`` over the node table (named ``decision_gl_x``, ``decision_gl_w``) per panel,
 so that the core, ``formulas`` and LibreOffice compute the same sums.
 """
@@ -13,6 +13,7 @@ from __future__ import annotations
 from typing import Any, Callable
 
 from cmmwb.xlfuncs import conformity as cf
+from cmmwb.xlfuncs import global_risk as gr
 
 from ..workbook.book import Book
 from ..workbook.styles import FMT_MM, FMT_UM, HEADER_FONT
@@ -48,16 +49,16 @@ def write_node_table(book: Book, ws, row: int, column: int) -> None:
     """The Gauss-Legendre nodes and weights of one panel on [-1, 1] (named ranges)."""
     book.text(ws, row, column, "Gauss–Legendre x_i (1)", font=HEADER_FONT)
     book.text(ws, row, column + 1, "w_i (1)", font=HEADER_FONT)
-    for i, (x, w) in enumerate(zip(cf.GL_NODES, cf.GL_WEIGHTS)):
+    for i, (x, w) in enumerate(zip(gr.GL_NODES, gr.GL_WEIGHTS)):
         ws.cell(row + 1 + i, column).value = x
         ws.cell(row + 1 + i, column + 1).value = w
-    n = len(cf.GL_NODES)
+    n = len(gr.GL_NODES)
     book.define("decision_gl_x", f"{quote_sheet(ws.title)}!{cell(row + 1, column)}:{cell(row + n, column)}")
     book.define("decision_gl_w", f"{quote_sheet(ws.title)}!{cell(row + 1, column + 1)}:{cell(row + n, column + 1)}")
 
 
 def _clamp(v: str) -> str:
-    return f"=MIN(MAX({v},-{cf.GL_RANGE:g}),{cf.GL_RANGE:g})"
+    return f"=MIN(MAX({v},-{gr.GL_RANGE:g}),{gr.GL_RANGE:g})"
 
 
 def _gl(a: str, b: str, f: Callable[[str], str]) -> str:
@@ -78,7 +79,7 @@ def write_rows(book: Book, ws, top: int, rows: list[dict], cache: dict[str, Any]
     h = top + 1
     book.header(ws, h, 1, RISK_COLUMNS, notes=RISK_NOTES)
     c = {name: j + 1 for j, name in enumerate(RISK_COLUMNS)}
-    V = f"{cf.GL_RANGE:g}"
+    V = f"{gr.GL_RANGE:g}"
     for i, row in enumerate(rows):
         r = h + 1 + i
         d = row["decision"]
@@ -97,7 +98,7 @@ def write_rows(book: Book, ws, top: int, rows: list[dict], cache: dict[str, Any]
         far = f"1000*({sd}+{u})/1000"
         lims = {"T_L_mm": (row["lsl"], "-"), "T_U_mm": (row["usl"], "+"), "A_L_mm": (row["A_L"], "-"),
                 "A_U_mm": (row["A_U"], "+")}
-        panels = cf.risk_panels(d["process_mean_mm"], d["process_sd_um"], d["u_um"],
+        panels = gr.risk_panels(d["process_mean_mm"], d["process_sd_um"], d["u_um"],
                                 cf.Tolerance(d["lsl_mm"], d["usl_mm"]), tuple(d["acceptance_limits_mm"]))
         for name, (ref, sign) in lims.items():
             book.formula(ws, r, c[name], f"={ref}" if ref else f"={mean}{sign}{far}", fmt=FMT_MM)
@@ -114,7 +115,7 @@ def write_rows(book: Book, ws, top: int, rows: list[dict], cache: dict[str, Any]
                 "x_U": (panels["T_U"] - d["process_mean_mm"]) / s0_v}
         for name, expr in ends.items():
             book.formula(ws, r, c[name], _clamp(expr), fmt="0.000")
-            cache[at(name)] = min(max(vals[name], -cf.GL_RANGE), cf.GL_RANGE)
+            cache[at(name)] = min(max(vals[name], -gr.GL_RANGE), gr.GL_RANGE)
         v1, v2, v3, v4, x_l, x_u = (at(n) for n in ("v1", "v2", "v3", "v4", "x_L", "x_U"))
 
         def phi(x: str) -> str:
@@ -157,7 +158,7 @@ def write_rows(book: Book, ws, top: int, rows: list[dict], cache: dict[str, Any]
         book.array(Block(ws.title, r, c["R_C_global"], 1, 1),
                    f"=IF({empty},0,IF({u}<={sd},{rc_v},{rc_x}))", fmt=FMT_P,
                    note="JCGM 106:2012, 9.5.2; Gauss-Legendre panels over v = e/u when u <= σ₀, else over "
-                        "x = (η − μ)/σ₀ (xlfuncs.conformity.global_risks_normal; docs/errata.md)")
+                        "x = (η − μ)/σ₀ (xlfuncs.global_risk.global_risks_normal; docs/errata.md)")
         book.array(Block(ws.title, r, c["R_P_global"], 1, 1),
                    f"=IF({empty},1-{pnc},IF({u}<={sd},{rp_v},{rp_x}))", fmt=FMT_P,
                    note="JCGM 106:2012, 9.5.3; the same panels")

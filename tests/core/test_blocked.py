@@ -11,6 +11,7 @@ import pytest
 from cmmwb.xlfuncs import blocked as bl
 from cmmwb.xlfuncs import features as ft
 from cmmwb.xlfuncs import pointcloud as pc
+from cmmwb.xlfuncs import record_covariance as rc
 from cmmwb.xlfuncs.errors import DegenerateGeometryError, ModelError
 from cmmwb.xlfuncs.locator import diagnose as dg
 
@@ -112,11 +113,11 @@ def test_record_covariance_equals_the_mismatch_locator_and_the_dense_reference()
     rng = np.random.default_rng(5)
     I = rng.integers(0, 40, 25)
     J = (I + rng.integers(1, 39, 25)) % 40
-    fast = bl.record_covariance(cloud, PARAMS, I, J, components=True, block=60)
+    fast = rc.record_covariance(cloud, PARAMS, I, J, components=True, block=60)
     ref = dg.length_covariance(cloud, PARAMS, I, J, components=True)
     for f in FACTORS:
         assert rel_err(fast[f], ref[f]) <= REL, f
-    total = bl.record_covariance(cloud, PARAMS, I, J)
+    total = rc.record_covariance(cloud, PARAMS, I, J)
     assert rel_err(total, length_covariance_dense(cloud, PARAMS, I, J)) <= REL
 
 
@@ -131,12 +132,12 @@ def test_record_covariance_with_short_length_scales_and_zero_factors_on_both_for
     short = pc.Parameters(sigma_ET_um=0.3, lambda_ET_mm=10, sigma_ER_urad=4.0, lambda_ER_mm=20,
                           sigma_P0_um=0.1, sigma_P_um=0.15, lambda_P=0.03)
     for d_log in (False, True):
-        gathered = bl.record_covariance(cloud, short, I, J, components=True, d_log_lambda=d_log)
-        rows = bl.record_covariance(cloud, short, I, J, components=True, d_log_lambda=d_log, block=70)
+        gathered = rc.record_covariance(cloud, short, I, J, components=True, d_log_lambda=d_log)
+        rows = rc.record_covariance(cloud, short, I, J, components=True, d_log_lambda=d_log, block=70)
         for f in FACTORS:
             assert rel_err(gathered[f], rows[f]) <= REL, (f, d_log)
         assert not np.any(gathered["R"]) and not np.any(gathered["S"])
-    assert rel_err(bl.record_covariance(cloud, short, I, J), length_covariance_dense(cloud, short, I, J)) <= REL
+    assert rel_err(rc.record_covariance(cloud, short, I, J), length_covariance_dense(cloud, short, I, J)) <= REL
 
 def test_distances_on_a_backend_are_the_local_numbers():
     cloud = random_cloud(50)

@@ -7,6 +7,7 @@ import pytest
 from cmmwb.xlfuncs import blocked as bl
 from cmmwb.xlfuncs import features as ft
 from cmmwb.xlfuncs import pointcloud as pc
+from cmmwb.xlfuncs import record_covariance as rc
 
 distributed = pytest.importorskip("distributed")
 from cmmwb.xlfuncs.distributed import DaskBackend, get_backend  # noqa: E402
@@ -61,8 +62,8 @@ def test_record_covariance_on_a_dask_cluster_equals_the_local_path(cluster):
     cloud = random_cloud(60)
     I, J = np.arange(0, 30), np.arange(30, 60)
     with DaskBackend(cluster.scheduler_address) as backend:
-        remote = bl.record_covariance(cloud, PARAMS, I, J, backend=backend, block=200)
-    assert np.array_equal(remote, bl.record_covariance(cloud, PARAMS, I, J, block=200))
+        remote = rc.record_covariance(cloud, PARAMS, I, J, backend=backend, block=200)
+    assert np.array_equal(remote, rc.record_covariance(cloud, PARAMS, I, J, block=200))
 
 
 def test_the_environment_chooses_the_backend(monkeypatch, cluster):

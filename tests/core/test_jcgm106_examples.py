@@ -29,6 +29,7 @@ import numpy as np
 import pytest
 
 from cmmwb.xlfuncs import conformity as cf
+from cmmwb.xlfuncs import global_risk as gr
 from cmmwb.xlfuncs.errors import ModelError
 
 from tests.helpers import ENGINES, close
@@ -93,7 +94,7 @@ def test_no_acceptance_interval_when_even_the_midpoint_falls_short():
 
 T_U_UM = 2.0            # radial error motion must be below 2 µm
 U_M_UM = 0.25           # the measuring system's standard uncertainty
-BEARINGS = cf.gamma_prior(4.0, 4.0)     # α = 4, β = 4 µm⁻¹: mean 1 µm, sd 0.5 µm
+BEARINGS = gr.gamma_prior(4.0, 4.0)     # α = 4, β = 4 µm⁻¹: mean 1 µm, sd 0.5 µm
 SUNCAL = {"nonconforming": 0.04238011199168401, "R_C": 0.008019111884303471,
           "w_um": 0.3281712284559932, "A_U_um": 1.6718287715440068}
 
@@ -101,7 +102,7 @@ SUNCAL = {"nonconforming": 0.04238011199168401, "R_C": 0.008019111884303471,
 def test_bearings_nonconforming_fraction_without_inspection():
     """9.5.4 (as suncal states it): Pr(η > T_U) = 4.2 % of the bearings do not conform.  For integer α
     the gamma tail is e^(-βT) Σ_{j<α} (βT)^j/j!, here 126⅓·e⁻⁸."""
-    r = cf.global_risks(BEARINGS, U_M_UM, (None, T_U_UM), (None, T_U_UM))
+    r = gr.global_risks(BEARINGS, U_M_UM, (None, T_U_UM), (None, T_U_UM))
     exact = math.exp(-8.0) * sum(8.0 ** j / math.factorial(j) for j in range(4))
     assert r.nonconforming == pytest.approx(exact, rel=1e-12)
     assert printed(100 * r.nonconforming, 4.2, 1)
@@ -111,7 +112,7 @@ def test_bearings_nonconforming_fraction_without_inspection():
 def test_bearings_global_consumers_risk_with_simple_acceptance():
     """9.5.4 (as suncal states it): inspecting every bearing with u_m = 0.25 µm and accepting
     below T_U leaves R_C = 0.8 % (suncal: 0.008019111884303471)."""
-    r = cf.global_risks(BEARINGS, U_M_UM, (None, T_U_UM), (None, T_U_UM))
+    r = gr.global_risks(BEARINGS, U_M_UM, (None, T_U_UM), (None, T_U_UM))
     assert printed(100 * r.consumer, 0.8, 1)
     assert close(r.consumer, SUNCAL["R_C"], rel=1e-9)
     assert 0 < r.producer < 1 - r.nonconforming
@@ -120,17 +121,17 @@ def test_bearings_global_consumers_risk_with_simple_acceptance():
 def test_bearings_acceptance_limit_for_a_global_consumers_risk_of_0_1_percent():
     """9.5.4 (suncal's result): a required R_C <= 0.1 % moves the acceptance limit to
     A_U = T_U - w = 1.67 µm; the producer's risk grows (more conforming bearings are rejected)."""
-    w = cf.guard_band_for_global_risk(BEARINGS, U_M_UM, (None, T_U_UM), 0.001)
+    w = gr.guard_band_for_global_risk(BEARINGS, U_M_UM, (None, T_U_UM), 0.001)
     assert abs(w - SUNCAL["w_um"]) <= 1e-9
     assert printed(T_U_UM - w, 1.67, 2) and abs(T_U_UM - w - SUNCAL["A_U_um"]) <= 1e-9
-    simple = cf.global_risks(BEARINGS, U_M_UM, (None, T_U_UM), (None, T_U_UM))
-    guarded = cf.global_risks(BEARINGS, U_M_UM, (None, T_U_UM), (None, T_U_UM - w))
+    simple = gr.global_risks(BEARINGS, U_M_UM, (None, T_U_UM), (None, T_U_UM))
+    guarded = gr.global_risks(BEARINGS, U_M_UM, (None, T_U_UM), (None, T_U_UM - w))
     assert guarded.consumer == pytest.approx(0.001, rel=1e-9)
     assert guarded.producer > simple.producer
 
 
 def test_a_guard_band_is_zero_when_simple_acceptance_already_meets_the_risk():
-    assert cf.guard_band_for_global_risk(BEARINGS, U_M_UM, (None, T_U_UM), 0.05) == 0.0
+    assert gr.guard_band_for_global_risk(BEARINGS, U_M_UM, (None, T_U_UM), 0.05) == 0.0
 
 
 # -- 9.5: normal process and measuring system -------------------------------------------
@@ -138,8 +139,8 @@ def test_a_guard_band_is_zero_when_simple_acceptance_already_meets_the_risk():
 def _bvn_checks(mean, sd0, u_m, tol, acc):
     """R_C, R_P from the core and (1) the probability of acceptance in closed form, (2) R_C as
     the integral over accepted η_m of h(η_m)·(1 - p_c(η_m)) with the normal posterior."""
-    prior = cf.normal_prior(mean, sd0)
-    r = cf.global_risks(prior, u_m, tol, acc)
+    prior = gr.normal_prior(mean, sd0)
+    r = gr.global_risks(prior, u_m, tol, acc)
     s = math.hypot(sd0, u_m)
     a_lo, a_hi = acc
     p_acc = cf.norm_cdf((a_hi - mean) / s) - cf.norm_cdf((a_lo - mean) / s)
@@ -174,8 +175,8 @@ def test_normal_global_risks_agree_with_closed_forms_and_the_other_order(mean, s
 
 
 def test_guarded_acceptance_lowers_the_consumers_and_raises_the_producers_risk():
-    prior = cf.normal_prior(0.0, 1.0)
-    risks = [cf.global_risks(prior, 0.25, (-2.0, 2.0), (-2.0 + w, 2.0 - w)) for w in (-0.5, 0.0, 0.5)]
+    prior = gr.normal_prior(0.0, 1.0)
+    risks = [gr.global_risks(prior, 0.25, (-2.0, 2.0), (-2.0 + w, 2.0 - w)) for w in (-0.5, 0.0, 0.5)]
     assert risks[0].consumer > risks[1].consumer > risks[2].consumer
     assert risks[0].producer < risks[1].producer < risks[2].producer
 
@@ -186,7 +187,7 @@ def test_small_u_m_risks_follow_their_two_term_expansion(u_m):
     = g₀(T) u_m/√(2π) ± g₀'(T) u_m²/4 + O(u_m³) (simple acceptance, A = C): with N(0, 1) and
     C = [-2, 2], g₀(±2) = φ(2) and the prior falls away from the centre, so
     R_C ≈ 2φ(2)(u_m/√(2π) - u_m²/2) and R_P ≈ 2φ(2)(u_m/√(2π) + u_m²/2)."""
-    r = cf.global_risks(cf.normal_prior(0.0, 1.0), u_m, (-2.0, 2.0), (-2.0, 2.0))
+    r = gr.global_risks(gr.normal_prior(0.0, 1.0), u_m, (-2.0, 2.0), (-2.0, 2.0))
     phi2 = math.exp(-2.0) / math.sqrt(2 * math.pi)
     lead = 2 * phi2 * u_m / math.sqrt(2 * math.pi)
     assert r.consumer == pytest.approx(lead - phi2 * u_m ** 2, rel=2 * u_m ** 2)
@@ -195,13 +196,13 @@ def test_small_u_m_risks_follow_their_two_term_expansion(u_m):
 
 def test_bad_priors_and_uncertainties_are_refused():
     with pytest.raises(ModelError, match="sd > 0"):
-        cf.normal_prior(0.0, 0.0)
+        gr.normal_prior(0.0, 0.0)
     with pytest.raises(ModelError, match="shape >= 1"):
-        cf.gamma_prior(0.5, 1.0)
+        gr.gamma_prior(0.5, 1.0)
     with pytest.raises(ModelError, match="u_m"):
-        cf.global_risks(BEARINGS, 0.0, (None, 2.0), (None, 2.0))
+        gr.global_risks(BEARINGS, 0.0, (None, 2.0), (None, 2.0))
     with pytest.raises(ModelError, match="max_consumer_risk"):
-        cf.guard_band_for_global_risk(BEARINGS, 0.25, (None, 2.0), 0.0)
+        gr.guard_band_for_global_risk(BEARINGS, 0.25, (None, 2.0), 0.0)
 
 
 # -- the bearing's acceptance limit in a built Decision sheet, three engines ----------------------
@@ -220,7 +221,7 @@ def bearing_book(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("bearing")
     plain, _ = build(tmp, KNUCKLE, name="plain.toml")
     u = {c["name"]: c["u_um"] for c in plain["characteristics"]}
-    w = cf.guard_band_for_global_risk(BEARINGS, U_M_UM, (None, T_U_UM), 0.001)
+    w = gr.guard_band_for_global_risk(BEARINGS, U_M_UM, (None, T_U_UM), 0.001)
     names = ["S1_S2_distance", "S3_from_S1S2", "S4_from_ABC"]
     etas = [T_U_UM - w - 0.05, T_U_UM - w + 0.05, T_U_UM]
     scale = {n: u[n] / U_M_UM / 1000 for n in names}
@@ -366,9 +367,9 @@ def test_fixed_panel_global_risks_match_the_adaptive_quadrature(mean_off_um, sd_
            "low": cf.Tolerance(lsl_mm=50 - half / 1000)}[side]
     acc = cf.acceptance_limits(tol, w_in_u * u_um)
     mean = 50 + mean_off_um / 1000
-    fixed = cf.global_risks_normal(mean, sd_um, u_um, tol, acc)
+    fixed = gr.global_risks_normal(mean, sd_um, u_um, tol, acc)
     um = lambda x: None if x is None else (x - 50) * 1000      # noqa: E731  (µm about 50 mm)
-    ref = cf.global_risks(cf.normal_prior(mean_off_um, sd_um), u_um, (um(tol.lsl_mm), um(tol.usl_mm)),
+    ref = gr.global_risks(gr.normal_prior(mean_off_um, sd_um), u_um, (um(tol.lsl_mm), um(tol.usl_mm)),
                           (um(acc[0]), um(acc[1])))
     for got, want in ((fixed.consumer, ref.consumer), (fixed.producer, ref.producer),
                       (fixed.nonconforming, ref.nonconforming)):
@@ -403,7 +404,7 @@ def test_global_risks_in_the_json(process_book):
     results, _ = process_book
     for d in results["decisions"]:
         tol = cf.Tolerance(d["lsl_mm"], d["usl_mm"])
-        g = cf.global_risks_normal(d["process_mean_mm"], d["process_sd_um"], d["u_um"], tol,
+        g = gr.global_risks_normal(d["process_mean_mm"], d["process_sd_um"], d["u_um"], tol,
                                    tuple(d["acceptance_limits_mm"]))
         assert d["global_consumer_risk"] == g.consumer and d["global_producer_risk"] == g.producer
         assert 0 < d["global_consumer_risk"] < d["process_nonconforming"] < 1

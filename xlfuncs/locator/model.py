@@ -11,9 +11,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .. import blocked as bl
 from .. import memory
 from .. import pointcloud as pc
+from .. import record_covariance as rc
 from ..errors import ModelError
 from . import effects as fx
 from . import structured_lengths as sl
@@ -251,9 +251,9 @@ def length_covariance(cloud: pc.PointCloud, params: pc.Parameters, I: np.ndarray
     (eqs. 28-29), per factor if ``components``; ``d_log_lambda`` (with ``components``): the
     closed-form dC/d(log lambda) of the hyper-parameter fit (:mod:`xlfuncs.calibrate`).
 
-    :func:`xlfuncs.blocked.record_covariance`, the one implementation (kernel form, row blocks
+    :func:`xlfuncs.record_covariance.record_covariance`, the one implementation (kernel form, row blocks
     of records, memory O(n^2) whatever m)."""
-    return bl.record_covariance(cloud, params, I, J, components=components, d_log_lambda=d_log_lambda)
+    return rc.record_covariance(cloud, params, I, J, components=components, d_log_lambda=d_log_lambda)
 
 
 def group_labels(prep: Prepared) -> dict[str, list[str]]:
