@@ -111,6 +111,17 @@ def table(results, started: str, start_factor: float = 1.0) -> str:
     return "\n".join(lines)
 
 
+#: the line of a results file from which on the text is kept when the tables are rewritten
+NOTES = "<!-- notes: not written by calibrate_coverage.py -->"
+
+
+def write_keeping_notes(path: Path, tables: str) -> None:
+    """The tables, then the hand-written part of the file as it was (from :data:`NOTES` on)."""
+    old = path.read_text(encoding="utf-8") if path.exists() else ""
+    notes = old[old.index(NOTES):] if NOTES in old else NOTES + "\n"
+    path.write_text(tables + "\n\n" + notes, encoding="utf-8")
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--sets", type=int, default=200)
@@ -132,7 +143,7 @@ def main(argv=None) -> int:
         t = time.perf_counter()
         r = run_layout(key, title, name, probes, kw, args.sets, start_factor=args.start_factor)
         results.append(r)
-        Path(args.out).write_text(table(results, started, args.start_factor) + "\n", encoding="utf-8")
+        write_keeping_notes(Path(args.out), table(results, started, args.start_factor))
         print(f"{title}: {args.sets} sets in {time.perf_counter() - t:.0f} s", flush=True)
     print(table(results, started, args.start_factor))
     return 0
