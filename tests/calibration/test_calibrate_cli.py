@@ -6,21 +6,9 @@ import json
 from cmmwb.xlfuncs.model import MPE1
 
 from tests.helpers import run_cmmwb
-from tests.helpers.tasks import parameters_toml
+from tests.helpers.tasks import machine_task_toml
 
-TASK = """[task]
-kind = "pointcloud"
-name = "cmm"
-
-""" + parameters_toml(MPE1) + """
-[[probes]]
-id = "P1"
-offset_mm = [0.0, 20.0, -30.0]
-
-[[probes]]
-id = "P2"
-offset_mm = [0.0, -20.0, -30.0]
-"""
+TASK = machine_task_toml(MPE1, [("P1", (0.0, 20.0, -30.0)), ("P2", (0.0, -20.0, -30.0))])
 
 
 def run(*args, cwd):

@@ -21,7 +21,7 @@ from cmmwb.xlfuncs.reml_structured import StructuredRecordCovariance
 
 from tests.helpers import run_cmmwb
 from tests.helpers.clouds import MPE1, PAIR, THREE
-from tests.helpers.tasks import parameters_toml
+from tests.helpers.tasks import machine_task_toml
 
 REL = 1e-8
 
@@ -132,19 +132,7 @@ def test_calibrate_takes_the_structured_covariance_above_the_dense_cap(monkeypat
         reml.record_set(p, "iso", structured=False)
 
 
-TASK = """[task]
-kind = "pointcloud"
-name = "cmm"
-
-""" + parameters_toml(MPE1) + """
-[[probes]]
-id = "P1"
-offset_mm = [0.0, 20.0, -30.0]
-
-[[probes]]
-id = "P2"
-offset_mm = [0.0, -20.0, -30.0]
-"""
+TASK = machine_task_toml(MPE1, [("P1", (0.0, 20.0, -30.0)), ("P2", (0.0, -20.0, -30.0))])
 
 
 def test_the_covariance_option_gives_the_same_calibration(tmp_path):

@@ -8,17 +8,9 @@ from cmmwb.generator.diagnosis.run import demo
 from cmmwb.xlfuncs.model import MPE1
 
 from tests.helpers import run_cmmwb as run
-from tests.helpers.tasks import parameters_toml
+from tests.helpers.tasks import machine_task_toml
 
-TASK = """[task]
-kind = "pointcloud"
-name = "cmm"
-
-""" + parameters_toml(MPE1) + """
-[[probes]]
-id = "P1"
-offset_mm = [0.0, 0.0, -50.0]
-"""
+TASK = machine_task_toml(MPE1, [("P1", (0.0, 0.0, -50.0))])
 
 
 def test_simulate_then_diagnose_finds_the_planted_warm_records_effect(tmp_path):

@@ -23,6 +23,16 @@ def parameters_toml(params) -> str:
     return "[parameters]\n" + "".join(f"{k} = {getattr(params, k)!r}\n" for k in params.__dataclass_fields__)
 
 
+def machine_task_toml(params, probes, *, name: str = "cmm", extra: str = "") -> str:
+    """A pointcloud task file that only describes the machine (what ``cmmwb simulate``,
+    ``diagnose`` and ``calibrate`` read): ``params`` as its ``[parameters]``, ``probes`` as
+    ``(id, offset_mm)`` pairs, ``extra`` TOML lines after ``[task]`` (e.g. an ``[mpe]`` table)."""
+    text = f'[task]\nkind = "pointcloud"\nname = "{name}"\n{extra}\n' + parameters_toml(params)
+    for pid, offset in probes:
+        text += f'\n[[probes]]\nid = "{pid}"\noffset_mm = [{", ".join(repr(float(v)) for v in offset)}]\n'
+    return text
+
+
 def write_random_task(folder: Path, seed: int, m: int = 8, probes: int = 2, name: str | None = None,
                       labels: list[str] | None = None, mpe: bool = True) -> Path:
     rng = np.random.default_rng(seed)
