@@ -18,12 +18,10 @@ bench/results/lengths_equal.md and lengths_scale.md.
 
 from __future__ import annotations
 
-import json
-import os
-import subprocess
 import sys
-import textwrap
 from pathlib import Path
+
+from fresh_process import run_fresh  # bench/, the folder of this script, is on sys.path
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -71,25 +69,6 @@ out = {{"n": rec.n, "chosen": [s.chosen, d.chosen], "chi2_before": rel(s.chi2_be
         "bound": s.prep.C.chi2_bound()}}
 """
 
-TAIL = """
-ru = resource.getrusage(resource.RUSAGE_SELF)
-out["peak_MB"] = ru.ru_maxrss / 1024
-out["cpu_s"] = ru.ru_utime + ru.ru_stime
-print("RESULT", json.dumps(out))
-"""
-
-
-def run(code: str) -> dict:
-    env = dict(os.environ, OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1", MKL_NUM_THREADS="1")
-    p = subprocess.run([sys.executable, "-c", textwrap.dedent(code) + TAIL], cwd=ROOT, capture_output=True,
-                       text=True, env=env)
-    if p.returncode != 0:
-        raise RuntimeError(p.stderr)
-    r = json.loads([ln for ln in p.stdout.splitlines() if ln.startswith("RESULT")][-1][7:])
-    r["load"] = os.getloadavg()[0]
-    return r
-
-
 def main(argv: list[str]) -> int:
     parts = [a for a in argv if not a.startswith("--")] or ["equal", "scale"]
     sizes = [20_000, 200_000]
@@ -101,7 +80,7 @@ def main(argv: list[str]) -> int:
              "after the run, 2.0 = both cores busy; CPU = user + system time of the process, simulation of the "
              "records included, the share of the wall time this process got).", ""]
     if "equal" in parts:
-        r = run(EQUAL.format(n=5000, structured=True))
+        r = run_fresh(EQUAL.format(n=5000, structured=True))
         print("equal", r, flush=True)
         lines = head + ["## structured against dense, 5,000 length records (largest relative difference)", "",
                   "| records | chosen (structured / dense) | chi2 before | chi2 after | log p before | "
@@ -117,7 +96,7 @@ def main(argv: list[str]) -> int:
                   "| path | records | time / s | CPU / s of the diagnosis (whole process) | peak MB | load | chosen | estimates (u) | k (ranks) | chi2 rel. bound |",
                   "|---|---|---|---|---|---|---|---|---|---|"]
         for n in sizes:
-            r = run(SCALE.format(n=n, structured=True))
+            r = run_fresh(SCALE.format(n=n, structured=True))
             print("scale", r, flush=True)
             est = ", ".join(f"{e} {v[0]:.2f} ({v[1]:.2f})" for e, v in r["estimates"].items())
             ranks = ", ".join(f"{k} {v}" for k, v in r["ranks"].items())

@@ -22,12 +22,10 @@ jobs; the load average is printed with each row).  Results: bench/results/calibr
 
 from __future__ import annotations
 
-import json
-import os
-import subprocess
 import sys
-import textwrap
 from pathlib import Path
+
+from fresh_process import run_fresh  # bench/, the folder of this script, is on sys.path
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -61,22 +59,11 @@ out = {{"n": rec.n, "obs": int(len(s.y)), "op": type(s.op).__name__, "prep_s": p
         "checks_s": checks_s, "iterations": cal.iterations, "ranks": getattr(s.op, "ranks", None),
         "bound": getattr(s.op, "chi2_bound", None), "chi2_dof": chi2 / dof, "z_rms": float(np.sqrt(np.mean(z * z))),
         "estimates": {{k: [e_.status, e_.value, e_.u, e_.start] for k, e_ in cal.estimates.items()}}}}
-ru = resource.getrusage(resource.RUSAGE_SELF)
-out["peak_MB"] = ru.ru_maxrss / 1024
-out["cpu_s"] = ru.ru_utime + ru.ru_stime
-print("RESULT", json.dumps(out))
 """
 
 
 def run(n: int, hold: tuple) -> dict:
-    env = dict(os.environ, OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1", MKL_NUM_THREADS="1")
-    p = subprocess.run([sys.executable, "-c", textwrap.dedent(CODE.format(n=n, hold=hold))], cwd=ROOT, capture_output=True,
-                       text=True, env=env)
-    if p.returncode != 0:
-        raise RuntimeError(p.stderr)
-    r = json.loads([ln for ln in p.stdout.splitlines() if ln.startswith("RESULT")][-1][7:])
-    r["load"] = os.getloadavg()[0]
-    return r
+    return run_fresh(CODE.format(n=n, hold=hold))
 
 
 def main(argv: list[str]) -> int:
