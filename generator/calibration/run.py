@@ -27,7 +27,6 @@ from cmmwb.xlfuncs import calibration_checks as checks
 from cmmwb.xlfuncs import compensation as cp
 from cmmwb.xlfuncs import pointcloud as pc
 from cmmwb.xlfuncs import reml
-from cmmwb.xlfuncs.errors import ModelError
 from cmmwb.xlfuncs.locator import diagnose as dg
 from cmmwb.xlfuncs.locator import effects as fx
 from cmmwb.xlfuncs.locator.recordings import RecordingsError, write_recordings
@@ -114,9 +113,7 @@ def run_calibrate(paths: list[Path], model: dg.Model, out_dir: Path, *, task_pat
             try:
                 structured = reml.use_structured(rec, covariance)
                 prep = dg.prepare(rec, model, structured)
-                if not structured and prep.r_um.shape[0] > reml.DENSE_MAX_OBS:
-                    raise ModelError(f"{prep.r_um.shape[0]} observations: the dense record covariance takes "
-                                     f"at most {reml.DENSE_MAX_OBS} per file (--covariance structured or auto)")
+                op = reml.record_covariance(prep, structured)   # refuses a dense file over the cap, before the search
                 chosen, diag = [], None
                 if effects == "auto":
                     diag = dg.diagnose_prepared(prep, alpha)
@@ -127,7 +124,7 @@ def run_calibrate(paths: list[Path], model: dg.Model, out_dir: Path, *, task_pat
                 else:
                     chosen = [e.strip() for e in effects.split(",") if e.strip()]
                     X, labels = _effect_columns(prep, chosen, path)
-                s = reml.RecordSet(stem, prep, X, [f"{a} {b}" for a, b in labels], reml.record_covariance(prep, structured))
+                s = reml.RecordSet(stem, prep, X, [f"{a} {b}" for a, b in labels], op)
             except RecordingsError as e:     # a ModelError too, named by the recordings' line
                 raise InputError(e.message, file=path, where=e.where) from None
         sets.append(s)
