@@ -33,8 +33,10 @@ KIND = "budget"
 EXAMPLES = ["knuckle.toml"]
 EXAMPLES_DIR = Path(__file__).resolve().parents[1] / "examples"
 
-#: the commented steering-knuckle task written by ``cmmwb new budget``
-NEW_TASK: str = (EXAMPLES_DIR / "knuckle.toml").read_text(encoding="utf-8")
+#: the commented steering-knuckle task written by ``cmmwb new budget``, named ``my_budget`` like the
+#: other kinds' starting tasks (``my_pointcloud``, ``my_feature``, ``my_part``)
+NEW_TASK: str = (EXAMPLES_DIR / "knuckle.toml").read_text(encoding="utf-8").replace(
+    '\nname = "knuckle" ', '\nname = "my_budget"', 1)
 #: the task names no table beside it (its points are in the TOML)
 NEW_TASK_FILES: dict[str, str] = {}
 #: the task-kind contract's hook (generator.taskkind): a budget is exact at every size

@@ -230,13 +230,14 @@ def write_plots(task: Task, results: dict, out_dir: Path) -> list[Path]:
 
 
 def summary(results: dict) -> list[str]:
+    """One line per characteristic: the value in the unit of the JSON and the decisions (mm, deg),
+    u in µm or µrad, so that a quantity is never shown in two units."""
     lines = []
     for r in results["characteristics"]:
-        small = r["unit"] == "mm" and r["type"] not in ch.SIZE_TYPES + ("distance",)
-        v, unit = (r["value"] * 1e3, "µm") if small else (r["value"], r["unit"])
+        v = f"{r['value']:.6f} mm" if r["unit"] == "mm" else f"{r['value']:.4f} {r['unit']}"
         u_unit = "µm" if r["u_unit"] == "um" else "µrad"
-        extra = f", zone {r['zone_mm'] * 1e3:.1f} µm" if r["zone_mm"] is not None else ""
-        lines.append(f"{r['name']}: {v:.4f} {unit}, u = {r['u']:.3f} {u_unit}{extra}")
+        extra = f", zone {r['zone_mm']:.4f} mm" if r["zone_mm"] is not None else ""
+        lines.append(f"{r['name']}: {v}, u = {r['u']:.3f} {u_unit}{extra}")
     return lines
 
 

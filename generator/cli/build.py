@@ -23,7 +23,9 @@ def register(sub) -> None:
     s.add_argument("--out", required=True, metavar="DIR", help="output folder (created if missing)")
     s.add_argument("--no-plots", action="store_true", help="skip the PNG plots (default: write them)")
     s.add_argument("--pdf", action="store_true",
-                   help="also print the workbook to DIR/<name>.pdf for the audit file (needs LibreOffice)")
+                   help="also print the workbook to DIR/<name>.pdf for the audit file (needs LibreOffice); "
+                        "a later build of the task without --pdf removes that PDF, as it does every file "
+                        "of the previous build it does not write again (an edited one: see --force)")
     s.add_argument("--force", action="store_true",
                    help="replace outputs that were edited since cmmwb wrote them, keeping NAME.bak backups "
                         "(default: refuse)")

@@ -4,6 +4,7 @@ rec.csv``: recordings of a realistic layout measured by a CMM drawn from the tas
 
 from __future__ import annotations
 
+import inspect
 import math
 from pathlib import Path
 
@@ -40,15 +41,22 @@ def register(sub) -> None:
                    help="artefact temperature: T or T0,T1 (a ramp over the session) in °C "
                         "(default: no temperature column)")
     s.add_argument("--hours", type=float, default=None,
-                   help="length of the session in hours (adds time_s; default: no time column)")
+                   help="length of the session in hours, over which the records' time_s is spread (every "
+                        f"layout writes time_s; default: the layout's own, {_default_hours()})")
     s.add_argument("--repeats", type=int, default=None,
                    help="repetitions (iso10360, stepgauge; default: the layout's own)")
     s.add_argument("--out", required=True, metavar="REC.csv", help="recordings CSV to write")
     s.set_defaults(func=run)
 
 
+def _default_hours() -> str:
+    """Each layout's default session length (the ``hours`` of its builder), for the help text."""
+    hours = {name: inspect.signature(getattr(sm, name)).parameters["hours"].default for name in sm.LAYOUTS}
+    return ", ".join(f"{name} {h:g} h" for name, h in hours.items())
+
+
 def run(args) -> int:
-    from ..diagnosis.run import load_model  # the locator (scipy): only when run
+    from ..diagnosis.run import load_model, planted_text  # the locator (scipy): only when run
 
     model, label = load_model(args.task, args.sigma_um, default_mpe1=True)
     probes = model.probes
@@ -76,8 +84,7 @@ def run(args) -> int:
                 "planted: " + (", ".join(f"{k}={v}" for k, v in planted.items()) or "nothing")]
     out = Path(args.out)
     write_text(out, write_recordings(rec, comments=comments))
-    print(f"{rec.n} {rec.kind} records ({args.layout}), planted "
-          + (", ".join(f"{k} = {v}" for k, v in planted.items()) or "nothing") + f" -> {out}")
+    print(f"{rec.n} {rec.kind} records ({args.layout}), planted {planted_text(planted)} -> {out}")
     return 0
 
 

@@ -61,7 +61,7 @@ def run_import(src: Path, out: Path, *, features: list[str] | None = None, kind:
     if kind == "feature" and len(chosen) != 1:
         raise InputError("a feature task fits one element: give one --feature", file=src)
     labels, X, N, notes = [], [], [], [f"imported by cmmwb import from {src.name} (QIF {doc.version})",
-                                         f"coordinates converted from {doc.unit_name} to mm"]
+                                         _coordinates_note(doc.unit_name, doc.mm_per_unit)]
     for f in chosen:
         ps = doc.points_of(f)
         n = ps.N
@@ -131,6 +131,13 @@ def _write_recordings(doc, src: Path, out: Path, features: list[str] | None,
     with replacing(out) as tmp:
         tmp.write_text(buf.getvalue(), encoding="utf-8")
     return [out], lines
+
+
+def _coordinates_note(unit_name: str, mm_per_unit: float) -> str:
+    """What was done to the file's coordinates: nothing when they are in mm already."""
+    if mm_per_unit == 1.0:
+        return f"coordinates in mm, as in the file ({unit_name})"
+    return f"coordinates converted from {unit_name} to mm (x {mm_per_unit:g})"
 
 
 def _comment(text: str) -> str:

@@ -60,6 +60,9 @@ KIND_MAP = {
 MATERIAL = {"NONE": "RFS", "REGARDLESS": "RFS", "MAXIMUM": "MMC", "LEAST": "LMC",
             "MMC": "MMC", "LMC": "LMC", "RFS": "RFS"}
 
+#: the QIF characteristic kinds whose values are angles (read in deg; every other kind in mm)
+ANGULAR_KINDS = ("Angle", "AngleBetween")
+
 
 @dataclass
 class Definition:
@@ -218,7 +221,7 @@ def read_characteristics(path: str | Path) -> QifCharacteristics:
     for d in _child(chars, "CharacteristicDefinitions") or []:
         kind = _local(d.tag).replace("CharacteristicDefinition", "")
         where = f"CharacteristicDefinitions/{_local(d.tag)} id={d.get('id')}"
-        scale = deg if kind in ("Angle", "AngleBetween") else mm
+        scale = deg if kind in ANGULAR_KINDS else mm
         tol = _child(d, "Tolerance")
         zs = _child(d, "ZoneShape")
         df = Definition(
@@ -240,7 +243,7 @@ def read_characteristics(path: str | Path) -> QifCharacteristics:
             raise InputError(f"nominal {n.get('id')} names an unknown definition {did!r}",
                              file=path, where="CharacteristicNominals")
         d = defs[did]
-        scale = deg if d.kind in ("Angle", "AngleBetween") else mm
+        scale = deg if d.kind in ANGULAR_KINDS else mm
         nominals[n.get("id")] = (d, _num(path, n, "TargetValue", f"nominal {n.get('id')}", scale))
     items: dict[str, Item] = {}
     for it in _child(chars, "CharacteristicItems") or []:
@@ -265,7 +268,7 @@ def read_characteristics(path: str | Path) -> QifCharacteristics:
                 raise InputError(f"actual {a.get('id')} names an unknown item {iid!r}", file=path,
                                  where=f"MeasurementResults id={mr.get('id')}")
             it = items[iid]
-            scale = deg if it.definition.kind in ("Angle", "AngleBetween") else mm
+            scale = deg if it.definition.kind in ANGULAR_KINDS else mm
             st = _child(a, "Status")
             fm = _child(a, "FeatureMeasurementIds") or _child(a, "FeatureActualIds") or []
             actuals.append(Actual(it, _num(path, a, "Value", f"actual {a.get('id')}", scale),

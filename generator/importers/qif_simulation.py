@@ -34,7 +34,7 @@ from cmmwb.xlfuncs import pointcloud as pc
 
 from ..errors import InputError
 from ..workbook.atomic import replacing
-from .qif_characteristics import QifCharacteristics, read_characteristics, write_uncertainties
+from .qif_characteristics import ANGULAR_KINDS, QifCharacteristics, read_characteristics, write_uncertainties
 
 #: the Forbes 2025 point-cloud model of the stand-in measurement (MPE1-like, Table 3)
 PARAMS = pc.Parameters(sigma_R_um=0.2, sigma_S_ppm=0.7, sigma_Sa_ppm=0.8, sigma_Q_ppm=0.9,
@@ -241,11 +241,15 @@ def annotate_file(src: Path, out: Path, *, force: bool = False) -> tuple[list[Pa
     first = {a.item.id: a for a in doc.parts[0].actuals} if doc.parts else {}
     for it in doc.items:
         d = it.definition
-        tol = (f"zone {d.tolerance:g}" if d.tolerance is not None else
-               f"{it.lsl:g} .. {it.usl:g}" if it.lsl is not None and it.usl is not None else "-")
+        angle = d.kind in ANGULAR_KINDS       # values in deg, else mm (converted from the file's units)
+        unit = "deg" if angle else "mm"
+        tol = (f"zone {d.tolerance:g} {unit}" if d.tolerance is not None else
+               f"{it.lsl:g} .. {it.usl:g} {unit}" if it.lsl is not None and it.usl is not None else "-")
         a = first.get(it.id)
-        val = "-" if a is None or a.value is None else f"{a.value:g} {a.status or ''}".strip()
-        uu = "-" if it.id not in u else f"u = {u[it.id]:.3g}"
+        val = "-" if a is None or a.value is None else f"{a.value:g} {unit} {a.status or ''}".strip()
+        # u as cmmwb states it everywhere (µm, µrad); the copy carries it in the value's unit
+        uu = "-" if it.id not in u else (f"u = {np.deg2rad(u[it.id]) * 1e6:.3g} µrad" if angle
+                                         else f"u = {u[it.id] * 1e3:.3g} µm")
         report.append(f"{it.name} [{d.kind}]: tolerance {tol}; part {doc.parts[0].id if doc.parts else '-'}: "
                       f"{val}; {uu}")
     return [out], report
