@@ -127,11 +127,36 @@ def task_toml(params: pc.Parameters, probes, name: str, note: str) -> str:
     return "\n".join(lines) + "\n"
 
 
-def demo(out_dir: Path) -> list[Path]:
+def planted_text(planted: dict) -> str:
+    """The planted effects of a simulation, each with its unit (docs/recordings.md section 4):
+    ``squareness_xy = 9 µrad``, ``probe_qualification = P2: (0.5, 0, 0) µm``, ``periodic_x = 0.5,
+    -0.3 µm, period 40 mm``; ``nothing`` when none."""
+    from cmmwb.xlfuncs.locator.effects import BY_NAME
+
+    def numbers(v) -> str:
+        return ", ".join(f"{x:g}" for x in v)
+
+    out = []
+    for name, value in planted.items():
+        unit = BY_NAME[name].unit.replace("um", "µm").replace("urad", "µrad")
+        if isinstance(value, dict):             # per probe: probe_qualification, probe_lobing
+            text = "; ".join(f"{pid}: ({numbers(v)}) {unit}" for pid, v in value.items())
+        elif name.startswith("periodic_"):      # a, b (µm), period (mm)
+            text = f"{numbers(value[:2])} {unit}, period {value[2]:g} mm"
+        elif isinstance(value, (list, tuple)):
+            text = f"({numbers(value)}) {unit}"
+        else:
+            text = f"{value:g} {unit}"
+        out.append(f"{name} = {text}")
+    return ", ".join(out) or "nothing"
+
+
+def demo(out_dir: Path, verbose: bool = True) -> list[Path]:
     """Two cases into ``out_dir``: a squareness error concealed in an ISO 10360-2 length test
     (no larger in any record than noise reaches anyway, only in the diagonal lengths) found and
     modelled; and a pitch
-    error measured with one probe offset, reported as aliased with an x scale error."""
+    error measured with one probe offset, reported as aliased with an x scale error.  The files
+    written; ``verbose``: each case's answer and files printed too."""
     out_dir = Path(out_dir)
     params = MPE1
     model = dg.Model(params, DEMO_PROBES, True)
@@ -145,7 +170,8 @@ def demo(out_dir: Path) -> list[Path]:
          "the same test with one probe offset (0, 0, -50) mm, planted EBX (pitch of the X carriage) = 150 "
          "µrad/m: it moves the tip like an x scale error of p_z * kappa = -7.5 µm/m (Forbes 2025 section 3.3)"),
     ]
-    print(f"\n[diagnose] mismatch locator demonstrations -> {out_dir}/")
+    say = print if verbose else (lambda *_: None)
+    say(f"\n[diagnose] mismatch locator demonstrations -> {out_dir}/")
     for name, planted, seed, note in cases:
         t = time.perf_counter()
         L = sm.iso10360(DEMO_PROBES)
@@ -158,9 +184,9 @@ def demo(out_dir: Path) -> list[Path]:
         result, made = run_diagnose(case_dir / "recordings.csv", model, case_dir, source="demo",
                                     task_label=str(case_dir / "task.toml"))
         files += [case_dir / "recordings.csv", case_dir / "task.toml", *made]
-        print(f"\n  [{name}] {note}  ({time.perf_counter() - t:.1f} s)")
-        print(f"    planted: {', '.join(f'{k} = {v}' for k, v in planted.items())}")
-        print(f"    {result['summary']}")
+        say(f"\n  [{name}] {note}  ({time.perf_counter() - t:.1f} s)")
+        say(f"    planted: {planted_text(planted)}")
+        say(f"    {result['summary']}")
         for f in [case_dir / "recordings.csv", case_dir / "task.toml", *made]:
-            print(f"    -> {f}")
+            say(f"    -> {f}")
     return files
