@@ -26,7 +26,7 @@ class DemoItem:
     book: str             # its path in the demo folder (``budget/knuckle.xlsx``)
     shows: str            # which paper's result it reproduces, or what it is an example of
     first_sheet: str      # the sheet to look at first
-    look_for: str         # what that sheet shows
+    look_for: str         # what that sheet shows (other sheets it names in `backticks`)
     question: str = ""    # the lab question it answers, if it is the demo's answer to one
     group: str = ""       # the heading it is listed under (default: its folder's)
 
@@ -129,7 +129,7 @@ ITEMS: tuple[DemoItem, ...] = (
              "the same test with one probe offset (0, 0, -50) mm and a pitch error EBX of the x carriage "
              "planted: with one offset it looks exactly like an x scale error",
              "Candidates",
-             "the x scale error chosen, and the planted EBX listed as `aliased` with it, with the "
+             "the x scale error chosen, and the planted EBX listed as aliased with it, with the "
              "measurement that would separate them"),
 )
 
