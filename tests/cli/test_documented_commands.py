@@ -217,6 +217,29 @@ def test_every_demo_book_has_its_index_entry_and_every_entry_its_book_and_sheet(
     html = (out / "index.html").read_text(encoding="utf-8")
     for it in ITEMS:
         assert f"`{it.book}`" in page and f'href="{it.book}"' in html
+    assert _unclosed_tags(html) == []
+
+
+def _unclosed_tags(page: str) -> list[str]:
+    """The elements of an HTML page left open or closed out of order (none on a page a browser
+    shows as written)."""
+    from html.parser import HTMLParser
+
+    void = {"meta", "br", "img", "link", "hr", "input"}
+    stack: list[str] = []
+    wrong: list[str] = []
+
+    class Tags(HTMLParser):
+        def handle_starttag(self, tag, attrs):
+            if tag not in void:
+                stack.append(tag)
+
+        def handle_endtag(self, tag):
+            if not stack or stack.pop() != tag:
+                wrong.append(tag)
+
+    Tags().feed(page)
+    return wrong + stack
 
 
 def test_the_index_says_what_the_books_show(demo):
