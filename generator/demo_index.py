@@ -146,13 +146,14 @@ def item(book: str) -> DemoItem | None:
     return next((it for it in ITEMS if it.book == book), None)
 
 
-def write_index(out_dir: Path, rebuild: dict[str, str]) -> list[Path]:
+def write_index(out_dir: Path, rebuild: dict[str, str], force: bool = False) -> list[Path]:
     """``index.html`` and ``index.md`` into ``out_dir`` (all or nothing), from :data:`ITEMS` and
     ``rebuild`` (book path in ``out_dir`` -> the command, run in ``out_dir``, that rebuilds it).
-    A book without an entry is still listed, as undescribed.  Returns the two files."""
+    A book without an entry is still listed, as undescribed; ``force``: an edited page is replaced
+    (kept as ``NAME.bak``).  Returns the two files."""
     out_dir = Path(out_dir)
     pages = {"index.html": html_page(rebuild), "index.md": markdown_page(rebuild)}
-    with Staging(out_dir) as tmp:
+    with Staging(out_dir, force=force) as tmp:
         for name, text in pages.items():
             (tmp / name).write_text(text, encoding="utf-8", newline="\n")
     return [out_dir / name for name in pages]

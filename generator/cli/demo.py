@@ -34,6 +34,9 @@ def register(sub) -> None:
     s.add_argument("--out", default="cmmwb-demo", metavar="DIR", help="output folder (default: cmmwb-demo)")
     s.add_argument("--pdf", action="store_true",
                    help="also print every workbook to PDF beside it (needs LibreOffice)")
+    s.add_argument("--force", action="store_true",
+                   help="replace books and task files edited since an earlier demo wrote them into DIR, "
+                        "keeping NAME.bak backups (default: refuse)")
     s.add_argument("--verbose", "-v", action="store_true",
                    help="print every book's headline results and files as it is built (default: a summary "
                         "of a few lines)")
@@ -55,13 +58,13 @@ def run(args) -> int:
     for kind, mod in JOBS.items():
         for example in mod.EXAMPLES:
             t = time.perf_counter()
-            task = copy_task(EXAMPLES_DIR / example, out / kind)
-            results, files = build_task(task, out / kind, pdf=args.pdf)
+            task = copy_task(EXAMPLES_DIR / example, out / kind, force=args.force)
+            results, files = build_task(task, out / kind, pdf=args.pdf, force=args.force)
             book = next(f for f in files if f.suffix == ".xlsx")
             rebuild[book.relative_to(out).as_posix()] = f"cmmwb build {kind}/{task.name} --out {kind}"
             if args.verbose:
                 print_built(results, files, f"\n[{kind}] {results['name']}  ({time.perf_counter() - t:.1f} s)")
-    for f in diagnosis_demo(out / "diagnose", verbose=args.verbose):
+    for f in diagnosis_demo(out / "diagnose", verbose=args.verbose, force=args.force):
         if f.name == "diagnosis.xlsx":
             case = f.parent.relative_to(out).as_posix()
             rebuild[f"{case}/{f.name}"] = (f"cmmwb diagnose {case}/recordings.csv --task {case}/task.toml "
@@ -77,7 +80,7 @@ def run(args) -> int:
             print(f"\n[pdf] {len(pdfs)} workbooks printed by LibreOffice")
             for f in pdfs:
                 print(f"    -> {f}")
-    index = write_index(out, rebuild)
+    index = write_index(out, rebuild, force=args.force)
     print(f"{'' if not args.verbose else chr(10)}cmmwb {__version__} demo: {len(rebuild)} workbooks with their "
           f"JSON, plots and task files in {out}{os.sep} ({time.perf_counter() - t0:.1f} s{printed})")
     first = next((it for it in ITEMS if it.question and it.book in rebuild), None)
@@ -92,13 +95,13 @@ def run(args) -> int:
     return 0
 
 
-def copy_task(example: Path, out_dir: Path) -> Path:
+def copy_task(example: Path, out_dir: Path, force: bool = False) -> Path:
     """The example task file and the files it reads (``[points] file``), copied into ``out_dir``
     (all or nothing, through the folder's manifest), so that its book can be rebuilt and the task
     edited there; the copy's path."""
     text = example.read_text(encoding="utf-8")
     names = [f["name"] for f in provenance(example, tomllib.loads(text))["input_files"]]
-    with Staging(out_dir) as tmp:
+    with Staging(out_dir, force=force) as tmp:
         (tmp / example.name).write_text(text, encoding="utf-8", newline="\n")
         for name in names:
             (tmp / name).write_bytes((example.parent / name).read_bytes())

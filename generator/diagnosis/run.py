@@ -151,12 +151,13 @@ def planted_text(planted: dict) -> str:
     return ", ".join(out) or "nothing"
 
 
-def demo(out_dir: Path, verbose: bool = True) -> list[Path]:
+def demo(out_dir: Path, verbose: bool = True, force: bool = False) -> list[Path]:
     """Two cases into ``out_dir``: a squareness error concealed in an ISO 10360-2 length test
     (no larger in any record than noise reaches anyway, only in the diagonal lengths) found and
     modelled; and a pitch
     error measured with one probe offset, reported as aliased with an x scale error.  The files
-    written; ``verbose``: each case's answer and files printed too."""
+    written; ``verbose``: each case's answer and files printed too; ``force``: files edited since
+    an earlier demo wrote them are replaced (kept as ``NAME.bak``)."""
     out_dir = Path(out_dir)
     params = MPE1
     model = dg.Model(params, DEMO_PROBES, True)
@@ -177,12 +178,12 @@ def demo(out_dir: Path, verbose: bool = True) -> list[Path]:
         L = sm.iso10360(DEMO_PROBES)
         rec = sm.simulate(L, params, planted, seed=seed, temperature_C=20.0)
         case_dir = out_dir / name
-        with Staging(case_dir) as tmp:
+        with Staging(case_dir, force=force) as tmp:
             write_recordings(rec, tmp / "recordings.csv",
                              comments=[f"cmmwb demo: {note}", f"planted: {planted}, seed {seed}"])
             (tmp / "task.toml").write_text(task_toml(params, DEMO_PROBES, f"demo_{name}", note), encoding="utf-8")
         result, made = run_diagnose(case_dir / "recordings.csv", model, case_dir, source="demo",
-                                    task_label=str(case_dir / "task.toml"))
+                                    task_label=str(case_dir / "task.toml"), force=force)
         files += [case_dir / "recordings.csv", case_dir / "task.toml", *made]
         say(f"\n  [{name}] {note}  ({time.perf_counter() - t:.1f} s)")
         say(f"    planted: {planted_text(planted)}")

@@ -336,7 +336,7 @@ def test_the_verbose_demo_lists_each_book_and_still_ends_with_the_index(tmp_path
     from cmmwb.generator.diagnosis import run as diagnosis
 
     monkeypatch.setattr(demo_cli, "JOBS", {"budget": budget})
-    monkeypatch.setattr(diagnosis, "demo", lambda out_dir, verbose=True: [])
+    monkeypatch.setattr(diagnosis, "demo", lambda out_dir, verbose=True, force=False: [])
     assert main(["demo", "--out", str(tmp_path / "d"), "--verbose"]) == 0
     out = capsys.readouterr().out.splitlines()
     assert any(line.startswith("[budget] knuckle") for line in out)
@@ -344,3 +344,25 @@ def test_the_verbose_demo_lists_each_book_and_still_ends_with_the_index(tmp_path
     assert out[-1].strip() == str(tmp_path / "d" / "index.html")
     page = (tmp_path / "d" / "index.md").read_text(encoding="utf-8")
     assert "`budget/knuckle.xlsx`" in page and "cmmwb build budget/knuckle.toml --out budget" in page
+
+
+def test_a_demo_over_an_edited_task_file_refuses_unless_forced(tmp_path, monkeypatch, capsys):
+    """The task files beside the books are the person's to edit: a second demo does not overwrite
+    an edited one (exit status 2, the file named), and with --force keeps it as NAME.bak."""
+    from cmmwb.generator.budget import job as budget
+    from cmmwb.generator.cli import demo as demo_cli
+    from cmmwb.generator.cli import main
+    from cmmwb.generator.diagnosis import run as diagnosis
+
+    monkeypatch.setattr(demo_cli, "JOBS", {"budget": budget})
+    monkeypatch.setattr(diagnosis, "demo", lambda out_dir, verbose=True, force=False: [])
+    out = tmp_path / "d"
+    assert main(["demo", "--out", str(out)]) == 0
+    task = out / "budget" / "knuckle.toml"
+    task.write_text(task.read_text(encoding="utf-8").replace("k = 2", "k = 3", 1), encoding="utf-8")
+    capsys.readouterr()
+    assert main(["demo", "--out", str(out)]) == 2
+    assert "knuckle.toml" in capsys.readouterr().err and "k = 3" in task.read_text(encoding="utf-8")
+    assert main(["demo", "--out", str(out), "--force"]) == 0
+    assert "k = 3" in (out / "budget" / "knuckle.toml.bak").read_text(encoding="utf-8")
+    assert "k = 3" not in task.read_text(encoding="utf-8")
