@@ -33,6 +33,7 @@ from xml.sax.saxutils import escape
 from openpyxl.utils import column_index_from_string, get_column_letter, range_boundaries
 
 from .atomic import replacing
+from .sharedstrings import texts
 
 MODES = ("results", "all", "none")
 FACTORS = ("R", "PQ", "S", "ET", "ER", "P")
@@ -53,6 +54,8 @@ _REF_ATTR = re.compile(rb'\bref="([A-Z]+[0-9]+(?::[A-Z]+[0-9]+)?)"')
 _ARRAY = re.compile(rb'\bt="array"')
 _SINGLE_REF = re.compile(r"^=?(?:(?:'((?:[^']|'')+)'|([A-Za-z_][A-Za-z0-9_.]*))!)?\$?([A-Z]{1,3})\$?([0-9]+)$")
 _HEADER_TEXT = re.compile(rb"<t[^>]*>(.*?)</t>", re.S)
+_SHARED = re.compile(rb'\bt="s"')
+_V_TEXT = re.compile(rb"<v>([0-9]+)</v>")
 
 
 # -- what the Results sheet holds, per kind (the contract of docs/cli.md) ----------------
@@ -190,16 +193,24 @@ def _rewrite(xml: bytes, values: dict[str, Any], *, arrays: bool) -> tuple[bytes
     return xml[:open_end] + body + xml[end:], count
 
 
-def _results_header(xml: bytes) -> dict[str, str]:
-    """Column name -> column letter of the Results sheet's first row (inline strings)."""
+def _results_header(xml: bytes, shared: list[str]) -> dict[str, str]:
+    """Column name -> column letter of the Results sheet's first row (shared strings, looked up
+    in ``shared``, or inline strings)."""
     for rm in _ROW.finditer(xml):
         if re.search(rb'\br="1"', rm.group(1)) is None:
             continue
         out = {}
         for cm in _CELL.finditer(rm.group(3) or b""):
             am = _ATTR_R.search(cm.group(1))
+            if not am:
+                continue
+            if _SHARED.search(cm.group(1)):
+                v = _V_TEXT.search(cm.group(3) or b"")
+                if v and int(v.group(1)) < len(shared):
+                    out[shared[int(v.group(1))]] = am.group(1).decode()
+                continue
             t = _HEADER_TEXT.search(cm.group(3) or b"")
-            if am and t:
+            if t:
                 out[_unescape(t.group(1).decode("utf-8"))] = am.group(1).decode()
         return out
     return {}
@@ -261,7 +272,7 @@ def _results_values(z: zipfile.ZipFile, parts: dict[str, str], kind: str, result
     if "Results" not in parts:
         return {}
     xml = z.read(parts["Results"])
-    header = _results_header(xml)
+    header = _results_header(xml, texts(z))
     values: dict[str, Any] = {}
     for r, row in enumerate(results_table(kind, results), start=2):
         for name, value in row.items():

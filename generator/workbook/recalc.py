@@ -4,8 +4,12 @@
 * ``libreoffice``: a real LibreOffice (``soffice --headless``) with a private profile that forces a
   full recalculation on load (``OOXMLRecalcMode`` = 0, see ``docs/engines.md``), converting to a
   fresh ``.xlsx`` whose cached values are then read with openpyxl.
+* ``gnumeric``: Gnumeric's ``ssconvert --recalc`` on a copy without cached values
+  (``generator.workbook.gnumeric``), read the same way.
 
-Both return ``{sheet name: {cell coordinate: value}}`` for every cell that holds a value.
+Each returns ``{sheet name: {cell coordinate: value}}`` for every cell that holds a value.
+:func:`default_engine` is the fastest one installed (``FASTEST_FIRST``, measured in
+``docs/engines.md``).
 """
 
 from __future__ import annotations
@@ -17,6 +21,7 @@ import shutil
 import subprocess
 import sys
 import tempfile
+import warnings
 from contextlib import contextmanager
 from pathlib import Path
 from types import SimpleNamespace
@@ -25,7 +30,12 @@ from typing import Any
 import openpyxl
 from openpyxl.utils import get_column_letter, range_boundaries
 
-ENGINES = ("formulas", "libreoffice")
+from .gnumeric import GnumericError, recalculate_into, ssconvert
+
+ENGINES = ("formulas", "libreoffice", "gnumeric")
+#: the engines by speed on cmmwb's books (docs/engines.md: the knuckle and a step gauge take
+#: Gnumeric well under 1 s, LibreOffice 3-8 s, ``formulas`` 24-34 s)
+FASTEST_FIRST = ("gnumeric", "libreoffice", "formulas")
 Values = dict[str, dict[str, Any]]
 
 _KEY = re.compile(r"^'?\[(?P<book>[^\]]+)\](?P<sheet>.+?)'?!(?P<ref>[A-Z]+[0-9]+(:[A-Z]+[0-9]+)?)$")
@@ -54,6 +64,20 @@ def soffice() -> str | None:
     return None
 
 
+def installed(engine: str) -> bool:
+    """Whether ``engine`` can run here (``formulas`` always can: it is a dependency)."""
+    if engine == "libreoffice":
+        return soffice() is not None
+    if engine == "gnumeric":
+        return ssconvert() is not None
+    return engine == "formulas"
+
+
+def default_engine() -> str:
+    """The fastest engine installed here."""
+    return next(e for e in FASTEST_FIRST if installed(e))
+
+
 def recalculate(path: str | Path, engine: str = "formulas", timeout_s: float = 600) -> Values:
     """Recompute every formula of the workbook at ``path`` and return all cell values."""
     path = Path(path)
@@ -61,6 +85,8 @@ def recalculate(path: str | Path, engine: str = "formulas", timeout_s: float = 6
         return _recalc_formulas(path)
     if engine == "libreoffice":
         return _recalc_libreoffice(path, timeout_s)
+    if engine == "gnumeric":
+        return _recalc_gnumeric(path, timeout_s)
     raise ValueError(f"unknown engine {engine!r}; choose one of {', '.join(ENGINES)}")
 
 
@@ -170,8 +196,35 @@ def _recalc_libreoffice(path: Path, timeout_s: float) -> Values:
         return read_cached(result)
 
 
+#: the second starting value of every formula cell in :func:`gnumeric_cycle_cells`
+CYCLE_SEED = 7.25
+
+
+def gnumeric_cycle_cells(path: str | Path, values: Values, timeout_s: float = 600) -> list[str]:
+    """The cells (``Sheet!A1``, in sheet and row order) whose Gnumeric value ``values`` (computed
+    from no cached values) changes when every formula cell starts from :data:`CYCLE_SEED`
+    instead: the cells a circular reference reaches (Gnumeric iterates a cycle from its cells'
+    starting values and gives no error; ``generator.workbook.gnumeric``).  Empty for a book
+    without a circular reference."""
+    again = _recalc_gnumeric(Path(path), timeout_s, seed=CYCLE_SEED)
+    return [f"{sheet}!{ref}" for sheet, cells in values.items() for ref, v in cells.items()
+            if again.get(sheet, {}).get(ref) != v]
+
+
+def _recalc_gnumeric(path: Path, timeout_s: float, seed: float | None = None) -> Values:
+    with tempfile.TemporaryDirectory(prefix="cmmwb_gnumeric_") as tmp:
+        try:
+            out = recalculate_into(path, tmp, timeout_s, seed)
+        except GnumericError as e:
+            raise RecalcError(str(e)) from None
+        with warnings.catch_warnings():
+            # Gnumeric's styles part has no cell style named "Normal"; openpyxl says so, harmlessly
+            warnings.filterwarnings("ignore", "Workbook contains no default style", UserWarning)
+            return read_cached(out)
+
+
 def read_cached(path: str | Path) -> Values:
-    """Cached values of every cell of a saved workbook (as LibreOffice or Excel left them)."""
+    """Cached values of every cell of a saved workbook (as LibreOffice, Gnumeric or Excel left them)."""
     wb = openpyxl.load_workbook(path, data_only=True)
     try:
         out: Values = {}

@@ -22,10 +22,10 @@ from cmmwb.generator.feature.task import FIT_CURRENT, FIT_STALE
 from cmmwb.generator.taskfile import key_line
 from cmmwb.generator.workbook import plots
 from cmmwb.generator.workbook.pagesetup import CM_PER_CHAR
-from cmmwb.generator.workbook.recalc import recalculate, results_rows
+from cmmwb.generator.workbook.recalc import results_rows
 from cmmwb.generator.workbook.styles import FMT_SCI
 
-from tests.helpers import EXAMPLES
+from tests.helpers import EXAMPLES, recalc
 
 CMMWB = [sys.executable, "-m", "cmmwb.generator"]
 
@@ -198,14 +198,14 @@ def test_an_edited_point_flags_the_results_as_stale(sphere_book, tmp_path, engin
     results, book = sphere_book
     assert results["feature"]["fit"]["state"] == FIT_CURRENT
     assert results["feature"]["fit"]["gauss_newton_step_norm"] < 1e-12
-    before = results_rows(recalculate(book, engine))
+    before = results_rows(recalc(book, engine))
     assert {r["fit_state"] for r in before} == {FIT_CURRENT}
     wb = openpyxl.load_workbook(book)
     ws = wb["Points"]
     ws["B2"].value = ws["B2"].value + 0.001
     edited = tmp_path / f"edited_{engine}.xlsx"
     wb.save(edited)
-    after = results_rows(recalculate(edited, engine))
+    after = results_rows(recalc(edited, engine))
     assert {r["fit_state"] for r in after} == {FIT_STALE}
     rules = wb["Results"].conditional_formatting
     assert any(str(cf.sqref) == f"G2:G{1 + len(after)}" for cf in rules)
