@@ -29,7 +29,7 @@ def register(sub) -> None:
 
 
 def run(args) -> int:
-    from ..workbook.recalc import RecalcError, recalculate, results_rows
+    from ..workbook.recalc import RecalcError, recalculate, recalculate_checking_cycles, results_rows
     from ..workbook.safe_xlsx import MAX_CELLS, MAX_FORMULAS_ENGINE_CELLS, check
 
     path = Path(args.book)
@@ -47,11 +47,16 @@ def run(args) -> int:
     # entities in any part, macros, external links, DDE, queries, cell and string counts
     check(path, max_cells=MAX_FORMULAS_ENGINE_CELLS if engine == "formulas" else MAX_CELLS)
     try:
-        values = recalculate(path, engine)
+        if engine == "gnumeric":   # Gnumeric iterates a cycle without an error value: checked
+            values, cycle = recalculate_checking_cycles(path)
+        else:
+            values, cycle = recalculate(path, engine), []
     except RecalcError as e:
         raise InputError(str(e), file=path) from None
-    if engine == "gnumeric":
-        _refuse_cycles_in_gnumeric(path, values)   # Gnumeric iterates a cycle without an error
+    if cycle:
+        raise InputError(f"a circular reference: {len(cycle)} formula cell(s) depend on themselves or on a cell "
+                         f"that does, e.g. {cycle[0]}; cmmwb's workbooks have none (was a formula edited?)",
+                         file=path)
     if "Results" not in values:
         raise InputError("no sheet named 'Results'", file=path, where="sheet Results")
     rows = results_rows(values)
@@ -72,21 +77,6 @@ def run(args) -> int:
               file=sys.stderr)
         return 1
     return 0
-
-
-def _refuse_cycles_in_gnumeric(path: Path, values) -> None:
-    """A circular reference is a clear error (exit 2) in Gnumeric too, which computes one
-    without an error value: found by a second run from other starting values."""
-    from ..workbook.recalc import RecalcError, gnumeric_cycle_cells
-
-    try:
-        cells = gnumeric_cycle_cells(path, values)
-    except RecalcError as e:
-        raise InputError(str(e), file=path) from None
-    if cells:
-        raise InputError(f"a circular reference: {len(cells)} formula cell(s) depend on themselves or on a cell "
-                         f"that does, e.g. {cells[0]}; cmmwb's workbooks have none (was a formula edited?)",
-                         file=path)
 
 
 def _refuse_circular_references(path: Path) -> None:

@@ -23,7 +23,6 @@ never as formulas.
 from __future__ import annotations
 
 import math
-import posixpath
 import re
 import zipfile
 from pathlib import Path
@@ -33,6 +32,7 @@ from xml.sax.saxutils import escape
 from openpyxl.utils import column_index_from_string, get_column_letter, range_boundaries
 
 from .atomic import replacing
+from .cached_values import sheet_parts
 from .sharedstrings import texts
 
 MODES = ("results", "all", "none")
@@ -41,9 +41,6 @@ FACTORS = ("R", "PQ", "S", "ET", "ER", "P")
 FEATURE_NOT_APPLICABLE = "—"
 ERRORS = {"#NULL!", "#DIV/0!", "#VALUE!", "#REF!", "#NAME?", "#NUM!", "#N/A", "#GETTING_DATA"}
 
-_SHEET = re.compile(rb'<sheet\b[^>]*?\bname="([^"]*)"[^>]*?\br:id="([^"]*)"')
-_REL = re.compile(rb'<Relationship\b[^>]*?\bId="([^"]*)"[^>]*?\bTarget="([^"]*)"')
-_REL2 = re.compile(rb'<Relationship\b[^>]*?\bTarget="([^"]*)"[^>]*?\bId="([^"]*)"')
 _ROW = re.compile(rb"<row\b([^>]*?)(/>|>(.*?)</row>)", re.S)
 _CELL = re.compile(rb"<c\b([^>]*?)(/>|>(.*?)</c>)", re.S)
 _ATTR_R = re.compile(rb'\br="([A-Z]+)([0-9]+)"')
@@ -94,23 +91,6 @@ def results_table(kind: str, results: dict) -> list[dict[str, Any]]:
 
 
 # -- the xlsx parts ------------------------------------------------------------------------------
-
-def sheet_parts(z: zipfile.ZipFile) -> dict[str, str]:
-    """Sheet title -> part name (``xl/worksheets/sheet3.xml``)."""
-    wb = z.read("xl/workbook.xml")
-    rels = z.read("xl/_rels/workbook.xml.rels")
-    targets = {i: t for i, t in _REL.findall(rels)}
-    targets.update({i: t for t, i in _REL2.findall(rels)})
-    out = {}
-    for name, rid in _SHEET.findall(wb):
-        target = targets.get(rid)
-        if target is None:
-            continue
-        t = target.decode()
-        part = t.lstrip("/") if t.startswith("/") else posixpath.normpath(posixpath.join("xl", t))
-        out[_unescape(name.decode())] = part
-    return out
-
 
 def _unescape(s: str) -> str:
     return (s.replace("&lt;", "<").replace("&gt;", ">").replace("&quot;", '"').replace("&apos;", "'")

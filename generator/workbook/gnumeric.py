@@ -40,7 +40,7 @@ def recalculate_into(path: str | Path, folder: str | Path, timeout_s: float = 60
     cells' starting values (measured: ``B2 = C2+1``, ``C2 = B2*2`` gives 3 and 2 from no cached
     values, 201 and 200 from 100 and 7), so the result of a cycle depends on where it starts,
     while every other cell is recomputed from its inputs alone.  Two runs from different starts
-    (``generator.workbook.recalc.gnumeric_cycle_cells``) find the cells a cycle reaches."""
+    (``generator.workbook.recalc.recalculate_checking_cycles``) find the cells a cycle reaches."""
     exe = ssconvert()
     if exe is None:
         raise GnumericError("Gnumeric (ssconvert) is not installed")

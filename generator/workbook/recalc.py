@@ -21,7 +21,7 @@ import shutil
 import subprocess
 import sys
 import tempfile
-import warnings
+from concurrent.futures import ThreadPoolExecutor
 from contextlib import contextmanager
 from pathlib import Path
 from types import SimpleNamespace
@@ -30,6 +30,7 @@ from typing import Any
 import openpyxl
 from openpyxl.utils import get_column_letter, range_boundaries
 
+from .cached_values import read_values
 from .gnumeric import GnumericError, recalculate_into, ssconvert
 
 ENGINES = ("formulas", "libreoffice", "gnumeric")
@@ -196,19 +197,23 @@ def _recalc_libreoffice(path: Path, timeout_s: float) -> Values:
         return read_cached(result)
 
 
-#: the second starting value of every formula cell in :func:`gnumeric_cycle_cells`
+#: the second starting value of every formula cell in :func:`recalculate_checking_cycles`
 CYCLE_SEED = 7.25
 
 
-def gnumeric_cycle_cells(path: str | Path, values: Values, timeout_s: float = 600) -> list[str]:
-    """The cells (``Sheet!A1``, in sheet and row order) whose Gnumeric value ``values`` (computed
-    from no cached values) changes when every formula cell starts from :data:`CYCLE_SEED`
-    instead: the cells a circular reference reaches (Gnumeric iterates a cycle from its cells'
-    starting values and gives no error; ``generator.workbook.gnumeric``).  Empty for a book
-    without a circular reference."""
-    again = _recalc_gnumeric(Path(path), timeout_s, seed=CYCLE_SEED)
-    return [f"{sheet}!{ref}" for sheet, cells in values.items() for ref, v in cells.items()
-            if again.get(sheet, {}).get(ref) != v]
+def recalculate_checking_cycles(path: str | Path, timeout_s: float = 600) -> tuple[Values, list[str]]:
+    """Gnumeric's values of the workbook at ``path`` (from no cached values), and the cells
+    (``Sheet!A1``, in sheet and row order) whose value changes when every formula cell starts
+    from :data:`CYCLE_SEED` instead: the cells a circular reference reaches (Gnumeric iterates a
+    cycle from its cells' starting values and gives no error value; ``generator.workbook.gnumeric``).
+    Empty for a book without a circular reference.  The two runs go side by side."""
+    path = Path(path)
+    with ThreadPoolExecutor(2) as pool:
+        first = pool.submit(_recalc_gnumeric, path, timeout_s)
+        again = pool.submit(_recalc_gnumeric, path, timeout_s, CYCLE_SEED)
+        values, seeded = first.result(), again.result()
+    return values, [f"{sheet}!{ref}" for sheet, cells in values.items() for ref, v in cells.items()
+                    if seeded.get(sheet, {}).get(ref) != v]
 
 
 def _recalc_gnumeric(path: Path, timeout_s: float, seed: float | None = None) -> Values:
@@ -217,27 +222,13 @@ def _recalc_gnumeric(path: Path, timeout_s: float, seed: float | None = None) ->
             out = recalculate_into(path, tmp, timeout_s, seed)
         except GnumericError as e:
             raise RecalcError(str(e)) from None
-        with warnings.catch_warnings():
-            # Gnumeric's styles part has no cell style named "Normal"; openpyxl says so, harmlessly
-            warnings.filterwarnings("ignore", "Workbook contains no default style", UserWarning)
-            return read_cached(out)
+        return read_cached(out)
 
 
 def read_cached(path: str | Path) -> Values:
-    """Cached values of every cell of a saved workbook (as LibreOffice, Gnumeric or Excel left them)."""
-    wb = openpyxl.load_workbook(path, data_only=True)
-    try:
-        out: Values = {}
-        for ws in wb.worksheets:
-            cells = {}
-            for row in ws.iter_rows():
-                for c in row:
-                    if c.value is not None:
-                        cells[c.coordinate] = c.value
-            out[ws.title] = cells
-        return out
-    finally:
-        wb.close()
+    """Cached values of every cell of a saved workbook (as LibreOffice, Gnumeric or Excel left
+    them), read from its XML (``generator.workbook.cached_values``)."""
+    return read_values(path)
 
 
 def results_rows(values: Values, sheet: str = "Results") -> list[dict[str, Any]]:

@@ -12,6 +12,7 @@ Cells, styles and formulas are untouched: a text cell stays text (``t="s"``), ne
 
 from __future__ import annotations
 
+import html
 import re
 import zipfile
 from pathlib import Path
@@ -94,5 +95,4 @@ def texts(z: zipfile.ZipFile) -> list[str]:
 
 
 def _unescape(s: str) -> str:
-    return (s.replace("&lt;", "<").replace("&gt;", ">").replace("&quot;", '"').replace("&apos;", "'")
-            .replace("&amp;", "&"))
+    return html.unescape(s) if "&" in s else s

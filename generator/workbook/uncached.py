@@ -30,7 +30,7 @@ def strip_cached_values(src: str | Path, dst: str | Path, seed: float | None = N
     """Copy the workbook ``src`` to ``dst`` without cached formula values; returns how many
     cells lost one.  With ``seed`` every formula cell gets that number as its cached value instead
     (another starting point for an engine that iterates circular references:
-    ``generator.workbook.gnumeric.cycle_cells``)."""
+    ``generator.workbook.gnumeric``)."""
     count = 0
     with zipfile.ZipFile(src) as z, zipfile.ZipFile(dst, "w", zipfile.ZIP_DEFLATED) as out:
         types = z.read("[Content_Types].xml")

@@ -19,6 +19,8 @@ from pathlib import Path
 
 from openxml_audit import FileFormat, OpenXmlValidator, ValidationSeverity
 
+from tests.helpers import excel
+
 FORMAT = FileFormat.MICROSOFT_365
 
 #: the children of a SpreadsheetML font (CT_Font)
@@ -89,8 +91,8 @@ def fingerprint(path: Path) -> str:
 
 class Watch:
     """The ``.xlsx`` files under one folder (a test worker's ``basetemp``) not yet looked at:
-    :meth:`check` validates each new or rewritten one (once per :func:`fingerprint`) and returns
-    the problems found; with ``skip`` it only marks them seen (a test that writes foreign or
+    :meth:`check` validates each new or rewritten one (once per :func:`fingerprint`), holds it to
+    the Excel list of docs/engines.md (``tests.helpers.excel``) and returns the problems found; with ``skip`` it only marks them seen (a test that writes foreign or
     hostile files on purpose: ``@pytest.mark.foreign_books``)."""
 
     def __init__(self, root: Path):
@@ -146,7 +148,7 @@ class Watch:
                 if fp in self.fingerprints:
                     self.same += 1
                     continue
-                said = problems(book)
+                said = problems(book) + excel.problems(book)
                 self.fingerprints.add(fp)
                 self.validated += 1
             except (zipfile.BadZipFile, KeyError, OSError) as e:
