@@ -120,7 +120,7 @@ def check(path: Path, *, max_cells: int = MAX_CELLS) -> None:
             strings += len(_SHARED_STRING.findall(data))
             if cells > max_cells:
                 raise InputError(f"more than {max_cells:,} cells: too large for this command (see "
-                                 "docs/input_limits.md)" + (" -- use --engine libreoffice"
+                                 "docs/input_limits.md)" + (" -- use --engine gnumeric or --engine libreoffice"
                                                             if max_cells < MAX_CELLS else ""),
                                  file=path, where=part_place(zf, info.filename))
             if strings > MAX_SHARED_STRINGS:
