@@ -16,8 +16,8 @@ from pathlib import Path
 
 from openpyxl.utils import get_column_letter, range_boundaries
 
-_WORKSHEET = b"application/vnd.openxmlformats-officedocument.spreadsheetml.worksheet+xml"
-_OVERRIDE = re.compile(rb'<Override\b[^>]*?\bPartName="/?([^"]+)"[^>]*?\bContentType="([^"]+)"[^>]*/>')
+from .cached_values import sheet_parts
+
 _CELL = re.compile(rb"<c\b([^>]*?)(?:/>|>(.*?)</c>)", re.S)
 _ARRAY_F = re.compile(rb"<f\b[^>]*?\bt=\"array\"[^>]*>")
 _REF = re.compile(rb'\bref="([A-Z]+[0-9]+(?::[A-Z]+[0-9]+)?)"')
@@ -33,8 +33,7 @@ def strip_cached_values(src: str | Path, dst: str | Path, seed: float | None = N
     ``generator.workbook.gnumeric``)."""
     count = 0
     with zipfile.ZipFile(src) as z, zipfile.ZipFile(dst, "w", zipfile.ZIP_DEFLATED) as out:
-        types = z.read("[Content_Types].xml")
-        sheets = {p.decode() for p, t in _OVERRIDE.findall(types) if t == _WORKSHEET}
+        sheets = set(sheet_parts(z).values())
         for info in z.infolist():
             data = z.read(info)
             if info.filename in sheets:

@@ -42,6 +42,7 @@ def test_the_hostile_corpus_has_at_least_40_cases():
     assert len(CASES) >= 40
 
 
+@pytest.mark.foreign_books       # hostile files, written on purpose
 @pytest.mark.parametrize("name", sorted(CASES))
 def test_a_hostile_file_gives_one_clear_message_and_writes_nothing(tmp_path, capsys, name):
     argv, file_name, words = CASES[name](tmp_path)
