@@ -31,7 +31,7 @@ import openpyxl
 from openpyxl.utils import get_column_letter, range_boundaries
 
 from .cached_values import read_values
-from .gnumeric import GnumericError, recalculate_into, ssconvert
+from .gnumeric import GnumericError, recalculate_into, sheet_as_text, ssconvert
 
 ENGINES = ("formulas", "libreoffice", "gnumeric")
 #: the engines by speed on cmmwb's books (docs/engines.md: the knuckle and a step gauge take
@@ -201,19 +201,44 @@ def _recalc_libreoffice(path: Path, timeout_s: float) -> Values:
 CYCLE_SEED = 7.25
 
 
-def recalculate_checking_cycles(path: str | Path, timeout_s: float = 600) -> tuple[Values, list[str]]:
-    """Gnumeric's values of the workbook at ``path`` (from no cached values), and the cells
-    (``Sheet!A1``, in sheet and row order) whose value changes when every formula cell starts
-    from :data:`CYCLE_SEED` instead: the cells a circular reference reaches (Gnumeric iterates a
-    cycle from its cells' starting values and gives no error value; ``generator.workbook.gnumeric``).
-    Empty for a book without a circular reference.  The two runs go side by side."""
+def recalculate_checking_cycles(path: str | Path, sheet: str = "Results",
+                                timeout_s: float = 600) -> tuple[Values, list[str]]:
+    """Gnumeric's values of the workbook at ``path`` (from no cached values), and the cells of
+    ``sheet`` (``Results!B2``, in row order) whose value changes when every formula cell starts
+    from :data:`CYCLE_SEED` instead: the cells there a circular reference reaches (Gnumeric
+    iterates a cycle from its cells' starting values and gives no error value;
+    ``generator.workbook.gnumeric``).  Empty for a book without a circular reference.  The two
+    runs go side by side; the second one writes only ``sheet``, as text."""
     path = Path(path)
-    with ThreadPoolExecutor(2) as pool:
+    with ThreadPoolExecutor(2) as pool, tempfile.TemporaryDirectory(prefix="cmmwb_gnumeric_") as tmp:
         first = pool.submit(_recalc_gnumeric, path, timeout_s)
-        again = pool.submit(_recalc_gnumeric, path, timeout_s, CYCLE_SEED)
-        values, seeded = first.result(), again.result()
-    return values, [f"{sheet}!{ref}" for sheet, cells in values.items() for ref, v in cells.items()
-                    if seeded.get(sheet, {}).get(ref) != v]
+        again = pool.submit(sheet_as_text, path, tmp, sheet, timeout_s, CYCLE_SEED)
+        try:
+            values, seeded = first.result(), again.result()
+        except GnumericError as e:
+            raise RecalcError(str(e)) from None
+    cells = values.get(sheet, {})
+    return values, [f"{sheet}!{ref}" for ref in sorted(set(cells) | set(seeded), key=_row_major)
+                    if not _same(cells.get(ref), seeded.get(ref))]
+
+
+def _row_major(ref: str) -> tuple[int, int]:
+    c0, r0, _, _ = range_boundaries(ref)
+    return r0, c0
+
+
+def _same(value, text: str | None) -> bool:
+    """Whether a value read from Gnumeric's .xlsx is the text its CSV export wrote for the cell."""
+    if value is None or text is None:
+        return value is None and text is None
+    if isinstance(value, bool):
+        return text == ("TRUE" if value else "FALSE")
+    if isinstance(value, (int, float)):
+        try:
+            return float(text) == float(value)
+        except ValueError:
+            return False
+    return text == str(value)
 
 
 def _recalc_gnumeric(path: Path, timeout_s: float, seed: float | None = None) -> Values:
