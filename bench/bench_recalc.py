@@ -56,11 +56,11 @@ def main() -> None:
                            check=True, capture_output=True)
             book = out / f"{name}.xlsx"
             for engine in engines:
-                args = [*CMMWB, "recalc", str(book)] + (["--engine", engine] if engine else [])
+                command = [*CMMWB, "recalc", str(book)] + (["--engine", engine] if engine else [])
                 load = os.getloadavg()[0]
                 best = None
                 for _ in range(runs):
-                    wall, cpu, err = run(args)
+                    wall, cpu, err = run(command)
                     if best is None or wall < best[0]:
                         best = (wall, cpu)
                 said = engine or err.split("engine ", 1)[1].split(" ", 1)[0] + " (default)"
