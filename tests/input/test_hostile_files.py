@@ -314,6 +314,7 @@ def test_200000_point_records_fit_on_the_structured_path_but_not_dense():
         check_diagnose_fits("point", 200_000, available=4 * 2**30)
 
 
+@pytest.mark.foreign_books       # a relationship without its hyperlink element, on purpose
 def test_an_external_hyperlink_is_not_refused(tmp_path):
     """Hyperlinks open nothing by themselves: a workbook with one (to any address) passes."""
     from hostile import book, parts
