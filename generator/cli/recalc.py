@@ -35,17 +35,16 @@ def run(args) -> int:
     path = Path(args.book)
     if not path.exists():
         raise InputError("no such file", file=path)
-    engine = args.engine
-    if engine is None:
-        engine = default_engine()
-        print(f"cmmwb recalc: engine {engine} (the fastest installed; --engine to choose another)",
-              file=sys.stderr)
-    elif not installed(engine):
+    engine = args.engine or default_engine()
+    if args.engine and not installed(engine):
         raise InputError(f"the {engine} engine is not installed here; installed: "
                          f"{', '.join(e for e in ENGINES if installed(e))}", file=path)
     # an untrusted file, checked before any engine sees it: regular file, size, zip bomb,
     # entities in any part, macros, external links, DDE, queries, cell and string counts
     check(path, max_cells=MAX_FORMULAS_ENGINE_CELLS if engine == "formulas" else MAX_CELLS)
+    if args.engine is None:   # said only once the file is accepted: a refusal stays one line
+        print(f"cmmwb recalc: engine {engine} (the fastest installed; --engine to choose another)",
+              file=sys.stderr)
     try:
         if engine == "gnumeric":   # Gnumeric iterates a cycle without an error value: checked
             values, cycle = recalculate_checking_cycles(path)
