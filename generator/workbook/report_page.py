@@ -41,8 +41,8 @@ from .xlref import cell, col
 
 SHEET = "Summary"
 #: the table's columns: header -> width (characters); C: header -> number of the column
-COLUMNS = {"characteristic": 16, "nominal": 11, "lower limit": 11, "upper limit": 11, "value": 14, "deviation": 10,
-           "U": 10, "p_c": 7, "decision": 17, "conformity": 20, "tolerance bar": 13}
+COLUMNS = {"characteristic": 16, "nominal": 11, "lower limit": 11, "upper limit": 11, "value": 13, "deviation": 10,
+           "U": 11, "p_c": 7, "decision": 17, "conformity": 22, "tolerance bar": 13}
 C = {name: j + 1 for j, name in enumerate(COLUMNS)}
 LAST = len(COLUMNS)
 #: the columns right of the printed page that hold what the formulas and bars read
@@ -174,7 +174,7 @@ def write_report_page(book: Book, header: PageHeader, rows: Sequence[PageRow], v
         for part in textwrap.wrap(note, TEXT_WIDTH):
             book.text(ws, r, 1, part, font=NOTE_FONT)
             r += 1
-    # scaled to the page width: the columns (COLUMNS, 140 characters) print at 0.75 or more
+    # scaled to the page width: the columns (COLUMNS, 142 characters) print at 0.75 or more
     for row_number in range(1, r + 1):
         ws.row_dimensions[row_number].height = ROW_PT
     book.print_setup(ws, landscape=True, title_rows=(head, head), fit_widths=False, area=f"A1:{col(LAST)}{r}",
@@ -186,12 +186,13 @@ def _verdict(book: Book, ws, r: int, v: Verdict) -> int:
     value = f"{v.value_cell}" if v.value_cell else repr(float(v.value))
     book.text(ws, r, 2, "value")
     book.formula(ws, r, 3, f"={value}", fmt="0.0000", value=float(v.value))
-    book.text(ws, r, 4, v.limit)
+    book.text(ws, r, 4, "limit")
+    book.text(ws, r, 5, v.limit)
     if v.verdict_cell:
-        book.formula(ws, r, 6, f"={v.verdict_cell}", fmt=None, value=v.verdict)
+        book.formula(ws, r, 7, f"={v.verdict_cell}", fmt=None, value=v.verdict)
     else:
-        book.text(ws, r, 6, v.verdict)
-    ws.cell(row=r, column=6).font = HEADER_FONT
+        book.text(ws, r, 7, v.verdict)
+    ws.cell(row=r, column=7).font = HEADER_FONT
     r += 1
     for part in textwrap.wrap(v.rule, TEXT_WIDTH - 20):
         book.text(ws, r, 2, part, font=NOTE_FONT)
@@ -239,7 +240,10 @@ def _row(book: Book, ws, r: int, row: PageRow, same: bool = False) -> int:
     dec_value = max(dec_U + shift, 0)
     numbers = [float(x.value) for x in (row.value, row.nominal, row.lsl, row.usl) if isinstance(x, Live)]
     fmt_value = _number_format(_fitting(dec_value, numbers, q.unit, COLUMNS["value"]), q.unit)
-    fmt_U = _number_format(_fitting(max(dec_U, 0), [U_now], q.U_unit, COLUMNS["U"]), q.U_unit)
+    dec_fit = _fitting(max(dec_U, 0), [U_now], q.U_unit, COLUMNS["U"])
+    # U keeps its two significant digits (GUM 7.2.6): in powers of ten when its decimals do not fit
+    fmt_U = _number_format(dec_fit, q.U_unit) if dec_fit == max(dec_U, 0) else f'0.0E+00" {q.U_unit}"'
+
     book.text(ws, r, C["characteristic"], q.label, font=HEADER_FONT)
     fmt_plain = _number_format(_fitting(dec_value, numbers + [-abs(n) for n in numbers], "",
                                         min(COLUMNS["nominal"], COLUMNS["deviation"])), "")
