@@ -131,6 +131,17 @@ class Book:
             c.alignment = Alignment(wrap_text=True, vertical="top")
         return c
 
+    @staticmethod
+    def align_top(ws: Worksheet, row: int, columns: int) -> None:
+        """Every cell of ``row`` (columns 1 .. ``columns``) aligned at the top, wrapping kept: in a
+        row a wrapped text makes high, the other cells stand level with its first line (at the
+        default bottom they read as belonging to the row below)."""
+        for c in range(1, columns + 1):
+            cell_ = ws.cell(row=row, column=c)
+            al = cell_.alignment
+            cell_.alignment = Alignment(horizontal=al.horizontal, vertical="top", wrap_text=al.wrap_text,
+                                        indent=al.indent)
+
     def header(self, ws: Worksheet, row: int, column: int, labels: Sequence[str],
                notes: Sequence[str | None] | None = None) -> None:
         """A row of bold column headers (each label carries its unit, e.g. ``u_um``)."""
@@ -388,7 +399,8 @@ class Book:
     def print_setup(self, ws: Worksheet, *, landscape: bool | None = None, title_rows: int | None = -1,
                     area: str | None = None, row_breaks: Sequence[int] = (), fit_widths: bool = True,
                     matrix: tuple[int, int] | None = None, caption: str | None = None,
-                    one_page: bool = False) -> None:
+                    one_page: bool = False, scale: int | None = None,
+                    corner: tuple[int, int] = (24, 12), chart_row: int | None = None) -> None:
         """How ``ws`` prints (applied by :meth:`save`; sheets without a call get the defaults).
 
         Every sheet a person reads prints on A4, scaled to the page width, with the sheet name and
@@ -398,10 +410,17 @@ class Book:
         (e.g. one budget per page); ``one_page``: scaled to fit one page (the Summary).  ``matrix``
         = (rows, columns) of a large matrix at B2: only its top-left corner prints, with
         ``caption`` in the page header saying so (a 156 x 156 V_X would otherwise fill 60 pages).
-        With an ``area``, only its columns count for the width (landscape, pages across)."""
+        With an ``area``, only its columns count for the width (landscape, pages across).
+        ``scale`` (percent): printed at that scale instead of fitted to the page width, as many
+        pages across and down as it needs, column A repeated when it spans pages across (a wide
+        table whose text would otherwise print below 8 pt).  ``corner``: the (rows, columns) of a
+        ``matrix`` that print.  ``chart_row`` (with ``scale``): the row
+        from which a chart anchored in column A stands below the table: its rows print as a range of
+        their own, once, not on every page across."""
         self._print[ws.title] = dict(landscape=landscape, title_rows=title_rows, area=area,
                                      row_breaks=tuple(row_breaks), fit_widths=fit_widths, matrix=matrix,
-                                     caption=caption, one_page=one_page)
+                                     caption=caption, one_page=one_page, scale=scale, corner=corner,
+                                     chart_row=chart_row)
 
     def _finish_layout(self) -> None:
         """Column widths that fit what each column shows, and the print setup of every sheet."""

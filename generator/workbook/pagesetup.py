@@ -14,9 +14,20 @@ from openpyxl.worksheet.worksheet import Worksheet
 
 from .styles import TITLE_FONT
 
+#: height (pt) of one wrapped line of 11 pt text (12.8 pt measured in LibreOffice's PDF)
+LINE_PT = 13.5
 WIDE_SHEET = 360               # characters of column width beyond which a sheet prints several pages across
 FIT_WIDTH_MAX_CELLS = 250_000   # larger sheets (value blocks of large books) keep their widths
 MAX_WIDTH = 60
+
+
+def wrapped_lines(text: str, width: float) -> int:
+    """How many lines ``text`` takes wrapped in a column ``width`` characters wide (the unit is a
+    digit's width; LibreOffice fitted 1.2-1.3 characters of text per unit, Calibri in Excel more: 1.2
+    counts a line more where in doubt); the row's height is then ``LINE_PT`` per line."""
+    import textwrap
+
+    return max(1, len(textwrap.wrap(text, int(width * 1.2)))) if text else 1
 
 
 def display_len(value, fmt: str | None) -> int:
@@ -98,7 +109,8 @@ def _used_width(ws: Worksheet, last_column: int | None = None) -> float:
 def page_setup(ws: Worksheet, *, landscape: bool | None = None, title_rows: int | None = -1,
                 area: str | None = None, row_breaks: Sequence[int] = (),
                 matrix: tuple[int, int] | None = None, caption: str | None = None,
-                one_page: bool = False) -> None:
+                one_page: bool = False, scale: int | None = None, corner: tuple[int, int] = (24, 12),
+                chart_row: int | None = None) -> None:
     from openpyxl.utils import get_column_letter
     from openpyxl.worksheet.pagebreak import Break
 
@@ -115,7 +127,7 @@ def page_setup(ws: Worksheet, *, landscape: bool | None = None, title_rows: int 
     ws.oddFooter.right.size = 8
     if matrix is not None:
         n_rows, n_cols = matrix
-        rows, cols = min(n_rows, 24), min(n_cols, 12)
+        rows, cols = min(n_rows, corner[0]), min(n_cols, corner[1])
         ws.print_area = f"A1:{get_column_letter(1 + cols)}{1 + rows}"
         ws.oddHeader.center.text = caption or (
             f"{ws.title}: top-left {rows} x {cols} of the {n_rows} x {n_cols} matrix; "
@@ -137,7 +149,14 @@ def page_setup(ws: Worksheet, *, landscape: bool | None = None, title_rows: int 
     if landscape is None:
         landscape = width > 100
     ws.page_setup.orientation = "landscape" if landscape else "portrait"
-    if width > WIDE_SHEET:
+    if scale is not None:
+        # a fixed scale, as many pages across and down as the table needs (column A and the
+        # title rows repeated): a wide table stays readable instead of shrinking to one page
+        ws.sheet_properties.pageSetUpPr.fitToPage = False
+        ws.page_setup.scale = scale
+        if width * CM_PER_CHAR * scale / 100 > (_PAGE_CM if landscape else _PAGE_CM[::-1])[0]:
+            ws.print_title_cols = "A:A"
+    elif width > WIDE_SHEET:
         # a very wide table (the diagnose Records): several pages across, the first column repeated,
         # rather than one page at an unreadable scale
         ws.page_setup.fitToWidth = math.ceil(width / (WIDE_SHEET * 0.75))
@@ -150,6 +169,23 @@ def page_setup(ws: Worksheet, *, landscape: bool | None = None, title_rows: int 
         ws.print_title_rows = f"1:{title_rows}"
     if area:
         ws.print_area = area
+    if chart_row is not None and scale is not None:
+        # a table printed pages across, then a chart anchored at A{chart_row}: two print ranges, so
+        # that the chart's rows print once (one page wide) and not once per page across
+        page_cm = (_PAGE_CM if landscape else _PAGE_CM[::-1])
+        chars = page_cm[0] * 100.0 / scale / CM_PER_CHAR
+        last, used = 1, 0.0
+        while last < ws.max_column:
+            letter = get_column_letter(last + 1)
+            dim = ws.column_dimensions[letter] if letter in ws.column_dimensions else None
+            w = dim.width if dim is not None and dim.width else 8.43
+            if used + w > chars:
+                break
+            used += w
+            last += 1
+        rows = int(page_cm[1] * 100.0 / scale / 0.53)      # rows of 15 pt on one page
+        ws.print_area = [f"A1:{get_column_letter(ws.max_column)}{chart_row - 1}",
+                         f"A{chart_row}:{get_column_letter(last)}{chart_row + rows - 1}"]
     for r in row_breaks:
         if r > 1:
             ws.row_breaks.append(Break(id=r - 1))
@@ -175,7 +211,8 @@ CM_PER_CHAR = 0.25
 
 def _width_cm(ws: Worksheet) -> float:
     """The width (cm) of what ``ws`` prints across one page: its columns, or a text that runs on
-    past the last column (the MPE sheet's notes), whichever reaches further."""
+    past the last column (the MPE sheet's notes), whichever reaches further (a wrapped text stays
+    in its column)."""
     from openpyxl.utils import get_column_letter
 
     chars = _used_width(ws)
@@ -183,7 +220,8 @@ def _width_cm(ws: Worksheet) -> float:
     # notes sit near the top; a large book's Budget has 10^5 rows, which are not read
     for row in ws.iter_rows(min_row=1, max_row=min(ws.max_row, OVERFLOW_ROWS)):
         for c in row:
-            if isinstance(c.value, str) and c.data_type == "s":
+            if isinstance(c.value, str) and c.data_type == "s" and not (c.alignment is not None
+                                                                       and c.alignment.wrap_text):
                 longest[c.column] = max(longest.get(c.column, 0), len(c.value))
     left = 0.0
     for column in range(1, ws.max_column + 1):
@@ -191,6 +229,20 @@ def _width_cm(ws: Worksheet) -> float:
         dim = ws.column_dimensions[letter] if letter in ws.column_dimensions else None
         chars = max(chars, left + longest.get(column, 0))
         left += dim.width if dim is not None and dim.width else 8.43
+    if not ws.sheet_properties.pageSetUpPr.fitToPage and ws.page_setup.scale:
+        # a fixed scale: one printed page holds the page's width divided by the scale; a chart in a
+        # print range of its own (``chart_row``) as wide as that range's columns
+        landscape = ws.page_setup.orientation == "landscape"
+        page = (_PAGE_CM if landscape else _PAGE_CM[::-1])[0] * 100.0 / ws.page_setup.scale
+        ranges = str(ws.print_area or "").split(",")
+        if len(ranges) > 1:
+            from openpyxl.utils import range_boundaries
+
+            lo, _, hi, _ = range_boundaries(ranges[-1].split("!")[-1].replace("$", ""))
+            chars = sum((ws.column_dimensions[get_column_letter(c)].width or 8.43)
+                        if get_column_letter(c) in ws.column_dimensions else 8.43 for c in range(lo, hi + 1))
+            return min(page, CM_PER_CHAR * chars)
+        return page
     return CM_PER_CHAR * chars / max(1, ws.page_setup.fitToWidth or 1)
 
 
