@@ -32,7 +32,7 @@ from ..workbook.pagesetup import LINE_PT, wrapped_lines
 from ..workbook.styles import FMT_SCI, FMT_UM
 from ..workbook.xlref import Block, cell
 from .gls import fill_after, gls_sheets
-from .records import RECORDS_SCALE, display_unit, length_records, point_records
+from .records import FOOTER_PT, RECORDS_SCALE, display_unit, length_records, point_records
 
 NATIVE_MAX_OBS = 160
 #: a hyper-parameter or a probe offset as typed (0.2, 200, -50), never in General's 12 digits
@@ -359,4 +359,5 @@ def _chart(book: Book, diag: Diagnosis, obs: dict) -> None:
     anchor_row = r1 + 3
     book.scatter(ws, f"A{anchor_row}", "Standardized residuals z before and after the refit",
                  x_title, "z", series[::-1], width=24, height=13, page=book)
-    book.print_setup(ws, scale=RECORDS_SCALE, chart_row=anchor_row - 1, landscape=False)
+    book.print_setup(ws, min_scale=RECORDS_SCALE, chart_row=anchor_row - 1, landscape=False, title_columns="A:A",
+                     footer_pt=FOOTER_PT)

@@ -71,7 +71,9 @@ def travel_cells(book: Book, diag: Diagnosis, inputs: dict, sheet: str, cols: di
 
 #: the record sheets print at this scale (percent), pages across and down: 8 pt text from 11 pt
 #: cells (fitted to the page width, 40 columns printed at 4 pt)
-RECORDS_SCALE = 75
+RECORDS_SCALE = 0.75
+#: the footer of a sheet printed at RECORDS_SCALE: 11 pt prints at 8.25 pt
+FOOTER_PT = 11
 #: the width (characters) a wrapped header of a record sheet is counted in (its numbers' width)
 HEADER_WIDTH = 11
 
@@ -144,7 +146,8 @@ def _record_sheet(book: Book, rec, sheet: str, columns: list[str], derived: list
         for k, f in row_formulas(L):
             book.formula(ws, r, ci[k], f, fmt=FMT_MM if k.endswith("_mm") or k.endswith("_um") else NUMBER_FORMAT)
     ws.freeze_panes = "B2"
-    book.print_setup(ws, scale=RECORDS_SCALE, landscape=False)   # portrait: 60 records a page
+    # portrait: 60 records a page; the ids repeated on every page across
+    book.print_setup(ws, min_scale=RECORDS_SCALE, landscape=False, title_columns="A:A", footer_pt=FOOTER_PT)
     return ws, ci, rows
 
 

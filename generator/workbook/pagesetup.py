@@ -106,11 +106,12 @@ def _used_width(ws: Worksheet, last_column: int | None = None) -> float:
     return total
 
 
-def page_setup(ws: Worksheet, *, landscape: bool | None = None, title_rows: int | None = -1,
+def page_setup(ws: Worksheet, *, landscape: bool | None = None, title_rows: int | tuple[int, int] | None = -1,
                 area: str | None = None, row_breaks: Sequence[int] = (),
                 matrix: tuple[int, int] | None = None, caption: str | None = None,
-                one_page: bool = False, scale: int | None = None, corner: tuple[int, int] = (24, 12),
-                chart_row: int | None = None) -> None:
+                one_page: bool = False, title_columns: str | None = None,
+                min_scale: float | None = None, footer_pt: float | None = None,
+                corner: tuple[int, int] = (24, 12), chart_row: int | None = None) -> None:
     from openpyxl.utils import get_column_letter
     from openpyxl.worksheet.pagebreak import Break
 
@@ -122,9 +123,9 @@ def page_setup(ws: Worksheet, *, landscape: bool | None = None, title_rows: int 
     ws.page_margins.left = ws.page_margins.right = 0.5
     ws.page_margins.top = ws.page_margins.bottom = 0.6
     ws.oddFooter.left.text = "&A"
-    ws.oddFooter.left.size = 8
+    ws.oddFooter.left.size = footer_pt or 8       # scaled with the page (LibreOffice)
     ws.oddFooter.right.text = "page &P of &N"
-    ws.oddFooter.right.size = 8
+    ws.oddFooter.right.size = footer_pt or 8
     if matrix is not None:
         n_rows, n_cols = matrix
         rows, cols = min(n_rows, corner[0]), min(n_cols, corner[1])
@@ -149,32 +150,34 @@ def page_setup(ws: Worksheet, *, landscape: bool | None = None, title_rows: int 
     if landscape is None:
         landscape = width > 100
     ws.page_setup.orientation = "landscape" if landscape else "portrait"
-    if scale is not None:
-        # a fixed scale, as many pages across and down as the table needs (column A and the
-        # title rows repeated): a wide table stays readable instead of shrinking to one page
-        ws.sheet_properties.pageSetUpPr.fitToPage = False
-        ws.page_setup.scale = scale
-        if width * CM_PER_CHAR * scale / 100 > (_PAGE_CM if landscape else _PAGE_CM[::-1])[0]:
-            ws.print_title_cols = "A:A"
-    elif width > WIDE_SHEET:
-        # a very wide table (the diagnose Records): several pages across, the first column repeated,
-        # rather than one page at an unreadable scale
+    if width > WIDE_SHEET and min_scale is None:
+        # a very wide table: several pages across, the first column repeated, rather than one page
+        # at an unreadable scale
         ws.page_setup.fitToWidth = math.ceil(width / (WIDE_SHEET * 0.75))
         ws.print_title_cols = "A:A"
     if title_rows == -1:
         first = ws.cell(row=1, column=1)
         title_rows = 1 if (first.value is not None and first.font is not None and first.font.b
                            and first.font.sz != TITLE_FONT.sz) else None
-    if title_rows:
+    if min_scale is not None:
+        # a fixed scale (text stays legible), as many pages across as the width needs
+        ws.sheet_properties.pageSetUpPr.fitToPage = False
+        ws.page_setup.scale = max(10, min(100, round(100 * min_scale)))
+    if title_columns:
+        ws.print_title_cols = title_columns
+    if isinstance(title_rows, tuple):          # (first, last): a header row below a title block
+        ws.print_title_rows = f"{title_rows[0]}:{title_rows[1]}"
+    elif title_rows:
         ws.print_title_rows = f"1:{title_rows}"
     if area:
         ws.print_area = area
-    if chart_row is not None and scale is not None:
+    if chart_row is not None and min_scale is not None:
         # a table printed pages across, then a chart anchored at A{chart_row}: two print ranges, so
         # that the chart's rows print once (one page wide) and not once per page across
+        scale = ws.page_setup.scale
         page_cm = (_PAGE_CM if landscape else _PAGE_CM[::-1])
         chars = page_cm[0] * 100.0 / scale / CM_PER_CHAR
-        last, used = 1, 0.0
+        last, used = 0, 0.0
         while last < ws.max_column:
             letter = get_column_letter(last + 1)
             dim = ws.column_dimensions[letter] if letter in ws.column_dimensions else None
@@ -185,7 +188,7 @@ def page_setup(ws: Worksheet, *, landscape: bool | None = None, title_rows: int 
             last += 1
         rows = int(page_cm[1] * 100.0 / scale / 0.53)      # rows of 15 pt on one page
         ws.print_area = [f"A1:{get_column_letter(ws.max_column)}{chart_row - 1}",
-                         f"A{chart_row}:{get_column_letter(last)}{chart_row + rows - 1}"]
+                         f"A{chart_row}:{get_column_letter(max(1, last))}{chart_row + rows - 1}"]
     for r in row_breaks:
         if r > 1:
             ws.row_breaks.append(Break(id=r - 1))
