@@ -20,6 +20,7 @@ import numpy as np
 from . import calibrate as cb
 from . import calibration_checks as checks
 from . import compensation as cp
+from . import conformity as cf
 from . import pointcloud as pc
 from . import reml
 from .errors import ModelError
@@ -32,6 +33,10 @@ from .locator.report import Diagnosis, effect_estimates
 #: the u(d) grid and the MPE check: the pointcloud workbook's grid (the MPE sheet is shared)
 GRID_POINTS = 101
 DEFAULT_L_MAX_MM = 1000.0
+#: the coverage factor of U(C_max) = k·u(C_max) in the MPE decision
+DECISION_K = 2.0
+#: the limit of the MPE check: the fitted model meets the MPE statement where C(d) <= 1 everywhere
+C_LIMIT = 1.0
 
 
 class EffectChoiceError(ModelError):
@@ -122,6 +127,7 @@ class CalibrationRun:
     mpe_check: dict | None
     profiles: list[dict]
     residuals: list[dict]
+    indicated: dict | None = None
 
     def to_json(self) -> dict:
         return {"records": [{"file": f.set.name, "kind": f.prep.design.kind, "records": int(f.prep.rec.n),
@@ -136,7 +142,7 @@ class CalibrationRun:
                 "fitted_parameters": {k: float(getattr(self.final, k)) for k in pc.Parameters.__dataclass_fields__},
                 "chi2": self.chi2,
                 "u_d": self.u_d,
-                "mpe_check": self.mpe_check, "profiles": self.profiles}
+                "mpe_check": self.mpe_check, "profiles": self.profiles, "indicated": self.indicated}
 
 
 def fit(files: list[FileFit], start: pc.Parameters) -> cb.Calibration:
@@ -212,12 +218,53 @@ def u_of_d(files: list[FileFit], task: pc.Parameters, cal: cb.Calibration, final
 
 
 def mpe_checks(task: pc.Parameters, cal: cb.Calibration, final: pc.Parameters, changes: list[cp.Change],
-               feedback: str, mpe: dict, P_mm: float) -> dict:
-    """The MPE check (Forbes 2025 eq. 36) of the fitted task and of the task's own values."""
+               feedback: str, mpe: dict, P_mm: float, rule: cf.DecisionRule | None = None,
+               k: float = DECISION_K) -> dict:
+    """The MPE check (Forbes 2025 eq. 36) of the fitted task and of the task's own values.  The
+    fitted task's u(C_max) is the estimates' (delta method in log); the parameters the feedback
+    replaced are held at their new values (their own uncertainty, of the corrections' u, is not in
+    it).  ``rule``: the decision of C_max <= 1 with that u (:func:`mpe_decision`; default ISO
+    14253-1 with U = ``k``·u)."""
     A, B, K, L_max = mpe["A_um"], mpe["B_mm"], mpe["K"], mpe["L_max_mm"]
-    return {"fitted": checks.mpe_consistency(final, A, B, K, P_mm, L_max,
-                                             cal if feedback == "none" or not changes else None, GRID_POINTS),
-            "task": checks.mpe_consistency(task, A, B, K, P_mm, L_max, None, GRID_POINTS)}
+    changed = {c.parameter for c in changes} if feedback != "none" else set()
+    fitted = checks.mpe_consistency(final, A, B, K, P_mm, L_max, cal, GRID_POINTS, held=changed)
+    used = [n for n in cal.free if n not in changed]
+    fitted["u_C_max_from"] = (
+        ("the covariance of the REML estimates of " + ", ".join(used) + " (delta method in log)"
+         + ("; " + ", ".join(sorted(changed & set(cal.free))) + " replaced by the feedback, held"
+            if changed & set(cal.free) else "")
+         + ("; the fed-back " + ", ".join(sorted(changed)) + " held at their values (the corrections' own "
+            "uncertainty is not included)" if changed else ""))
+        if used else "nothing was estimated: no uncertainty of C_max")
+    fitted["decision"] = mpe_decision(fitted["C_max"], fitted["u_C_max"], rule or cf.DecisionRule(), k)
+    return {"fitted": fitted, "task": checks.mpe_consistency(task, A, B, K, P_mm, L_max, None, GRID_POINTS)}
+
+
+def mpe_decision(C_max: float, u_C_max: float | None, rule: cf.DecisionRule, k: float = DECISION_K) -> dict:
+    """The MPE verdict as a decision (JCGM 106:2012, ISO 14253-1:2017; :func:`xlfuncs.conformity.decide`,
+    the machinery of the task decisions): the quantity C_max with standard uncertainty u(C_max),
+    U = k·u, against the one-sided specification C_max <= 1 (Forbes 2025 eq. 36: K u(d) <=
+    E_MPE(d) at every d), under ``rule``.  Returns the rule's outcome (``rule_outcome``: accepted
+    / rejected / cannot be decided; ``outcome`` and ``zone`` as the task decisions word them) and,
+    separately, what C_max and U prove (``conformity``: conformity proven when C_max + U <= 1,
+    non-conformity proven when C_max - U > 1, else neither), p_c = Φ((1 - C_max)/u), the guard
+    band and the limits.  Without u (nothing estimated) only the comparison C_max <= 1 is made,
+    and ``rule_outcome`` says that no rule could be applied."""
+    base = {"quantity": "C_max", "limit": "C_max <= 1", "usl": C_LIMIT, "value": float(C_max), "k": float(k),
+            "rule": rule.kind, "rule_name": cf.RULE_NAME[rule.kind], "r": rule.r, "max_pfa": rule.max_pfa,
+            "rule_text": rule.text + f"; U = k·u(C_max) with k = {k:g}"}
+    if u_C_max is None or not u_C_max > 0:
+        return {**base, "u": u_C_max, "U": None, "w": None, "acceptance_limit": None, "conformance_limit": None,
+                "non_conformance_limit": None, "p_c": None, "outcome": None, "zone": None,
+                "rule_outcome": "not decided: no u(C_max)", "conformity": None, "conformity_zone": None,
+                "within_limit": bool(C_max <= C_LIMIT)}
+    # the core decision works in a value unit and a u unit a thousandth of it (mm and µm)
+    d = cf.decide(C_max, u_C_max * cf.UM_PER_MM, cf.Tolerance(usl_mm=C_LIMIT), rule, k)
+    return {**base, "u": float(u_C_max), "U": d.U_um / cf.UM_PER_MM, "w": d.w_um / cf.UM_PER_MM,
+            "acceptance_limit": d.acceptance_mm[1], "conformance_limit": d.conformance_mm[1],
+            "non_conformance_limit": d.rejection_mm[1], "p_c": float(d.p_c), "outcome": d.outcome, "zone": d.zone,
+            "rule_outcome": d.rule_outcome, "conformity": d.conformity, "conformity_zone": d.conformity_zone,
+            "within_limit": bool(C_max <= C_LIMIT)}
 
 
 def residuals(cal: cb.Calibration) -> list[dict]:
@@ -230,11 +277,14 @@ def residuals(cal: cb.Calibration) -> list[dict]:
 
 
 def run(files: list[FileFit], task: pc.Parameters, *, feedback: str = "compensate", mpe: dict | None = None,
-        profiles: bool = True, cal: cb.Calibration | None = None) -> CalibrationRun:
+        profiles: bool = True, cal: cb.Calibration | None = None, rule: cf.DecisionRule | None = None,
+        indicated: bool = True) -> CalibrationRun:
     """The calibration of ``files`` (module docstring) starting from the task's ``task``
     parameters; ``mpe``: the MPE statement (``A_um``, ``B_mm``, ``K``, ``P_mm``, ``L_max_mm``)
     or None; ``profiles``: compute the likelihood profiles (about 9 refits per estimate);
-    ``cal``: the fit of :func:`fit`, when already done."""
+    ``cal``: the fit of :func:`fit`, when already done; ``rule``: the decision rule of the MPE
+    verdict (default ISO 14253-1); ``indicated``: refit with the effects the locator indicates
+    but does not name (:func:`indicated_effects`)."""
     cal = fit(files, task) if cal is None else cal
     findings, effect_rows = effects_at_fit(cal, files)
     changes: list[cp.Change] = []
@@ -248,7 +298,51 @@ def run(files: list[FileFit], task: pc.Parameters, *, feedback: str = "compensat
             raise FeedbackError(str(e)) from None
     chi2, compensated = chi2_before_after(files, task, final, feedback)
     u_d = u_of_d(files, task, cal, final, findings, changes, feedback, mpe)
-    mpe_json = mpe_checks(task, cal, final, changes, feedback, mpe, u_d["P_mm"]) if mpe else None
+    mpe_json = mpe_checks(task, cal, final, changes, feedback, mpe, u_d["P_mm"], rule) if mpe else None
     prof = [checks.profile(cal, n) for n in cal.free] if profiles else []
+    ind = indicated_effects(cal, files, task) if indicated else None
     return CalibrationRun(cal, files, feedback, final, findings, effect_rows, changes, notes, chi2, compensated,
-                          u_d, mpe_json, prof, residuals(cal))
+                          u_d, mpe_json, prof, residuals(cal), ind)
+
+
+def indicated_effects(cal: cb.Calibration, files: list[FileFit], start: pc.Parameters) -> dict:
+    """What the locator indicates and the calibration leaves out (``--effects auto``): the effects
+    ``diagnose`` finds significant at alpha but not at alpha_name (docs/recordings.md section 7:
+    indicated, not named, so not fixed effects of the fit), each with its estimate and u, and
+    what leaving them out does to the fitted hyper-parameters: the REML fit again with them as
+    fixed effects too (``refit``: each parameter's estimate and u with them, beside the
+    calibration's).  A systematic effect left out of X is absorbed by the factors whose
+    covariance can mimic it (a squareness by sigma_ET, a scale by sigma_S ...)."""
+    rows = []
+    for f in files:
+        if f.diag is None:
+            continue
+        for ind in f.diag.indicated:
+            rows.append({"file": f.name, "name": ind["name"], "unit": ind["unit"], "estimate": ind["estimate"],
+                         "u": ind["u"], "p_adjusted": ind["p_adjusted"], "alpha_name": f.diag.alpha_name})
+    out: dict = {"effects": rows, "refit": None}
+    if not rows:
+        return out
+    sets = []
+    for f in files:
+        if f.diag is None or not f.diag.indicated:
+            sets.append(f.set)
+            continue
+        X, labels = [f.set.X], list(f.set.X_labels)
+        for ind in f.diag.indicated:
+            c = f.diag.candidates[ind["name"]]
+            assert c.cols is not None
+            X.append(c.cols.X[:, c.kept])     # the identifiable columns, as the locator's refit
+            labels += [f"{c.name} {c.cols.labels[j]}" for j in c.kept]
+        sets.append(reml.RecordSet(f.name, f.prep, np.column_stack(X), labels, f.set.op))
+    again = cb.calibrate(sets, start)
+    params = []
+    for name, e in cal.estimates.items():
+        e2 = again.estimates[name]
+        if e.status == "off" and e2.status == "off":
+            continue
+        params.append({"name": name, "unit": e.unit, "estimate": e.value, "u": e.u, "status": e.status,
+                       "estimate_with": e2.value, "u_with": e2.u, "status_with": e2.status})
+    out["refit"] = {"hyper_parameters": params, "loglik": again.loglik, "estimated": list(again.free)}
+    return out
+

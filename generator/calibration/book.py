@@ -15,22 +15,25 @@ from ..pointcloud.book import MPE_GRID_POINTS, write_mpe
 from ..workbook.book import Book, ChartSeries, Formula
 from ..workbook.pagesetup import LINE_PT, wrapped_lines
 from ..workbook.xlref import cell
+from .page import decision_block, write_page
 
 NOTE_U = "standard uncertainty from the inverse observed information of the REML log-likelihood (delta method from log)"
 
 
 def write_book(result: dict, path: Path, final: pc.Parameters, mpe: dict | None) -> Path:
     book = Book("calibrate", "calibration", "Calibration — the six factors' hyper-parameters from the machine's recordings")
+    book.footer_pt = 11      # the sheets print at 73 % and more: footers of 8 pt and more
     _instructions(book, result)
     _fit(book, result)
-    _model(book, result, final, mpe)
+    decided = _model(book, result, final, mpe)
     if mpe:
         assert MPE_GRID_POINTS == len(result["u_d"]["d_mm"])
         write_mpe(book, None)
-    _loop(book, result, mpe is not None)
+    loop_rows = _loop(book, result, mpe is not None)
     _records(book, result)
     _profiles(book, result)
-    cached = _results(book, result, mpe is not None)
+    cached, results_rows = _results(book, result, mpe is not None, decided)
+    write_page(book, result, results_rows, loop_rows, decided)
     out = book.save(path)
     from ..workbook import cache
 
@@ -101,7 +104,9 @@ def _fit(book: Book, result: dict) -> None:
         ws.column_dimensions[c].width = w
 
 
-def _model(book: Book, result: dict, final: pc.Parameters, mpe: dict | None) -> None:
+def _model(book: Book, result: dict, final: pc.Parameters, mpe: dict | None) -> bool:
+    """The fitted task's parameters, the MPE statement and the MPE decision (when C_max has a u);
+    returns whether the decision is there."""
     ws = book.sheet("Model")
     book.header(ws, 1, 1, ["parameter", "value", "unit"])
     r = 2
@@ -120,16 +125,23 @@ def _model(book: Book, result: dict, final: pc.Parameters, mpe: dict | None) -> 
                        note="MPE statement E = A + L/B (Forbes 2025 eq. 36; the task's [mpe] or --mpe)")
             book.text(ws, r, 3, unit)
             r += 1
+    decided = False
+    if mpe and result["mpe_check"] and result["mpe_check"]["fitted"]["decision"]["U"] is not None:
+        fitted = result["mpe_check"]["fitted"]
+        r = decision_block(book, ws, r + 1, fitted["decision"], fitted["u_C_max_from"])
+        decided = True
     book.print_setup(ws)
+    return decided
 
 
 #: characters per line of a note on the Loop sheet (it prints landscape at full width)
 NOTE_WIDTH = 110
 
 
-def _loop(book: Book, result: dict, native: bool) -> None:
+def _loop(book: Book, result: dict, native: bool) -> dict[str, int]:
     """Effects, changes, notes, chi-square and the u(d) table on the landscape page width; the
-    chart of u(d) on a page of its own after them."""
+    chart of u(d) on a page of its own after them.  Returns the row of each effect parameter
+    ("file name label")."""
     from openpyxl.chart import Reference
 
     ws = book.sheet("Loop")
@@ -137,8 +149,10 @@ def _loop(book: Book, result: dict, native: bool) -> None:
     book.header(ws, 2, 1, ["effect", "file", "parameter", "estimate", "u", "unit"],
                 [None, None, None, "GLS estimate at the fitted model, in the unit", "its standard uncertainty", None])
     r = 3
+    rows = {}
     for e in result["effects"]:
         for lb, b, u in zip(e["labels"], e["estimate"], e["u"]):
+            rows[f"{e['file']} {e['name']} {lb}"] = r
             book.text(ws, r, 1, e["name"])
             book.text(ws, r, 2, e["file"])
             book.text(ws, r, 3, lb)
@@ -204,6 +218,7 @@ def _loop(book: Book, result: dict, native: bool) -> None:
     book.print_setup(ws, landscape=True, title_rows=None, fit_widths=False, row_breaks=[first - 1, anchor_row - 1])
     for c, w in zip("ABCDEF", LOOP_WIDTHS):
         ws.column_dimensions[c].width = w
+    return rows
 
 
 #: Loop's column widths (characters): landscape A4 at 100 %
@@ -275,7 +290,8 @@ def _profiles(book: Book, result: dict) -> None:
         ws.column_dimensions[c].width = w
 
 
-def _results(book: Book, result: dict, native: bool) -> list[dict]:
+def _results(book: Book, result: dict, native: bool, decided: bool) -> tuple[list[dict], dict[str, int]]:
+    """The Results sheet; returns its rows' values (cached) and the row of each quantity."""
     rows, cached = [], []
     for h in result["hyper_parameters"]:
         if h["status"] != "estimated":
@@ -284,14 +300,17 @@ def _results(book: Book, result: dict, native: bool) -> list[dict]:
         cached.append({"value": h["estimate"], "u": h["u"]})
     if native:
         m = result["mpe_check"]["fitted"]
-        rows.append(["C_max", Formula("=C_max"), "", "1"])
-        cached.append({"value": m["C_max"]})
-        rows.append(["d_at_max_mm", Formula("=d_at_max_mm"), "", "mm"])
+        # u(C_max) of the MPE decision (Model sheet), the core's number
+        rows.append(["C_max", Formula("=C_max", m["C_max"]),
+                     Formula("=u_C_max", m["u_C_max"]) if decided else "", "1"])
+        cached.append({"value": m["C_max"], **({"u": m["u_C_max"]} if decided else {})})
+        rows.append(["d_at_max_mm", Formula("=d_at_max_mm", m["d_at_max_mm"]), "", "mm"])
         cached.append({"value": m["d_at_max_mm"]})
-        rows.append(["margin", Formula("=1-C_max"), "", "1"])
+        rows.append(["margin", Formula("=1-C_max", m["margin"]), "", "1"])
         cached.append({"value": m["margin"]})
         last = 2 + len(result["u_d"]["d_mm"]) - 1
-        rows.append(["u_after_at_L_max_um", Formula(f"={cell(last, 3, 'MPE')}/K"), "", "µm"])
+        rows.append(["u_after_at_L_max_um", Formula(f"={cell(last, 3, 'MPE')}/K", result["u_d"]["after_um"][-1]),
+                     "", "µm"])
         cached.append({"value": result["u_d"]["after_um"][-1]})
     ws = book.results(["quantity", "value", "u", "unit"], rows,
                       ["estimated hyper-parameters (calibration.json), then the MPE check of the fitted model",
@@ -299,15 +318,15 @@ def _results(book: Book, result: dict, native: bool) -> list[dict]:
     # as a person reads them (GUM 7.2.6): u to two significant digits, the value to the same
     # decimal place; the cells keep full precision
     fixed = {"C_max": "0.000", "d_at_max_mm": "0.0", "margin": "0.000", "u_after_at_L_max_um": "0.000"}
-    for r, row in enumerate(rows, start=2):
-        u = row[2]
+    for r, (row, c) in enumerate(zip(rows, cached), start=2):
+        u = c.get("u")
         if isinstance(u, float) and u > 0:
             fmt = decimals_format(u)
             ws.cell(row=r, column=2).number_format = fmt
             ws.cell(row=r, column=3).number_format = fmt
         else:
             ws.cell(row=r, column=2).number_format = fixed.get(str(row[0]), "0.0000")
-    return cached
+    return cached, {str(row[0]): r for r, row in enumerate(rows, start=2)}
 
 
 def decimals_format(u: float) -> str:

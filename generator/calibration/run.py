@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from cmmwb.xlfuncs import calibration as cr
+from cmmwb.xlfuncs import conformity as cf
 from cmmwb.xlfuncs import pointcloud as pc
 from cmmwb.xlfuncs.locator import diagnose as dg
 from cmmwb.xlfuncs.locator.recordings import RecordingsError, write_recordings
@@ -29,6 +30,7 @@ from .. import __version__
 from ..diagnosis.run import read_recordings
 from ..errors import InputError, model_errors_named
 from ..workbook.atomic import Staging
+from ..workbook.provenance import provenance
 
 #: the u(d) grid and the MPE check use the pointcloud workbook's grid (the MPE sheet is shared)
 GRID_POINTS = cr.GRID_POINTS
@@ -58,17 +60,41 @@ def parse_mpe(text: str | None, doc: dict | None, probes) -> dict | None:
     return None
 
 
+def parse_rule(text: str | None) -> cf.DecisionRule:
+    """The decision rule of the MPE verdict: ``--rule NAME[:VALUE]`` (``iso14253`` default,
+    ``simple``, ``guarded_acceptance:R``, ``guarded_rejection:R``, ``specific_risk:MAX_PFA``;
+    docs/conformity.md)."""
+    if text is None:
+        return cf.DecisionRule()
+    name, _, value = text.partition(":")
+    name = name.strip()
+    if name not in cf.RULES:
+        raise InputError(f"--rule: expected one of {', '.join(cf.RULES)} (with :R or :MAX_PFA), got {text!r}")
+    try:
+        v = float(value) if value.strip() else None
+    except ValueError:
+        raise InputError(f"--rule: the value after ':' must be a number, got {value!r}") from None
+    if v is not None and name not in ("guarded_acceptance", "guarded_rejection", "specific_risk"):
+        raise InputError(f"--rule: {name} takes no value, got {text!r}")
+    with model_errors_named(where="--rule"):
+        if name == "specific_risk":
+            return cf.DecisionRule(name, max_pfa=0.05 if v is None else v)
+        return cf.DecisionRule(name, r=1.0 if v is None else v)
+
+
 def run_calibrate(paths: list[Path], model: dg.Model, out_dir: Path, *, task_path: Path | None = None,
                   task_label: str = "", effects: str = "auto", feedback: str = "compensate",
                   mpe: dict | None = None, alpha: float = 0.01, workbook: bool = True, force: bool = False,
-                  profiles: str = "auto", covariance: str = "auto") -> tuple[dict, list[Path]]:
+                  profiles: str = "auto", covariance: str = "auto",
+                  rule: cf.DecisionRule | None = None) -> tuple[dict, list[Path]]:
     """Calibrate from ``paths`` into ``out_dir`` (all or nothing); returns the JSON and the files.
     ``covariance``: the record covariance of the fit, ``dense``, ``structured`` or ``auto`` (dense
     up to ``reml.DENSE_MAX_OBS`` observations per file, structured above).  ``profiles``: the
     likelihood profiles (about 9 refits per estimated hyper-parameter), ``yes``, ``no`` or
     ``auto`` (only when every file has the dense covariance: on a structured one each refit is a
-    large fit of its own).  The computations are :mod:`xlfuncs.calibration`'s; this reads the
-    files and writes the outputs."""
+    large fit of its own).  ``rule``: the decision rule of the MPE verdict (default ISO 14253-1).
+    The computations are :mod:`xlfuncs.calibration`'s; this reads the files and writes the
+    outputs."""
     from ..taskfile import read_toml
 
     if not (0.0 < alpha < 1.0):
@@ -103,13 +129,17 @@ def run_calibrate(paths: list[Path], model: dg.Model, out_dir: Path, *, task_pat
         profiles_note = ("not computed: " + ", ".join(large) + " use the structured covariance, where each "
                          "profile point is a large refit (--profiles yes computes them)")
     try:
-        run = cr.run(files, model.params, feedback=feedback, mpe=mpe, profiles=profiles_note is None, cal=cal)
+        run = cr.run(files, model.params, feedback=feedback, mpe=mpe, profiles=profiles_note is None, cal=cal,
+                     rule=rule)
     except cr.FeedbackError as e:
         raise InputError(str(e), where="--feedback") from None
     by_stem = {Path(p).stem: Path(p) for p in paths}
     result = {"name": "calibration", "version": __version__, "simulation": task_label,
               "recordings": [Path(p).name for p in paths], **run.to_json(),
-              "profiles_note": profiles_note, "residuals": run.residuals}
+              "profiles_note": profiles_note, "residuals": run.residuals,
+              "provenance": provenance(task_path, doc, read=[Path(p) for p in paths])}
+    if result["indicated"] is not None:
+        result["indicated"]["text"] = indicated_text(result)
     result["summary"] = summary(result)
     with Staging(out_dir, force=force) as tmp:
         (tmp / "calibration.json").write_text(json.dumps(result, indent=1, ensure_ascii=False, allow_nan=False)
@@ -161,11 +191,49 @@ def summary(result: dict) -> str:
                              for k in (0, mid, len(ud["d_mm"]) - 1)) + ".")
     m = result["mpe_check"]
     if m:
-        f = m["fitted"]
-        parts.append(f"MPE check: C_max = {f['C_max']:.3f} at d = {f['d_at_max_mm']:.0f} mm, margin "
-                     f"{f['margin']:+.3f}: the fitted model {'meets' if f['conforms'] else 'does NOT meet'} the "
-                     "specification.")
+        parts.append(mpe_verdict_text(m["fitted"]))
+    if (result.get("indicated") or {}).get("text"):
+        parts.append(result["indicated"]["text"])
     return " ".join(parts)
+
+
+def mpe_verdict_text(f: dict) -> str:
+    """The MPE verdict in words: C_max with its U, the rule and its outcome, what C_max and U
+    prove (docs/calibrate.md section 3)."""
+    d = f["decision"]
+    head = f"MPE check of the fitted model: C_max = {f['C_max']:.3f} at d = {f['d_at_max_mm']:.0f} mm"
+    if d["U"] is None:
+        return (head + f" ({'within' if d['within_limit'] else 'above'} the limit 1; no u(C_max): nothing was "
+                "estimated, so no decision rule could be applied).")
+    return (head + f", U = {d['U']:.2g} (k = {d['k']:g}) against C_max <= 1, {d['rule_name']} rule: "
+            f"{d['outcome']}; {d['conformity']} ({d['conformity_zone']}; p_c = {d['p_c']:.3f}).")
+
+
+def indicated_text(result: dict) -> str:
+    """What the locator indicates and the calibration leaves out, and what that does to the
+    fitted hyper-parameters (:func:`xlfuncs.calibration.indicated_effects`)."""
+    ind = result.get("indicated") or {}
+    if not ind.get("effects"):
+        return ""
+    names = []
+    for e in ind["effects"]:
+        unit = e["unit"].replace("um", "µm").replace("urad", "µrad")
+        if isinstance(e["estimate"], list):
+            val = ", ".join(f"{b:.3g} ± {u:.2g}" for b, u in zip(e["estimate"], e["u"]) if b is not None)
+        else:
+            val = f"{e['estimate']:.3g} ± {e['u']:.2g}"
+        names.append(f"{e['name']} = {val} {unit} in {e['file']} (adjusted p = {e['p_adjusted']:.2g}, named only "
+                     f"below {e['alpha_name']:.2g})")
+    text = ("The locator indicates " + "; ".join(names) + ": not named, so not a fixed effect of this fit, and "
+            "the factors absorb it")
+    refit = ind.get("refit")
+    if refit:
+        moved = [f"{h['name']} {h['estimate']:.3g} -> {h['estimate_with']:.3g} {h['unit']}"
+                 + (f" ({h['status_with']})" if h["status_with"] != h["status"] else "")
+                 for h in refit["hyper_parameters"] if h["status"] == "estimated" or h["status_with"] == "estimated"]
+        if moved:
+            text += "; fitted with it as a fixed effect too: " + ", ".join(moved)
+    return text + "."
 
 
 def fitted_toml(doc: dict | None, params: pc.Parameters, result: dict) -> str:

@@ -32,6 +32,7 @@ from ..workbook.pagesetup import LINE_PT, wrapped_lines
 from ..workbook.styles import FMT_SCI, FMT_UM
 from ..workbook.xlref import Block, cell
 from .gls import fill_after, gls_sheets
+from .page import write_page
 from .records import FOOTER_PT, RECORDS_SCALE, display_unit, length_records, point_records
 
 NATIVE_MAX_OBS = 160
@@ -46,11 +47,12 @@ def param_unit(key: str) -> str:
 
 
 def write_book(diag: Diagnosis, path: Path, *, title_extra: str = "", params: Parameters | None = None,
-               source: str = "") -> Path:
+               source: str = "", provenance: dict | None = None) -> Path:
     prep = diag.prep
     D = prep.design
     book = Book("diagnose", "diagnosis", "Mismatch locator — recordings against the simulation"
                 + (f" ({title_extra})" if title_extra else ""))
+    book.footer_pt = 11      # the sheets print at 73 % and more: footers of 8 pt and more
     native = prep.C.shape[0] <= NATIVE_MAX_OBS and diag.whitener.mode == "cholesky"
     _instructions(book, diag, native, source)
     inputs = inputs_sheet(book, diag, params)
@@ -62,8 +64,9 @@ def write_book(diag: Diagnosis, path: Path, *, title_extra: str = "", params: Pa
     fill_after(book, diag, obs, gls)
     _candidates(book, diag)
     _groups(book, diag)
-    cached = _results(book, diag, gls, inputs)
+    cached, results_rows = _results(book, diag, gls, inputs)
     _chart(book, diag, obs)
+    write_page(book, diag, provenance, gls["stats"], results_rows, source or "the recordings")
     out = book.save(path)
     from ..workbook import cache
 
@@ -300,9 +303,9 @@ GROUP_FORMATS = {"records": "0", "chi2": "0.00", "dof": "0", "p_value": "0.00E+0
                  "rms_z": "0.00"}
 
 
-def _results(book: Book, diag: Diagnosis, gls: dict, inputs: dict) -> list[dict]:
+def _results(book: Book, diag: Diagnosis, gls: dict, inputs: dict) -> tuple[list[dict], dict[str, int]]:
     """The Results sheet; returns its rows' values (the core's numbers, as in diagnosis.json) for
-    the cached values.  A periodic error's period row is the scan's period (Inputs) plus the
+    the cached values, and the row of each quantity.  A periodic error's period row is the scan's period (Inputs) plus the
     refit's step for it."""
     st = gls["stats"]
     js = diag.to_json()
@@ -339,7 +342,7 @@ def _results(book: Book, diag: Diagnosis, gls: dict, inputs: dict) -> list[dict]
         ws.cell(row=r, column=2).number_format = (FMT_SCI if q.startswith("p_") else "0" if q.startswith("dof")
                                                   else "0.00" if q.startswith("chi2") else FMT_UM)
         ws.cell(row=r, column=3).number_format = FMT_UM
-    return cached
+    return cached, {str(row[0]): r for r, row in enumerate(rows, start=2)}
 
 
 def _chart(book: Book, diag: Diagnosis, obs: dict) -> None:

@@ -97,6 +97,9 @@ class Book:
         self._page_charts: list[tuple[str, object]] = []
         #: cached values of formula cells, given when they were written: {sheet: {coordinate: value}}
         self._values: dict[str, dict[str, object]] = {}
+        #: the footer's size (pt) of every sheet whose print setup gives none (None: 8 pt); the
+        #: footer prints scaled with its page, 11 pt at 0.73 is 8 pt
+        self.footer_pt: float | None = None
 
     # -- sheets ------------------------------------------------------------------------------
     def sheet(self, title: str, *, protect: bool = True) -> Worksheet:
@@ -477,7 +480,10 @@ class Book:
             if opts.get("fit_widths", True) and not opts.get("matrix") \
                     and ws.max_row * ws.max_column <= FIT_WIDTH_MAX_CELLS:
                 fit_widths(ws)
-            page_setup(ws, **{k: v for k, v in opts.items() if k != "fit_widths"})
+            kw = {k: v for k, v in opts.items() if k != "fit_widths"}
+            if kw.get("footer_pt") is None and self.footer_pt is not None:
+                kw["footer_pt"] = self.footer_pt
+            page_setup(ws, **kw)
         for title, chart in self._page_charts:
             size_to_page(self.wb[title], chart)
 
