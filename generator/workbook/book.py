@@ -447,7 +447,8 @@ class Book:
                     matrix: tuple[int, int] | None = None, caption: str | None = None,
                     one_page: bool = False, title_columns: str | None = None,
                     min_scale: float | None = None, footer_pt: float | None = None,
-                    corner: tuple[int, int] = (24, 12), chart_row: int | None = None) -> None:
+                    corner: tuple[int, int] = (24, 12), chart_row: int | None = None,
+                    blocks: Sequence[tuple[int, int]] = ()) -> None:
         """How ``ws`` prints (applied by :meth:`save`; sheets without a call get the defaults).
 
         Every sheet a person reads prints on A4, scaled to the page width, with the sheet name and
@@ -464,12 +465,13 @@ class Book:
         footer prints scaled with the page).  ``corner``: the (rows, columns) of a ``matrix`` that
         print.  ``chart_row`` (with ``min_scale``): the row from which a chart anchored in column A
         stands below the table: its rows print as a range of their own, once, not on every page
-        across."""
+        across.  ``blocks``: (first row, last row) of blocks (a matrix with its caption) that are
+        not split across pages where they fit on one (page breaks before them)."""
         self._print[ws.title] = dict(landscape=landscape, title_rows=title_rows, area=area,
                                      row_breaks=tuple(row_breaks), fit_widths=fit_widths, matrix=matrix,
                                      caption=caption, one_page=one_page, title_columns=title_columns,
                                      min_scale=min_scale, footer_pt=footer_pt, corner=corner,
-                                     chart_row=chart_row)
+                                     chart_row=chart_row, blocks=tuple(blocks))
 
     def _finish_layout(self) -> None:
         """Column widths that fit what each column shows, and the print setup of every sheet."""

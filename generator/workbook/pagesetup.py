@@ -111,7 +111,8 @@ def page_setup(ws: Worksheet, *, landscape: bool | None = None, title_rows: int 
                 matrix: tuple[int, int] | None = None, caption: str | None = None,
                 one_page: bool = False, title_columns: str | None = None,
                 min_scale: float | None = None, footer_pt: float | None = None,
-                corner: tuple[int, int] = (24, 12), chart_row: int | None = None) -> None:
+                corner: tuple[int, int] = (24, 12), chart_row: int | None = None,
+                blocks: Sequence[tuple[int, int]] = ()) -> None:
     from openpyxl.utils import get_column_letter
     from openpyxl.worksheet.pagebreak import Break
 
@@ -189,9 +190,60 @@ def page_setup(ws: Worksheet, *, landscape: bool | None = None, title_rows: int 
         rows = int(page_cm[1] * 100.0 / scale / 0.53)      # rows of 15 pt on one page
         ws.print_area = [f"A1:{get_column_letter(ws.max_column)}{chart_row - 1}",
                          f"A{chart_row}:{get_column_letter(max(1, last))}{chart_row + rows - 1}"]
-    for r in row_breaks:
+    breaks = sorted(set(row_breaks) | set(block_breaks(ws, blocks, row_breaks, landscape, min_scale, last_column)))
+    for r in breaks:
         if r > 1:
             ws.row_breaks.append(Break(id=r - 1))
+
+
+#: printed cm per character of column width with Calibri (Excel): the narrower font, so the
+#: larger scale of a page fitted to its width, the fewer rows on a page
+CM_PER_CHAR_NARROW = 0.19
+#: height (pt) of a row without one of its own (Excel's 15 pt for Calibri 11; LibreOffice's is smaller)
+DEFAULT_ROW_PT = 15.0
+
+
+def block_breaks(ws: Worksheet, blocks: Sequence[tuple[int, int]], row_breaks: Sequence[int] = (),
+                 landscape: bool = False, min_scale: float | None = None, last_column: int | None = None) -> list[int]:
+    """Rows that start a new page so that no block (first row, last row) is split across pages
+    where it fits on one: the rows a page holds are counted at the largest scale an engine prints
+    the sheet at (Calibri's narrow columns, 15 pt rows), so that a break comes early rather than
+    late in every engine; a block taller than a page starts on a new page and runs on."""
+    if not blocks:
+        return []
+    # A4 less the margins of page_setup (0.5 in at the sides, 0.6 in top and bottom) and 1.5 cm
+    # for the footer and a caption
+    page_w, page_h = (29.7 - 2 * 1.27, 21.0 - 2 * 1.52 - 1.5) if landscape else (21.0 - 2 * 1.27, 29.7 - 2 * 1.52 - 1.5)
+    if min_scale is not None:
+        scale = min_scale
+    else:
+        scale = min(1.0, page_w / max(1e-9, _used_width(ws, last_column) * CM_PER_CHAR_NARROW))
+    room = page_h / scale / 0.03528          # points of rows on one page
+
+    def height(r: int) -> float:
+        dim = ws.row_dimensions[r] if r in ws.row_dimensions else None
+        return dim.height if dim is not None and dim.height else DEFAULT_ROW_PT
+
+    titles = 0.0
+    if ws.print_title_rows:
+        a, b = (int(x) for x in str(ws.print_title_rows).replace("$", "").split(":"))
+        titles = sum(height(r) for r in range(a, b + 1))
+    starts = {first: last for first, last in blocks}
+    forced = set(row_breaks)
+    out: list[int] = []
+    used = 0.0
+    for r in range(1, max(ws.max_row, max(last for _, last in blocks)) + 1):
+        if r in forced and r > 1:
+            used = titles
+        if r in starts and r > 1:
+            need = sum(height(q) for q in range(r, starts[r] + 1))
+            if used + need > room and used > titles:     # it does not fit in what is left: a new page
+                out.append(r)
+                used = titles
+        used += height(r)
+        if used > room:                       # the engine breaks here by itself
+            used = titles + height(r)
+    return out
 
 
 def _room_for_caption(ws: Worksheet) -> None:
@@ -256,7 +308,9 @@ def size_to_page(ws: Worksheet, chart) -> None:
     """The chart as wide as one printed page of ``ws`` and at most 80 % of its height (the sheet
     prints scaled to the page width), never smaller than the writer made it."""
     landscape = ws.page_setup.orientation == "landscape"
-    page_w, page_h = _PAGE_CM if landscape else _PAGE_CM[::-1]
+    # A4 less the margins of page_setup (0.5 in at the sides, 0.6 in top and bottom) and 1.5 cm
+    # for the footer and a caption
+    page_w, page_h = (29.7 - 2 * 1.27, 21.0 - 2 * 1.52 - 1.5) if landscape else (21.0 - 2 * 1.27, 29.7 - 2 * 1.52 - 1.5)
     width = max(chart.width, 0.97 * _width_cm(ws))
     height = min(0.8 * page_h * width / page_w, 0.62 * width)
     chart.width, chart.height = round(width, 2), round(max(chart.height, height), 2)
