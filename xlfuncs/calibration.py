@@ -300,19 +300,19 @@ def run(files: list[FileFit], task: pc.Parameters, *, feedback: str = "compensat
     u_d = u_of_d(files, task, cal, final, findings, changes, feedback, mpe)
     mpe_json = mpe_checks(task, cal, final, changes, feedback, mpe, u_d["P_mm"], rule) if mpe else None
     prof = [checks.profile(cal, n) for n in cal.free] if profiles else []
-    ind = indicated_effects(cal, files, task) if indicated else None
+    ind = indicated_effects(cal, files, task, refit=not any(f.set.structured for f in files)) if indicated else None
     return CalibrationRun(cal, files, feedback, final, findings, effect_rows, changes, notes, chi2, compensated,
                           u_d, mpe_json, prof, residuals(cal), ind)
 
 
-def indicated_effects(cal: cb.Calibration, files: list[FileFit], start: pc.Parameters) -> dict:
+def indicated_effects(cal: cb.Calibration, files: list[FileFit], start: pc.Parameters, refit: bool = True) -> dict:
     """What the locator indicates and the calibration leaves out (``--effects auto``): the effects
     ``diagnose`` finds significant at alpha but not at alpha_name (docs/recordings.md section 7:
     indicated, not named, so not fixed effects of the fit), each with its estimate and u, and
     what leaving them out does to the fitted hyper-parameters: the REML fit again with them as
     fixed effects too (``refit``: each parameter's estimate and u with them, beside the
-    calibration's).  A systematic effect left out of X is absorbed by the factors whose
-    covariance can mimic it (a squareness by sigma_ET, a scale by sigma_S ...)."""
+    calibration's; not with ``refit`` False: ``refit_note`` says why).  A systematic effect
+    left out of X is absorbed by the factors whose covariance can mimic it."""
     rows = []
     for f in files:
         if f.diag is None:
@@ -320,8 +320,12 @@ def indicated_effects(cal: cb.Calibration, files: list[FileFit], start: pc.Param
         for ind in f.diag.indicated:
             rows.append({"file": f.name, "name": ind["name"], "unit": ind["unit"], "estimate": ind["estimate"],
                          "u": ind["u"], "p_adjusted": ind["p_adjusted"], "alpha_name": f.diag.alpha_name})
-    out: dict = {"effects": rows, "refit": None}
+    out: dict = {"effects": rows, "refit": None, "refit_note": None}
     if not rows:
+        return out
+    if not refit:
+        out["refit_note"] = ("not refitted: a file uses the structured covariance, where the fit with the indicated "
+                             "effects is a large fit of its own")
         return out
     sets = []
     for f in files:

@@ -233,6 +233,8 @@ def indicated_text(result: dict) -> str:
                  for h in refit["hyper_parameters"] if h["status"] == "estimated" or h["status_with"] == "estimated"]
         if moved:
             text += "; fitted with it as a fixed effect too: " + ", ".join(moved)
+    elif ind.get("refit_note"):
+        text += " (" + ind["refit_note"] + ")"
     return text + "."
 
 
