@@ -19,6 +19,7 @@ from .jobs import job
 from .taskfile import collecting_notes, naming_lines, read_toml, task_kind_and_name
 from .workbook.atomic import Staging
 from .workbook.book import BookAdditions
+from .workbook.provenance import provenance
 
 
 def non_finite(obj, where: str = "results"):
@@ -101,7 +102,7 @@ def build_task(task_path: Path, out_dir: Path, *, plots: bool = True, force: boo
             results["not_decided"] = skipped
         mod.add_type_a(results)                 # a kind's budgets show the type A inputs (budget)
     results["statements"] = report.statements(quantities, results.get("decisions", []))
-    results["provenance"] = report.provenance(task_path, doc, built_utc)
+    results["provenance"] = provenance(task_path, doc, built_utc)
     if rep is not None:
         results["report"] = rep
 

@@ -1,8 +1,9 @@
 """What ties an output to its inputs, and the page a person signs: provenance, the optional
 ``[report]`` table and the ``Summary`` sheet, the inspection report of a task.
 
-* provenance (every build): SHA-256 of the task file and of every file it reads (``file`` keys
-  of the task, e.g. ``[points] file``), the build time (UTC) and the cmmwb version; in the JSON
+* provenance (every build; :mod:`generator.workbook.provenance`, which ``diagnose`` and
+  ``calibrate`` use too): SHA-256 of the task file and of every file it reads (``file`` keys of
+  the task, e.g. ``[points] file``), the build time (UTC) and the cmmwb version; in the JSON
   (``"provenance"``), on the Summary sheet and so in the PDF.  ``SOURCE_DATE_EPOCH`` (seconds
   since 1970, the reproducible-builds convention) fixes the build time, e.g. for templates.
 * ``[report]``: ``lab``, ``operator``, ``cmm``, ``artefact``, ``job_id`` (text) and ``notes``
@@ -15,9 +16,7 @@
 
 from __future__ import annotations
 
-import datetime as _dt
 import math
-import os
 from pathlib import Path
 from typing import Any
 
@@ -29,49 +28,11 @@ from .decision import chart_scale_values, column
 from .errors import InputError
 from .quantities import Quantity, ToleranceKeys, Verdict
 from .taskfile import check_keys
-from .workbook.atomic import sha256
 from .workbook.book import Book
 from .workbook.report_page import Live, PageHeader, PageRow, write_report_page
 from .workbook.xlref import cell
 
 REPORT_KEYS = ("lab", "operator", "cmm", "artefact", "job_id", "notes")
-
-
-def _files_of(doc, out: list[str]) -> None:
-    if isinstance(doc, dict):
-        for k, v in doc.items():
-            if k == "file" and isinstance(v, str):
-                out.append(v)
-            else:
-                _files_of(v, out)
-    elif isinstance(doc, list):
-        for v in doc:
-            _files_of(v, out)
-
-
-def build_time_utc() -> str:
-    """Now (UTC, ISO 8601, seconds), or ``SOURCE_DATE_EPOCH`` when set."""
-    epoch = os.environ.get("SOURCE_DATE_EPOCH")
-    if epoch and epoch.strip().isdigit():
-        t = _dt.datetime.fromtimestamp(int(epoch), _dt.timezone.utc)
-    else:
-        t = _dt.datetime.now(_dt.timezone.utc)
-    return t.replace(microsecond=0).isoformat().replace("+00:00", "Z")
-
-
-def provenance(task_path: Path, doc: dict, built_utc: str | None = None) -> dict:
-    """``{"task_file": {"name", "sha256"}, "input_files": [{"name", "sha256"}], "built_utc",
-    "cmmwb_version"}``."""
-    task_path = Path(task_path)
-    names: list[str] = []
-    _files_of(doc, names)
-    inputs = []
-    for name in dict.fromkeys(names):
-        p = task_path.parent / name
-        if p.is_file():
-            inputs.append({"name": name, "sha256": sha256(p)})
-    return {"task_file": {"name": task_path.name, "sha256": sha256(task_path)}, "input_files": inputs,
-            "built_utc": built_utc or build_time_utc(), "cmmwb_version": __version__}
 
 
 def read_report(path: Path, doc: dict) -> dict | None:

@@ -76,5 +76,6 @@ def statement(symbol: str, value: float, value_unit: str, U: float, U_unit: str,
     effective degrees of freedom of U (∞: type B only)."""
     U_r, dec_U = round_uncertainty(U, digits, mode)
     dec_value = dec_U + round(math.log10(unit_ratio)) if unit_ratio > 0 else dec_U
-    return (f"{symbol} = {fmt(value, dec_value)} {value_unit}, U = {fmt(U_r, dec_U)} {U_unit} "
-            f"({coverage_text(k, nu)})")
+    # a dimensionless quantity (unit ""): no space before the comma
+    vu, Uu = (f" {value_unit}" if value_unit else ""), (f" {U_unit}" if U_unit else "")
+    return f"{symbol} = {fmt(value, dec_value)}{vu}, U = {fmt(U_r, dec_U)}{Uu} ({coverage_text(k, nu)})"

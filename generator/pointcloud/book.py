@@ -100,7 +100,9 @@ def write_mpe(book: Book, task) -> None:
                  note="max of C(d) over the grid, Forbes 2025 section 6.8")
     book.text(ws, 2, 10, "d_at_max_mm")
     book.formula(ws, 2, 11, f"=L_max_mm*(MATCH(C_max,{Crange},0)-1)/{n - 1}", name="d_at_max_mm", fmt="0.0")
-    book.text(ws, 4, 10, "Conforming parameters: every standard deviation divided by C_max when C_max > 1 (section 6.8)")
+    # short: a longer text ran past the last column and the sheet printed at half size
+    book.note(book.text(ws, 4, 10, "conforming parameters"),
+              "every standard deviation divided by C_max when C_max > 1 (Forbes 2025 section 6.8)")
     r = 5
     for key in pc.Parameters.__dataclass_fields__:
         book.text(ws, r, 10, key)

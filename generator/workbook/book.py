@@ -98,6 +98,9 @@ class Book:
         self._page_charts: list[tuple[str, object]] = []
         #: cached values of formula cells, given when they were written: {sheet: {coordinate: value}}
         self._values: dict[str, dict[str, object]] = {}
+        #: the footer's size (pt) of every sheet whose print setup gives none (None: 8 pt); the
+        #: footer prints scaled with its page, 11 pt at 0.73 is 8 pt
+        self.footer_pt: float | None = None
 
     # -- sheets ------------------------------------------------------------------------------
     def sheet(self, title: str, *, protect: bool = True) -> Worksheet:
@@ -136,6 +139,17 @@ class Book:
         if wrap:
             c.alignment = Alignment(wrap_text=True, vertical="top")
         return c
+
+    @staticmethod
+    def align_top(ws: Worksheet, row: int, columns: int) -> None:
+        """Every cell of ``row`` (columns 1 .. ``columns``) aligned at the top, wrapping kept: in a
+        row a wrapped text makes high, the other cells stand level with its first line (at the
+        default bottom they read as belonging to the row below)."""
+        for c in range(1, columns + 1):
+            cell_ = ws.cell(row=row, column=c)
+            al = cell_.alignment
+            cell_.alignment = Alignment(horizontal=al.horizontal, vertical="top", wrap_text=al.wrap_text,
+                                        indent=al.indent)
 
     def header(self, ws: Worksheet, row: int, column: int, labels: Sequence[str],
                notes: Sequence[str | None] | None = None) -> None:
@@ -438,7 +452,9 @@ class Book:
                     area: str | None = None, row_breaks: Sequence[int] = (), fit_widths: bool = True,
                     matrix: tuple[int, int] | None = None, caption: str | None = None,
                     one_page: bool = False, title_columns: str | None = None,
-                    min_scale: float | None = None, footer_pt: float | None = None) -> None:
+                    min_scale: float | None = None, footer_pt: float | None = None,
+                    corner: tuple[int, int] = (24, 12), chart_row: int | None = None,
+                    blocks: Sequence[tuple[int, int]] = ()) -> None:
         """How ``ws`` prints (applied by :meth:`save`; sheets without a call get the defaults).
 
         Every sheet a person reads prints on A4, scaled to the page width, with the sheet name and
@@ -452,11 +468,16 @@ class Book:
         ``min_scale``: print at this scale (0.8: 11 pt text at 8.8 pt) instead of fitting the page
         width, as many pages across and down as that needs; ``title_columns`` (``"A:B"``) are
         repeated on every page across.  ``footer_pt``: the footer's font size (default 8; the
-        footer prints scaled with the page)."""
+        footer prints scaled with the page).  ``corner``: the (rows, columns) of a ``matrix`` that
+        print.  ``chart_row`` (with ``min_scale``): the row from which a chart anchored in column A
+        stands below the table: its rows print as a range of their own, once, not on every page
+        across.  ``blocks``: (first row, last row) of blocks (a matrix with its caption) that are
+        not split across pages where they fit on one (page breaks before them)."""
         self._print[ws.title] = dict(landscape=landscape, title_rows=title_rows, area=area,
                                      row_breaks=tuple(row_breaks), fit_widths=fit_widths, matrix=matrix,
                                      caption=caption, one_page=one_page, title_columns=title_columns,
-                                     min_scale=min_scale, footer_pt=footer_pt)
+                                     min_scale=min_scale, footer_pt=footer_pt, corner=corner,
+                                     chart_row=chart_row, blocks=tuple(blocks))
 
     def _finish_layout(self) -> None:
         """Column widths that fit what each column shows, and the print setup of every sheet."""
@@ -467,7 +488,10 @@ class Book:
             if opts.get("fit_widths", True) and not opts.get("matrix") \
                     and ws.max_row * ws.max_column <= FIT_WIDTH_MAX_CELLS:
                 fit_widths(ws)
-            page_setup(ws, **{k: v for k, v in opts.items() if k != "fit_widths"})
+            kw = {k: v for k, v in opts.items() if k != "fit_widths"}
+            if kw.get("footer_pt") is None and self.footer_pt is not None:
+                kw["footer_pt"] = self.footer_pt
+            page_setup(ws, **kw)
         for title, chart in self._page_charts:
             size_to_page(self.wb[title], chart)
 

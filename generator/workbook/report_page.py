@@ -292,8 +292,9 @@ def _row(book: Book, ws, r: int, row: PageRow, same: bool = False) -> int:
     Ur = f"ROUND({U},1-INT(LOG10({U})))"
     dU = f"(1-INT(LOG10({Ur})))"
     k_text = f'IF(ABS({k}-ROUND({k},0))<1E-9,FIXED({k},0,TRUE),FIXED({k},2,TRUE))'
-    text = (f'={at["symbol"]}&" = "&FIXED({y},{dU}+{shift},TRUE)&" {q.unit}, U = "&FIXED({Ur},{dU},TRUE)&'
-            f'" {q.U_unit} (k = "&{k_text}&", coverage probability ≈ "&FIXED(100*{at["p_cov"]},2,TRUE)&" %)"')
+    vu, Uu = (f" {q.unit}" if q.unit else ""), (f" {q.U_unit}" if q.U_unit else "")   # dimensionless: no space
+    text = (f'={at["symbol"]}&" = "&FIXED({y},{dU}+{shift},TRUE)&"{vu}, U = "&FIXED({Ur},{dU},TRUE)&'
+            f'"{Uu} (k = "&{k_text}&", coverage probability ≈ "&FIXED(100*{at["p_cov"]},2,TRUE)&" %)"')
     from cmmwb.xlfuncs.statement import statement
 
     book.formula(ws, r + 1, 1, text, fmt=None, value=statement(
