@@ -69,25 +69,31 @@ def profile(cal: Calibration, name: str, points: int = 9, width: float = 3.0) ->
 
 
 def mpe_consistency(params: pc.Parameters, A_um: float, B_mm: float, K: float, P_mm: float,
-                    L_max_mm: float, cal: Calibration | None = None, n_grid: int = 201) -> dict:
+                    L_max_mm: float, cal: Calibration | None = None, n_grid: int = 201,
+                    held: frozenset[str] | set[str] = frozenset()) -> dict:
     """E_L,MPE = A + L/B against the fitted model's C(d) = K u(d)/(A + d/B) (Forbes 2025 eq. 36,
     u(d) of eq. 33): C_max, where, the margin 1 - C_max and, with ``cal``, u(C_max) from the
-    covariance of the estimates (delta method in log)."""
+    covariance of the estimates (delta method in log) over the estimated parameters not in
+    ``held`` (those the feedback replaced: their values are no longer the estimates, and their own
+    uncertainty is not part of u(C_max))."""
     chk = pc.mpe_check(params, A_um, B_mm, K, P_mm, L_max_mm, n_grid)
     d = L_max_mm * np.arange(n_grid) / (n_grid - 1)
     c = pc.C_of_d(d, params, A_um, B_mm, K, P_mm)
     u_c = None
-    if cal is not None and cal.free:
-        g = np.zeros(len(cal.free))
+    free = [n for n in cal.free if n not in held] if cal is not None else []
+    if cal is not None and free:
+        keep = [cal.free.index(n) for n in free]
+        cov_log = cal.cov_log[np.ix_(keep, keep)]
+        g = np.zeros(len(free))
         h = 1e-5
-        for a, name in enumerate(cal.free):
+        for a, name in enumerate(free):
             vals = {n: float(getattr(params, n)) for n in NAMES}
             hi, lo = dict(vals), dict(vals)
             hi[name] *= math.exp(h)
             lo[name] *= math.exp(-h)
             g[a] = (pc.C_of_d(chk.d_at_max_mm, pc.Parameters(**hi), A_um, B_mm, K, P_mm)
                     - pc.C_of_d(chk.d_at_max_mm, pc.Parameters(**lo), A_um, B_mm, K, P_mm)) / (2 * h)
-        u_c = float(math.sqrt(max(g @ cal.cov_log @ g, 0.0)))
+        u_c = float(math.sqrt(max(g @ cov_log @ g, 0.0)))
     return {"A_um": A_um, "B_mm": B_mm, "K": K, "P_mm": P_mm, "L_max_mm": L_max_mm,
             "C_max": chk.C_max, "u_C_max": u_c, "d_at_max_mm": chk.d_at_max_mm,
             "margin": 1.0 - chk.C_max, "conforms": chk.conforms,
