@@ -130,8 +130,18 @@ def run_calibrate(paths: list[Path], model: dg.Model, out_dir: Path, *, task_pat
         sets.append(s)
         per_file.append({"path": path, "rec": rec, "prep": prep, "diag": diag, "chosen": chosen,
                          "labels": labels})
+    large = [s.name for s in sets if s.structured]
+    profiles_note = None
+    if profiles == "no":
+        profiles_note = "not computed (--profiles no)"
+    elif profiles == "auto" and large:
+        profiles_note = ("not computed: " + ", ".join(large) + " use the structured covariance, where each "
+                         "profile point is a large refit (--profiles yes computes them)")
     with model_errors_named(task_label or paths[0]):
         cal = cb.calibrate(sets, model.params)
+        prof: list[dict] = []
+        if profiles_note is None:     # a profile that reaches a higher peak moves the fit there
+            cal, prof = checks.profiles_at_maximum(cal)
 
     # -- the effects at the fitted model, fed back ---------------------------------------------
     findings, effect_rows = [], []
@@ -192,14 +202,6 @@ def run_calibrate(paths: list[Path], model: dg.Model, out_dir: Path, *, task_pat
                                                  cal if feedback == "none" or not changes else None, GRID_POINTS),
                     "task": checks.mpe_consistency(model.params, mpe["A_um"], mpe["B_mm"], mpe["K"], P_mm, L_max,
                                                None, GRID_POINTS)}
-    large = [s.name for s in sets if s.structured]
-    profiles_note = None
-    if profiles == "no":
-        profiles_note = "not computed (--profiles no)"
-    elif profiles == "auto" and large:
-        profiles_note = ("not computed: " + ", ".join(large) + " use the structured covariance, where each "
-                         "profile point is a large refit (--profiles yes computes them)")
-    prof = [checks.profile(cal, n) for n in cal.free] if profiles_note is None else []
 
     resid = []
     for s in sets:
@@ -255,6 +257,8 @@ def summary(result: dict) -> str:
     zero = [h for h in result["hyper_parameters"] if h["status"] == "zero"]
     parts = ["Estimated: " + (", ".join(f"{h['name']} = {h['estimate']:.3g} ± {h['u']:.2g} {h['unit']}"
                                          for h in est) or "nothing") + "."]
+    if result.get("multimodal"):
+        parts.append(result["multimodal"])
     if zero:
         parts.append("At zero (not seen in these records): " + ", ".join(h["name"] for h in zero) + ".")
     if non:
