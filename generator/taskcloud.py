@@ -266,6 +266,16 @@ def read_points_rows(path: Path, rows, probes: tuple[Probe, ...]) -> PointTable:
     return points.table()
 
 
+def points_source(doc: dict) -> str:
+    """Where a task's points come from, in words for a report: ``the points table part.csv`` or
+    ``the points given in the task file ([points] rows)``."""
+    pts = doc.get("points")
+    name = pts.get("file") if isinstance(pts, dict) else None
+    if isinstance(name, str):
+        return f"the points table {name}"
+    return "the points given in the task file ([points] rows)"
+
+
 def read_point_cloud(path: Path, doc: dict) -> tuple[PointCloud, Parameters, PointTable]:
     """The point-cloud model of a task: points (``[points] file`` or ``rows``), probes, parameters."""
     params = read_parameters(path, doc)
