@@ -83,7 +83,7 @@ def results_table(kind: str, results: dict) -> list[dict[str, Any]]:
     if kind == "characteristic":
         return [{"name": c["name"], "type": c["type"], "value": c["value"], "unit": c["unit"],
                  "u": c["u"], "u_unit": c["u_unit"]} for c in results["characteristics"]]
-    if kind in ("diagnose", "calibrate"):
+    if kind in ("diagnose", "calibrate", "validation"):
         # the diagnosis (calibration) book's Results rows, built by generator.diagnosis.book
         # (generator.calibration.book) from the same numbers as diagnosis.json (calibration.json)
         return list(results["rows"])

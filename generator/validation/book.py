@@ -1,0 +1,220 @@
+"""The workbook of ``cmmwb validate``: the rows with their E_n as live formulas of the typed
+values (measured, calibrated, U_cal, k_cal, the task's U and k), the count against the claimed
+coverage (binomial, live), the chi-square of the rows, the structure's p-value (the core's: the
+locator needs the whole covariance and its search) and the verdict under its rule, the chart of
+the deviations against +-U and +-sqrt(U^2 + U_cal^2), and the Results sheet."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from ..workbook.book import Book, ChartSeries, Formula
+from ..workbook.xlref import block, cell
+
+ROWS = "Rows"
+VERDICT = "Verdict"
+FIRST = 3            # first data row of the Rows sheet
+COLUMNS = ("row", "characteristic", "workpiece", "run", "unit", "measured", "repeats", "calibrated",
+           "U_unit", "U_cal", "k_cal", "U", "k", "U_per_unit", "deviation", "U_c", "E_n", "within", "u_c",
+           "claimed", "z", "probed", "plus_U", "minus_U", "plus_U_c", "minus_U_c")
+C = {name: k + 1 for k, name in enumerate(COLUMNS)}
+NOTES = {
+    "measured": "measured value (the mean of the repeats), in the unit of column unit",
+    "calibrated": "the certificate's calibrated value", "U_cal": "the certificate's expanded uncertainty (U unit)",
+    "k_cal": "the certificate's coverage factor", "U": "the model's expanded uncertainty of this characteristic: the "
+    "task's result (validation.json records)", "k": "the model's coverage factor",
+    "U_per_unit": "U unit per value unit (1000: µm per mm)",
+    "deviation": "(measured - calibrated) x U_per_unit", "U_c": "sqrt(U^2 + U_cal^2)",
+    "E_n": "|deviation| / U_c (ISO/TS 15530-4 criterion E_n <= 1)", "within": "1 when E_n <= 1",
+    "u_c": "sqrt((U/k)^2 + (U_cal/k_cal)^2): standard uncertainty of the deviation under the model",
+    "claimed": "the coverage the model claims for the row: 2 Phi(U_c/u_c) - 1", "z": "deviation / u_c",
+    "probed": "1 when the row has its probed points (handed to the mismatch locator)",
+}
+
+
+def write_book(result: dict, path: Path) -> Path:
+    rows = result["rows"]
+    book = Book("validation", "validation", "Validation — does the model hold on this machine? (ISO/TS 15530-4)")
+    _instructions(book, result)
+    last = FIRST + len(rows) - 1
+    _rows(book, result, last)
+    cached = _verdict(book, result, last)
+    out = book.save(path)
+    from ..workbook import cache
+
+    cache.store(out, "validation", {"rows": cached})
+    return out
+
+
+def _instructions(book: Book, result: dict) -> None:
+    book.para("What this workbook is", bold=True)
+    book.para("Calibrated workpieces measured on the machine (" + result["results_file"]["name"] + ") compared with "
+              "the uncertainties the model gives for them (" + ", ".join(t["file"] for t in result["tasks"]) + "): "
+              "per row E_n = |y - y_cal| / sqrt(U^2 + U_cal^2), the share of rows with E_n <= 1 against the "
+              "coverage the model claims, whether the deviations are structured, and the verdict with its rule "
+              "(docs/validate.md).")
+    book.gap()
+    book.para("Sheets", bold=True)
+    book.para("Rows: the typed values (yellow: measured, calibrated, U_cal, k_cal, the task's U and k) and, as "
+              "formulas of them, the deviation, U_c, E_n, the claimed coverage and z; the chart of the deviations "
+              "with +-U and +-U_c per row.",
+              "Verdict: the count of rows within E_n <= 1 and its binomial test, the chi-square of the rows, the "
+              "structure's p-value (the core's: the mismatch locator on the length rows with probed points), the "
+              "verdict under the rule, alpha (editable), the cause and the next step.",
+              "Results: the count, the p-values and the verdict (1 = the model holds).")
+    book.gap()
+    book.para("Summary", bold=True)
+    book.para(result["summary"])
+    for n in result.get("notes", []):
+        book.para(n)
+
+
+def _rows(book: Book, result: dict, last: int) -> None:
+    from openpyxl.chart import Reference
+
+    ws = book.sheet(ROWS)
+    book.text(ws, 1, 1, "One row per characteristic, workpiece and run; E_n <= 1 is the ISO/TS 15530-4 criterion")
+    book.header(ws, 2, 1, list(COLUMNS), [NOTES.get(c) for c in COLUMNS])
+    geo = set()
+    loc = result.get("locator")
+    if loc:
+        for members in loc["rows_of_records"]:
+            geo.update(members)
+    for k, r in enumerate(result["rows"]):
+        row = FIRST + k
+
+        def ref(name: str) -> str:
+            return cell(row, C[name], absolute=False)
+
+        book.number(ws, row, C["row"], k + 1, fmt="0", computed=True)
+        book.text(ws, row, C["characteristic"], r["label"])
+        book.text(ws, row, C["workpiece"], r["workpiece"])
+        book.text(ws, row, C["run"], r["run"])
+        book.text(ws, row, C["unit"], r["unit"])
+        book.input(ws, row, C["measured"], None, r["measured"], fmt="0.000000")
+        book.number(ws, row, C["repeats"], r["repeats"], fmt="0", computed=True)
+        book.input(ws, row, C["calibrated"], None, r["calibrated"], fmt="0.000000")
+        book.text(ws, row, C["U_unit"], r["U_unit"])
+        book.input(ws, row, C["U_cal"], None, r["U_cal"], lo=0.0, fmt="0.000")
+        book.input(ws, row, C["k_cal"], None, r["k_cal"], lo=0.0, fmt="0.00")
+        book.input(ws, row, C["U"], None, r["U"], lo=0.0, fmt="0.000")
+        book.input(ws, row, C["k"], None, r["k"], lo=0.0, fmt="0.00")
+        book.number(ws, row, C["U_per_unit"], result["records"][r["label"]]["U_per_unit"], fmt="General",
+                    computed=True)
+        book.formula(ws, row, C["deviation"], f"=({ref('measured')}-{ref('calibrated')})*{ref('U_per_unit')}",
+                     fmt="0.000")
+        book.formula(ws, row, C["U_c"], f"=SQRT({ref('U')}^2+{ref('U_cal')}^2)", fmt="0.000")
+        book.formula(ws, row, C["E_n"], f"=ABS({ref('deviation')})/{ref('U_c')}", fmt="0.000")
+        book.formula(ws, row, C["within"], f"=IF({ref('E_n')}<=1,1,0)", fmt="0")
+        book.formula(ws, row, C["u_c"], f"=SQRT(({ref('U')}/{ref('k')})^2+({ref('U_cal')}/{ref('k_cal')})^2)",
+                     fmt="0.000")
+        book.formula(ws, row, C["claimed"], f"=2*_xlfn.NORM.S.DIST({ref('U_c')}/{ref('u_c')},TRUE)-1", fmt="0.0000")
+        book.formula(ws, row, C["z"], f"={ref('deviation')}/{ref('u_c')}", fmt="0.00")
+        book.number(ws, row, C["probed"], 1 if k in geo else 0, fmt="0", computed=True)
+        book.formula(ws, row, C["plus_U"], f"={ref('U')}", fmt="0.000")
+        book.formula(ws, row, C["minus_U"], f"=-{ref('U')}", fmt="0.000")
+        book.formula(ws, row, C["plus_U_c"], f"={ref('U_c')}", fmt="0.000")
+        book.formula(ws, row, C["minus_U_c"], f"=-{ref('U_c')}", fmt="0.000")
+    book.flag_unless(ws, f"{cell(FIRST, C['within'], absolute=False)}:{cell(last, C['within'], absolute=False)}", "1")
+    x = Reference(ws, min_col=C["row"], min_row=FIRST, max_row=last)
+
+    def ys(name: str):
+        return Reference(ws, min_col=C[name], min_row=FIRST, max_row=last)
+
+    unit = result["rows"][0]["U_unit"]
+    book.scatter(ws, cell(last + 3, 1, absolute=False), "Deviations from the calibrated values", "row",
+                 f"y - y_cal / {unit}",
+                 [ChartSeries("y - y_cal", x, ys("deviation")),
+                  ChartSeries("+U (model)", x, ys("plus_U"), symbol="dash", colour="2CA02C"),
+                  ChartSeries("-U (model)", x, ys("minus_U"), symbol="dash", colour="2CA02C"),
+                  ChartSeries("+sqrt(U² + U_cal²)", x, ys("plus_U_c"), symbol="dash", colour="D62728"),
+                  ChartSeries("-sqrt(U² + U_cal²)", x, ys("minus_U_c"), symbol="dash", colour="D62728")],
+                 width=24, height=12, page=book)
+    ws.freeze_panes = ws.cell(row=FIRST, column=C["measured"])
+    book.print_setup(ws, landscape=True, title_rows=2)
+
+
+def _verdict(book: Book, result: dict, last: int) -> list[dict]:
+    ws = book.sheet(VERDICT)
+
+    def col(name: str) -> str:
+        return block(FIRST, C[name], last - FIRST + 1, 1, ROWS)
+
+    c = result["count"]
+    v = result["verdict"]
+    book.header(ws, 1, 1, ["quantity", "value", "meaning"])
+    lines: list[tuple[str, str | float, str, str]] = []   # label, formula or value, meaning, name
+    lines.append(("alpha", result["alpha"], "significance level of the verdict (alpha/2 count, alpha/2 structure); "
+                  "editable", "alpha"))
+    lines.append(("rows", Formula(f"=COUNT({col('E_n')})"), "rows (characteristic, workpiece, run)", "val_rows"))
+    lines.append(("within", Formula(f"=SUM({col('within')})"), "rows with E_n <= 1", "val_within"))
+    lines.append(("share", Formula("=val_within/val_rows"), "share of rows with E_n <= 1", "val_share"))
+    lines.append(("claimed", Formula(f"=AVERAGE({col('claimed')})"), "mean coverage the model claims for the rows",
+                  "val_claimed"))
+    lines.append(("p_low_binomial", Formula("=_xlfn.BINOM.DIST(val_within,val_rows,val_claimed,TRUE)"),
+                  "P(within or fewer) for independent rows (binomial)", "val_p_low_binomial"))
+    lines.append(("p_high_binomial",
+                  Formula("=IF(val_within=0,1,1-_xlfn.BINOM.DIST(val_within-1,val_rows,val_claimed,TRUE))"),
+                  "P(within or more) for independent rows", "val_p_high_binomial"))
+    corr = c["p_low_correlated"]
+    lines.append(("p_low_correlated", corr if corr is not None else "—",
+                  "P(within or fewer) with the rows' correlation under the model (the core's draws; — when no row "
+                  "has probed points)", "val_p_low_correlated"))
+    lines.append(("p_count", Formula("=val_p_low_correlated") if corr is not None else Formula("=val_p_low_binomial"),
+                  "the count's p-value the verdict uses", "val_p_count"))
+    lines.append(("chi2_rows", Formula(f"=SUMPRODUCT({col('z')},{col('z')})"),
+                  "sum of z^2 over all rows (rows taken independent: a check, not the verdict's test)", "val_chi2"))
+    lines.append(("p_chi2_rows", Formula("=CHIDIST(val_chi2,val_rows)"), "its chi-square tail", "val_p_chi2"))
+    lines.append(("p_structure", result["p_structure"], "the structure's p-value (the core's): "
+                  + result["structure_basis"], "val_p_structure"))
+    lines.append(("holds", Formula("=IF(AND(val_p_count>=alpha/2,val_p_structure>=alpha/2),1,0)"),
+                  "1: the model holds (rule below)", "val_holds"))
+    cached = []
+    r = 2
+    for label, value, meaning, name in lines:
+        book.text(ws, r, 1, label)
+        if isinstance(value, Formula):
+            book.formula(ws, r, 2, value, fmt="0.000000", name=name)
+        elif isinstance(value, str):
+            book.text(ws, r, 2, value)
+            book.define(name, cell(r, 2, VERDICT))
+        elif name == "alpha":
+            book.input(ws, r, 2, name, value, lo=0.0, hi=1.0, fmt="0.000",
+                       note="alpha: the verdict's significance level (docs/validate.md)")
+        else:
+            book.number(ws, r, 2, value, fmt="0.000000", computed=True)
+            book.define(name, cell(r, 2, VERDICT))
+        book.text(ws, r, 3, meaning)
+        r += 1
+    book.text(ws, r, 1, "verdict")
+    book.formula(ws, r, 2, f'=IF(val_holds=1,"{_q(v_words(True))}","{_q(v_words(False))}")', fmt=None)
+    book.flag_unless(ws, cell(r, 2, absolute=False), v_words(True))
+    r += 2
+    for label, text in (("rule", v["rule"]), ("count", result["count_words"]),
+                        ("cause", v["cause"] or "—"), ("next step", v["next_step"])):
+        book.text(ws, r, 1, label)
+        book.text(ws, r, 2, text, wrap=True)
+        ws.row_dimensions[r].height = 12.5 * (len(text) // 70 + 1)
+        r += 1
+    ws.column_dimensions["A"].width = 18
+    ws.column_dimensions["B"].width = 70
+    ws.column_dimensions["C"].width = 60
+    book.print_setup(ws, fit_widths=False)
+    rows_out = [["within", Formula("=val_within"), "rows"], ["share", Formula("=val_share"), "1"],
+                ["claimed", Formula("=val_claimed"), "1"], ["p_count", Formula("=val_p_count"), "1"],
+                ["p_structure", Formula("=val_p_structure"), "1"], ["holds", Formula("=val_holds"), "1"]]
+    cached = [{"value": c["within"]}, {"value": c["share"]}, {"value": c["claimed"]}, {"value": c["p_low"]},
+              {"value": result["p_structure"]}, {"value": 1.0 if v["holds"] else 0.0}]
+    book.results(["quantity", "value", "unit"], rows_out,
+                 ["the validation's results (validation.json count, p_structure, verdict)", "value", "unit"])
+    return cached
+
+
+def v_words(holds: bool) -> str:
+    from cmmwb.xlfuncs.validation import VERDICT_WORDS
+
+    return VERDICT_WORDS[holds]
+
+
+def _q(text: str) -> str:
+    return text.replace('"', '""')
