@@ -237,37 +237,12 @@ def measure(vs: ValidationSet, params: pc.Parameters, planted: dict | None = Non
         Xs.append(Xi)
         for c in vs.lengths:
             values[c.label].append(float(np.linalg.norm(Xi[c.j] - Xi[c.i])))
-        for name, value in fitted_values(vs, Xi).items():
-            values[name].append(value)
+        if vs.characteristics:
+            f = vs.fit_points
+            jf = ch.fit_features(Xi[f], vs.N[f], vs.features)
+            for r in ch.evaluate(jf, {}, vs.characteristics):
+                values[r.name].append(r.value)
     return Measured(values, calibrated, U_cal, truth, Xs)
-
-
-def fitted_values(vs: ValidationSet, X: np.ndarray) -> dict[str, float]:
-    """The fitted characteristics of the set from the probed points ``X`` (mm): a diameter is
-    2 r0 of the feature's least-squares fit (Forbes 2022), a distance that of the two centres.
-    Each feature is fitted about its own nominal centroid (sizes and centre distances do not
-    change when a feature's points move by one vector): a circle fitted to indicated points
-    650 mm from the origin stalled at Gauss-Newton steps of 1e-9 mm (xlfuncs.features)."""
-    from . import features as ft
-
-    fits = {}
-    for spec in vs.features:
-        idx = vs.fit_points[list(spec.indices)]
-        shift = np.round(np.mean(vs.X[idx], axis=0))
-        f = ft.fit(spec.element, X[idx] - shift, normals=vs.N[idx], circle_plane=spec.circle_plane)
-        fits[spec.name] = (f, shift)
-    out = {}
-    for c in vs.characteristics:
-        if c.type == "diameter":
-            out[c.name] = 2.0 * float(fits[c.features[0]][0].shape[0])
-        elif c.type == "distance":
-            (f1, s1), (f2, s2) = (fits[n] for n in c.features)
-            p1 = f1.origin_mm + s1
-            p2 = f2.origin_mm + s2
-            out[c.name] = float(np.linalg.norm(p2 - p1))
-        else:
-            raise ModelError(f"{c.name}: the validation sets measure diameters and centre distances")
-    return out
 
 
 def rows_of(vs: ValidationSet, meas: Measured, U_model: dict[str, float], k: float = 2.0):
