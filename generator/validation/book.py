@@ -27,7 +27,7 @@ NOTES = {
     "deviation": "(measured - calibrated) x U_per_unit", "U_c": "sqrt(U^2 + U_cal^2)",
     "E_n": "|deviation| / U_c (ISO/TS 15530-4 criterion E_n <= 1)", "within": "1 when E_n <= 1",
     "u_c": "sqrt((U/k)^2 + (U_cal/k_cal)^2): standard uncertainty of the deviation under the model",
-    "claimed": "the coverage the model claims for the row: 2 Phi(U_c/u_c) - 1", "z": "deviation / u_c",
+    "claimed": "the coverage the model claims for the row: 2 Phi(U_c/u_c) - 1 (NORMSDIST: the name every engine has)", "z": "deviation / u_c",
     "probed": "1 when the row has its probed points (handed to the mismatch locator)",
 }
 
@@ -108,7 +108,7 @@ def _rows(book: Book, result: dict, last: int) -> None:
         book.formula(ws, row, C["within"], f"=IF({ref('E_n')}<=1,1,0)", fmt="0")
         book.formula(ws, row, C["u_c"], f"=SQRT(({ref('U')}/{ref('k')})^2+({ref('U_cal')}/{ref('k_cal')})^2)",
                      fmt="0.000")
-        book.formula(ws, row, C["claimed"], f"=2*_xlfn.NORM.S.DIST({ref('U_c')}/{ref('u_c')},TRUE)-1", fmt="0.0000")
+        book.formula(ws, row, C["claimed"], f"=2*NORMSDIST({ref('U_c')}/{ref('u_c')})-1", fmt="0.0000")
         book.formula(ws, row, C["z"], f"={ref('deviation')}/{ref('u_c')}", fmt="0.00")
         book.number(ws, row, C["probed"], 1 if k in geo else 0, fmt="0", computed=True)
         book.formula(ws, row, C["plus_U"], f"={ref('U')}", fmt="0.000")
@@ -151,10 +151,10 @@ def _verdict(book: Book, result: dict, last: int) -> list[dict]:
     lines.append(("share", Formula("=val_within/val_rows"), "share of rows with E_n <= 1", "val_share"))
     lines.append(("claimed", Formula(f"=AVERAGE({col('claimed')})"), "mean coverage the model claims for the rows",
                   "val_claimed"))
-    lines.append(("p_low_binomial", Formula("=_xlfn.BINOM.DIST(val_within,val_rows,val_claimed,TRUE)"),
+    lines.append(("p_low_binomial", Formula("=BINOMDIST(val_within,val_rows,val_claimed,TRUE)"),
                   "P(within or fewer) for independent rows (binomial)", "val_p_low_binomial"))
     lines.append(("p_high_binomial",
-                  Formula("=IF(val_within=0,1,1-_xlfn.BINOM.DIST(val_within-1,val_rows,val_claimed,TRUE))"),
+                  Formula("=IF(val_within=0,1,1-BINOMDIST(val_within-1,val_rows,val_claimed,TRUE))"),
                   "P(within or more) for independent rows", "val_p_high_binomial"))
     corr = c["p_low_correlated"]
     lines.append(("p_low_correlated", corr if corr is not None else "—",

@@ -46,7 +46,7 @@ def _points_csv(vs: vsm.ValidationSet, idx) -> str:
     w = csv.writer(out, lineterminator="\n")
     w.writerow(["id", "x", "y", "z", "nx", "ny", "nz", "probe"])
     for i in idx:
-        w.writerow([vs.ids[i], *(f"{v:.6f}" for v in vs.X[i]), *(f"{v:.9f}" for v in vs.N[i]),
+        w.writerow([vs.ids[i], *(f"{v:.9f}" for v in vs.X[i]), *(f"{v:.12f}" for v in vs.N[i]),
                     vs.probes[vs.k[i]].id])
     return out.getvalue()
 
