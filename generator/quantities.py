@@ -159,6 +159,8 @@ class ToleranceKeys:
     joiner: str = "→"
     k_from_decision: bool = False
     hint: str = ""
+    #: how the kind's own tolerances are decided, in words for the report page
+    note: str = ""
 
     @property
     def own(self) -> bool:

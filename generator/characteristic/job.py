@@ -247,7 +247,10 @@ def summary(results: dict) -> list[str]:
 
 #: the drawing's tolerances are fields of the characteristics (no [[decision.tolerances]]); the
 #: results give u only: U = k·u with the [decision] k (default 2)
-TOLERANCE_KEYS = ToleranceKeys((), k_from_decision=True)
+TOLERANCE_KEYS = ToleranceKeys((), k_from_decision=True, note=(
+    "the drawing's, on 'Characteristics': size and distance two-sided (lsl, usl, or nominal ± tolerance_mm); "
+    "form, orientation, position one-sided (value <= tolerance_mm); a position at MMC/LMC on its margin = "
+    "tolerance + bonus - value >= 0 (u with the size's); angles not decided yet"))
 #: material conditions with a bonus tolerance: decided on the margin (zone - value >= 0)
 BONUS_CONDITIONS = ("MMC", "LMC")
 #: characteristic types with a two-sided tolerance interval (lsl/usl or nominal ± tolerance_mm)
@@ -291,12 +294,14 @@ def tolerance(c: dict, row: int = 2) -> tuple[dict, str | None]:
         return {}, f"an angle tolerance ({c['unit']}) is not decided yet: the decision works in mm and µm"
     if typ in TWO_SIDED_TYPES:
         if lsl is not None or usl is not None:
-            return {"lsl": lsl, "usl": usl, "cells": {f"{k}_mm": at(k) for k, v in (("lsl", lsl), ("usl", usl))
-                                                      if v is not None}}, None
+            cells = {f"{k}_mm": at(k) for k, v in (("lsl", lsl), ("usl", usl)) if v is not None}
+            if nominal is not None:
+                cells["nominal"] = at("nominal")
+            return {"lsl": lsl, "usl": usl, "cells": cells}, None
         if nominal is not None:
             return {"lsl": nominal - tol, "usl": nominal + tol,
                     "cells": {"lsl_mm": f"{at('nominal')}-{at('tolerance_mm')}",
-                              "usl_mm": f"{at('nominal')}+{at('tolerance_mm')}"}}, None
+                              "usl_mm": f"{at('nominal')}+{at('tolerance_mm')}", "nominal": at("nominal")}}, None
         return {}, "tolerance_mm of a size or distance needs its nominal (nominal ± tolerance_mm), or give lsl/usl"
     if tol is None:
         return {}, f"a {typ} takes tolerance_mm (a zone width), not lsl/usl"

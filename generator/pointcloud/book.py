@@ -28,12 +28,15 @@ def extra_inputs(task) -> list[tuple]:
             ("L_max_mm", m.L_max_mm, "mm", "largest distance of the MPE check", 0.0)]
 
 
-def results_rows(task, first: int) -> list[list]:
+def results_rows(task, first: int, results: dict) -> list[list]:
     """The contract's Results rows: from, to, then references to Budget columns D..L
-    (d, u, U, u_R ... u_P) of the distance in row ``first + q``."""
+    (d, u, U, u_R ... u_P) of the distance in row ``first + q``, each with the core's value
+    (``results``, the JSON) to cache."""
     labels = task.cloud.labels
-    return [[labels[i], labels[j]] + [Formula(f"={cell(first + q, c, 'Budget')}") for c in range(4, 13)]
-            for q, (i, j) in enumerate(task.pairs)]
+    return [[labels[i], labels[j]] + [Formula(f"={cell(first + q, c, 'Budget')}", v) for c, v in
+                                      zip(range(4, 13), (d["d_mm"], d["u_um"], d["U_um"],
+                                                         *(d["components_um"][f] for f in pc.FACTORS)))]
+            for q, ((i, j), d) in enumerate(zip(task.pairs, results["distances"]))]
 
 
 def budget_chart(book: Book, ws, task, first: int) -> None:

@@ -158,7 +158,7 @@ def write_book(task: Task, results: dict, path: Path, additions: BookAdditions |
     if task.mpe is not None:
         write_mpe(book, task)
     budget_chart(book, book.wb["Budget"], task, budget)
-    book.results(RESULT_COLUMNS, results_rows(task, budget))
+    book.results(RESULT_COLUMNS, results_rows(task, budget, results))
     book.save(path, additions)
 
 

@@ -95,10 +95,11 @@ def _used_width(ws: Worksheet, last_column: int | None = None) -> float:
     return total
 
 
-def page_setup(ws: Worksheet, *, landscape: bool | None = None, title_rows: int | None = -1,
+def page_setup(ws: Worksheet, *, landscape: bool | None = None, title_rows: int | tuple[int, int] | None = -1,
                 area: str | None = None, row_breaks: Sequence[int] = (),
                 matrix: tuple[int, int] | None = None, caption: str | None = None,
-                one_page: bool = False) -> None:
+                one_page: bool = False, title_columns: str | None = None,
+                min_scale: float | None = None, footer_pt: float | None = None) -> None:
     from openpyxl.utils import get_column_letter
     from openpyxl.worksheet.pagebreak import Break
 
@@ -110,9 +111,9 @@ def page_setup(ws: Worksheet, *, landscape: bool | None = None, title_rows: int 
     ws.page_margins.left = ws.page_margins.right = 0.5
     ws.page_margins.top = ws.page_margins.bottom = 0.6
     ws.oddFooter.left.text = "&A"
-    ws.oddFooter.left.size = 8
+    ws.oddFooter.left.size = footer_pt or 8       # scaled with the page (LibreOffice)
     ws.oddFooter.right.text = "page &P of &N"
-    ws.oddFooter.right.size = 8
+    ws.oddFooter.right.size = footer_pt or 8
     if matrix is not None:
         n_rows, n_cols = matrix
         rows, cols = min(n_rows, 24), min(n_cols, 12)
@@ -146,7 +147,15 @@ def page_setup(ws: Worksheet, *, landscape: bool | None = None, title_rows: int 
         first = ws.cell(row=1, column=1)
         title_rows = 1 if (first.value is not None and first.font is not None and first.font.b
                            and first.font.sz != TITLE_FONT.sz) else None
-    if title_rows:
+    if min_scale is not None:
+        # a fixed scale (text stays legible), as many pages across as the width needs
+        ws.sheet_properties.pageSetUpPr.fitToPage = False
+        ws.page_setup.scale = max(10, min(100, round(100 * min_scale)))
+    if title_columns:
+        ws.print_title_cols = title_columns
+    if isinstance(title_rows, tuple):          # (first, last): a header row below a title block
+        ws.print_title_rows = f"{title_rows[0]}:{title_rows[1]}"
+    elif title_rows:
         ws.print_title_rows = f"1:{title_rows}"
     if area:
         ws.print_area = area
