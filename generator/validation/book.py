@@ -2,18 +2,23 @@
 values (measured, calibrated, U_cal, k_cal, the task's U and k), the count against the claimed
 coverage (binomial, live), the chi-square of the rows, the structure's p-value (the core's: the
 locator needs the whole covariance and its search) and the verdict under its rule, the chart of
-the deviations against +-U and +-sqrt(U^2 + U_cal^2), and the Results sheet."""
+the deviations against +-U and +-sqrt(U^2 + U_cal^2), the Results sheet and the report page every
+book has (``Summary``, :mod:`generator.workbook.report_page`): the verdicts and the rows with the
+largest E_n, each against its limits y_cal -+ sqrt(U^2 + U_cal^2)."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
+from ..quantities import Quantity, Verdict
 from ..workbook.book import Book, ChartSeries, Formula
+from ..workbook.report_page import Live, PageHeader, PageRow, write_report_page
 from ..workbook.xlref import block, cell
 
 ROWS = "Rows"
 VERDICT = "Verdict"
 FIRST = 3            # first data row of the Rows sheet
+PAGE_ROWS = 20       # the rows with the largest E_n on the report page
 COLUMNS = ("row", "characteristic", "workpiece", "run", "unit", "measured", "repeats", "calibrated",
            "U_unit", "U_cal", "k_cal", "U", "k", "U_per_unit", "deviation", "U_c", "E_n", "within", "u_c",
            "claimed", "z", "probed", "plus_U", "minus_U", "plus_U_c", "minus_U_c")
@@ -32,6 +37,27 @@ NOTES = {
 }
 
 
+#: the columns in the value's unit and in the U unit (their headers carry it when all rows share it)
+IN_VALUE_UNIT = ("measured", "calibrated")
+IN_U_UNIT = ("U_cal", "U", "deviation", "U_c", "u_c", "plus_U", "minus_U", "plus_U_c", "minus_U_c")
+SUFFIX = {"mm": "mm", "µm": "um", "deg": "deg", "rad": "rad", "µrad": "urad"}
+
+
+def headers(result: dict) -> list[str]:
+    """The Rows sheet's headers: with the units in their names (``measured_mm``, ``E_n``, ``U_um``)
+    when every row has the same units; the unit columns say them either way."""
+    units = {r["unit"] for r in result["rows"]}
+    U_units = {r["U_unit"] for r in result["rows"]}
+    out = []
+    for name in COLUMNS:
+        if name in IN_VALUE_UNIT and len(units) == 1 and next(iter(units)) in SUFFIX:
+            name = f"{name}_{SUFFIX[next(iter(units))]}"
+        elif name in IN_U_UNIT and len(U_units) == 1 and next(iter(U_units)) in SUFFIX:
+            name = f"{name}_{SUFFIX[next(iter(U_units))]}"
+        out.append(name)
+    return out
+
+
 def write_book(result: dict, path: Path) -> Path:
     rows = result["rows"]
     book = Book("validation", "validation", "Validation — does the model hold on this machine? (ISO/TS 15530-4)")
@@ -39,6 +65,7 @@ def write_book(result: dict, path: Path) -> Path:
     last = FIRST + len(rows) - 1
     _rows(book, result, last)
     cached = _verdict(book, result, last)
+    _report_page(book, result)
     out = book.save(path)
     from ..workbook import cache
 
@@ -74,7 +101,7 @@ def _rows(book: Book, result: dict, last: int) -> None:
 
     ws = book.sheet(ROWS)
     book.text(ws, 1, 1, "One row per characteristic, workpiece and run; E_n <= 1 is the ISO/TS 15530-4 criterion")
-    book.header(ws, 2, 1, list(COLUMNS), [NOTES.get(c) for c in COLUMNS])
+    book.header(ws, 2, 1, headers(result), [NOTES.get(c) for c in COLUMNS])
     geo = set()
     loc = result.get("locator")
     if loc:
@@ -218,3 +245,78 @@ def v_words(holds: bool) -> str:
 
 def _q(text: str) -> str:
     return text.replace('"', '""')
+
+
+def _report_page(book: Book, result: dict) -> None:
+    """The ``Summary`` sheet: the files and the build, the three verdicts (the count, the
+    structure, the model) as live formulas of the Verdict sheet, and the rows with the largest
+    E_n: value ± U against y_cal -+ U_c, the decision E_n <= 1, live from the Rows sheet."""
+    v = result["verdict"]
+    lines = [("results file", f"{result['results_file']['name']}  SHA-256 {result['results_file']['sha256']}")]
+    for t in result["tasks"]:
+        lines.append(("task file", f"{t['file']} (kind {t['kind']})  SHA-256 {t['sha256']}"))
+    lines.append(("built", f"{result['built_utc']} (UTC) by cmmwb {result['version']}"))
+    lines.append(("rows", f"{len(result['rows'])} (characteristic, workpiece, run) of "
+                          f"{len({(r['workpiece'], r['label']) for r in result['rows']})} calibrated characteristics"))
+    if not v["holds"]:
+        lines.append(("cause", v["cause"] or "—"))
+        lines.append(("next step", v["next_step"]))
+    header = PageHeader("Validation report — does the model hold on this machine? (ISO/TS 15530-4)", lines,
+                        v["rule"] + f"; alpha = {v['alpha']:g}", notes=[
+                            "Each row: the measured value ± the model's U against the calibrated value (nominal) "
+                            "-+ sqrt(U^2 + U_cal^2) (the limits); 'decision' is E_n <= 1 or not, 'conformity' "
+                            "the row's E_n. The rows with the largest E_n are listed; all rows: the Rows sheet.",
+                            "Result statements: U rounded to two significant digits and the value to the same "
+                            "decimal place (GUM 7.2.6)."])
+    words = {True: v_words(True), False: v_words(False)}
+    verdicts = [
+        Verdict("count", result["count"]["share"], "p_count >= alpha/2 (share of rows with E_n <= 1)",
+                "consistent with the claimed coverage" if result["count"]["p_low"] >= v["alpha"] / 2
+                else "too few rows within their U", result["count_words"], value_cell="val_share",
+                verdict_cell='IF(val_p_count>=alpha/2,"consistent with the claimed coverage",'
+                             '"too few rows within their U")'),
+        Verdict("structure", result["p_structure"], "p_structure >= alpha/2",
+                "no structure found" if result["p_structure"] >= v["alpha"] / 2 else "structured",
+                result["structure_basis"], value_cell="val_p_structure",
+                verdict_cell='IF(val_p_structure>=alpha/2,"no structure found","structured")'),
+        Verdict("the model", 1.0 if v["holds"] else 0.0, "holds = 1", words[v["holds"]],
+                "it holds when the count and the structure both pass (the decision rule above)",
+                value_cell="val_holds", verdict_cell=f'IF(val_holds=1,"{_q(words[True])}","{_q(words[False])}")'),
+    ]
+    rows = result["rows"]
+    order = sorted(range(len(rows)), key=lambda i: (-rows[i]["E_n"], i))[:PAGE_ROWS]
+    page = []
+    for i in order:
+        r = rows[i]
+        rec = result["records"][r["label"]]
+        row = FIRST + i
+
+        def ref(name: str) -> str:
+            return cell(row, C[name], ROWS)
+
+        scale = rec["U_per_unit"]
+        half = r["U_c"] / scale
+        q = Quantity(label=r["label"], value=r["measured"], unit=r["unit"],
+                     u=r["U"] / r["k"], u_unit=r["U_unit"], k=r["k"], U_unit=r["U_unit"], symbol=r["label"],
+                     nominal=r["calibrated"], lsl=r["calibrated"] - half, usl=r["calibrated"] + half,
+                     value_source=f"{r['workpiece']}, run {r['run']}: measured on the CMM "
+                                  f"({result['results_file']['name']}, line {r['line']}"
+                                  + (f", the mean of {r['repeats']} repeats" if r["repeats"] > 1 else "") + ")",
+                     u_source=rec["u_source"])
+        y = r["deviation"] / r["U_c"]
+        bar = {"y": Live(f"{ref('deviation')}/{ref('U_c')}", y),
+               "y_minus": Live(f"({ref('deviation')}-{ref('U')})/{ref('U_c')}", y - r["U"] / r["U_c"]),
+               "y_plus": Live(f"({ref('deviation')}+{ref('U')})/{ref('U_c')}", y + r["U"] / r["U_c"]),
+               "lsl": Live("-1", -1.0), "usl": Live("1", 1.0)}
+        page.append(PageRow(
+            q, value=Live(ref("measured"), r["measured"]), U=Live(ref("U"), r["U"]), k=Live(ref("k"), r["k"]),
+            nominal=Live(ref("calibrated"), r["calibrated"]),
+            lsl=Live(f"{ref('calibrated')}-{ref('U_c')}/{ref('U_per_unit')}", r["calibrated"] - half),
+            usl=Live(f"{ref('calibrated')}+{ref('U_c')}/{ref('U_per_unit')}", r["calibrated"] + half),
+            decision=Live(f'IF({ref("within")}=1,"E_n <= 1","E_n > 1")', "E_n <= 1" if r["within"] else "E_n > 1"),
+            decision_note="(ISO/TS 15530-4)",
+            conformity=Live(f'"E_n = "&FIXED({ref("E_n")},2,TRUE)', f"E_n = {r['E_n']:.2f}"),
+            conformity_note=Live(f'"U_cal = "&FIXED({ref("U_cal")},3,TRUE)', f"U_cal = {r['U_cal']:.3f}"),
+            bar=bar, source=["value: " + q.value_source + "; calibrated value and U_cal: the certificate",
+                             "U: " + q.u_source]))
+    write_report_page(book, header, page, verdicts, more=max(0, len(rows) - len(page)))

@@ -62,3 +62,7 @@ def test_the_workbook_agrees_with_its_json(book, engine):
     assert cells["verdict"] == r["verdict"]["verdict"]
     res = {row["quantity"]: row["value"] for row in results_rows(values)}
     assert close(float(res["p_count"]), c["p_low"]) and close(float(res["within"]), c["within"])
+    # the report page: its verdicts and its rows (largest E_n first) are live formulas of the sheets
+    page = set(values["Summary"].values())
+    assert r["verdict"]["verdict"] in page and "no structure found" in page
+    assert f"E_n = {r['worst'][0]['E_n']:.2f}" in page
