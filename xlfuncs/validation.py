@@ -199,7 +199,10 @@ def count_null(corr: np.ndarray, u_c: np.ndarray, U_c: np.ndarray, draws: int = 
     on its limit."""
     w, V = np.linalg.eigh(0.5 * (corr + corr.T))
     keep = w > 1e-12 * w[-1]
-    S = V[:, keep] * np.sqrt(w[keep])
+    # the symmetric square root R^(1/2) = V W^(1/2) V^T, unique, not V W^(1/2): eigenvectors of a
+    # degenerate eigenvalue are any basis of their space, chosen by the BLAS kernel (as in
+    # xlfuncs.locator.simulate)
+    S = (V[:, keep] * np.sqrt(w[keep])) @ V[:, keep].T
     rng = np.random.default_rng(seed)
     counts = np.empty(draws, dtype=int)
     limit = (U_c / u_c)[:, None]
