@@ -128,3 +128,20 @@ def test_a_failed_validation_leaves_the_folder_as_it_was(valset, tmp_path, capsy
     code = main(["validate", str(bad), "--task", str(valset / "validation_lengths.toml"), "--out", str(out)])
     assert code == 2
     assert sorted(p.name for p in out.iterdir()) == ["mine.txt"]
+
+
+def test_a_planted_squareness_fails_the_validation_and_is_named(tmp_path, capsys):
+    """`cmmwb simulate --validation ballplate --effect squareness_xy=20` then `cmmwb validate`: the
+    command succeeds (exit 0), its verdict is "does not hold", the cause the locator's named
+    effect with its estimate, the next step to compensate or calibrate it."""
+    assert main(["simulate", "--validation", "ballplate", "--effect", "squareness_xy=20", "--seed", "4",
+                 "--out", str(tmp_path / "set")]) == 0
+    capsys.readouterr()
+    assert main(["validate", str(tmp_path / "set" / "results.csv"), "--task",
+                 str(tmp_path / "set" / "validation_lengths.toml"), "--out", str(tmp_path / "out")]) == 0
+    out = capsys.readouterr().out
+    r = json.loads((tmp_path / "out" / "validation.json").read_text())
+    v = r["verdict"]
+    assert not v["holds"] and v["causes"][0]["name"] == "squareness_xy"
+    assert abs(v["causes"][0]["estimate"] - 20.0) < 3 * v["causes"][0]["u"]
+    assert "Cause: the locator names squareness_xy" in out and "Next step:" in out
