@@ -133,6 +133,8 @@ class Calibration:
     peaks: list[Peak] = field(default_factory=list)
     fixed: tuple[str, ...] = ()
     u_log_max: float = U_LOG_MAX
+    #: whether the fit was started again from other length scales (step 5 of :func:`calibrate`)
+    peaks_searched: bool = True
 
     @property
     def multimodal(self) -> str | None:
@@ -145,6 +147,7 @@ class Calibration:
             "iterations": self.iterations,
             "peaks": [p.to_json() for p in self.peaks],
             "multimodal": self.multimodal,
+            "peaks_searched": self.peaks_searched,
             "estimated": list(self.free),
             "hyper_parameters": [
                 {"name": e.name, "unit": e.unit, "start": e.start, "estimate": e.value, "u": e.u,
@@ -210,7 +213,7 @@ def _why_weak(name: str, sets: list[RecordSet], corr_row: np.ndarray | None, fre
 
 def calibrate(sets: list[RecordSet], start: pc.Parameters, *, fixed: tuple[str, ...] = (),
               u_log_max: float = U_LOG_MAX, warm: dict[str, float] | None = None, found_by: str = "",
-              known: list[Peak] | None = None, other_starts: bool = True) -> Calibration:
+              known: list[Peak] | None = None, other_starts: bool | None = None) -> Calibration:
     """REML estimates of the hyper-parameters, starting from ``start`` (the task's values).
 
     1. A parameter that is zero in ``start`` (or whose standard deviation is) is off: held at
@@ -233,9 +236,12 @@ def calibrate(sets: list[RecordSet], start: pc.Parameters, *, fixed: tuple[str, 
     ``warm``: values the fit of the free parameters starts from instead of ``start`` (a point a
     likelihood profile found higher, :func:`xlfuncs.calibration_checks.profiles_at_maximum`;
     ``found_by`` says so), ``known``: peaks found before, kept in ``peaks``; ``other_starts``
-    False skips step 5."""
+    False skips step 5, None (default) runs it when every record set has the dense covariance
+    (on the structured one each start is a large fit of its own: ``peaks_searched`` says so)."""
     if not sets:
         raise ModelError("no records to calibrate from")
+    if other_starts is None:
+        other_starts = not any(getattr(s, "structured", False) for s in sets)
     sv = {n: float(getattr(start, n)) for n in NAMES}
     if sv["sigma_R_um"] <= 0:
         raise ModelError("calibrate needs sigma_R_um > 0 in the task (the starting value of the repeatability)")
@@ -381,7 +387,7 @@ def calibrate(sets: list[RecordSet], start: pc.Parameters, *, fixed: tuple[str, 
             e.reason += f"; upper 95 % limit {e.upper:.3g} {e.unit} (REML profile)"
     return Calibration(est, params, start, list(free), cov if free else np.zeros((0, 0)), tf.loglik,
                        loglik_start, tf.chi2, tf.dof, iterations, sets, peaks if free else [], tuple(fixed),
-                       u_log_max)
+                       u_log_max, bool(other_starts))
 
 
 def _other_starts(sets: list[RecordSet], values: dict[str, float], free: list[str], box,
