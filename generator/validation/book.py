@@ -10,6 +10,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from openpyxl.styles import Alignment
+
 from ..quantities import Quantity, Verdict
 from ..workbook.book import Book, ChartSeries, Formula
 from ..workbook.report_page import Live, PageHeader, PageRow, write_report_page
@@ -201,7 +203,8 @@ def _verdict(book: Book, result: dict, last: int) -> list[dict]:
     for label, value, meaning, name in lines:
         book.text(ws, r, 1, label)
         if isinstance(value, Formula):
-            book.formula(ws, r, 2, value, fmt="0.000000", name=name)
+            book.formula(ws, r, 2, value, fmt="0" if name in ("val_rows", "val_within", "val_holds") else "0.000000",
+                         name=name)
         elif isinstance(value, str):
             book.text(ws, r, 2, value)
             book.define(name, cell(r, 2, VERDICT))
@@ -219,14 +222,22 @@ def _verdict(book: Book, result: dict, last: int) -> list[dict]:
     r += 2
     for label, text in (("rule", v["rule"]), ("count", result["count_words"]),
                         ("cause", v["cause"] or "—"), ("next step", v["next_step"])):
-        book.text(ws, r, 1, label)
-        book.text(ws, r, 2, text, wrap=True)
-        ws.row_dimensions[r].height = 12.5 * (len(text) // 70 + 1)
+        book.text(ws, r, 1, label).alignment = Alignment(vertical="top")
+        book.text(ws, r, 3, text, wrap=True).alignment = Alignment(wrap_text=True, vertical="top")
+        ws.row_dimensions[r].height = 13 * (len(text) // 85 + 1)
         r += 1
+    for row in range(2, r):
+        meaning = ws.cell(row=row, column=3)
+        if isinstance(meaning.value, str) and len(meaning.value) > 85:
+            meaning.alignment = Alignment(wrap_text=True, vertical="top")
+            for column in (1, 2):
+                ws.cell(row=row, column=column).alignment = Alignment(vertical="top")
+            ws.row_dimensions[row].height = max(ws.row_dimensions[row].height or 13,
+                                                13 * (len(meaning.value) // 85 + 1))
     ws.column_dimensions["A"].width = 18
-    ws.column_dimensions["B"].width = 70
-    ws.column_dimensions["C"].width = 60
-    book.print_setup(ws, fit_widths=False)
+    ws.column_dimensions["B"].width = 16
+    ws.column_dimensions["C"].width = 95
+    book.print_setup(ws, fit_widths=False, landscape=True)
     rows_out = [["within", Formula("=val_within"), "rows"], ["share", Formula("=val_share"), "1"],
                 ["claimed", Formula("=val_claimed"), "1"], ["p_count", Formula("=val_p_count"), "1"],
                 ["p_structure", Formula("=val_p_structure"), "1"], ["holds", Formula("=val_holds"), "1"]]
