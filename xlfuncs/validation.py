@@ -483,7 +483,10 @@ class Validation:
                     "chi2": d.chi2_before, "dof": d.dof_before, "p_omnibus": math.exp(d.logp_before),
                     "p_targeted": math.exp(d.logp_targeted), "mismatch": bool(d.mismatch), "gate": d.gate,
                     "effects": [dict(name=e, **_estimate(d, e)) for e in d.chosen], "indicated": d.indicated,
-                    "outliers": d.outliers, "noise_scale": d.noise_scale, "summary": d.summary},
+                    "outliers": d.outliers, "noise_scale": d.noise_scale,
+                    "groups": [{k: g[k] for k in ("by", "group", "records", "chi2", "dof", "p_value", "flagged")}
+                               for g in d.groups if g.get("flagged")],
+                    "located": d.located[:WORST], "summary": d.summary},
                 "worst": [rows[i] for i in self.worst],
                 "verdict": {"holds": self.holds, "verdict": self.verdict, "rule": RULE, "alpha": self.alpha,
                             "causes": self.causes, "cause": self.causes[0]["text"] if self.causes else None,
