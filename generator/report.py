@@ -239,15 +239,18 @@ def task_row(q: Quantity, k_cell: str | None) -> PageRow:
         kref = k_cell if k_cell else repr(float(q.k))
         k = Live(kref, q.k)
         U = Live(f"{kref}*{c.u}{times}", q.U)
-    note = ("decided on its margin (the row below)" if q.decided_as else
-            f"not decided ({q.not_decided.split(':')[0]})" if q.not_decided else "no tolerance given")
+    note = ("decided on its margin (below)" if q.decided_as else "not decided (see below)" if q.not_decided
+            else "no tolerance given")
+    source = ["value: " + q.value_source, "U: " + u_words(q)]
+    if q.not_decided:
+        source.append("tolerance not decided: " + q.not_decided)
 
     def const(v: float | None) -> Live | None:
         return None if v is None else Live(repr(float(v)), v)
 
     return PageRow(q, value=Live(c.value, q.value), U=U, k=k, nu_eff=None if math.isinf(q.nu_eff) else
                    Live(repr(q.nu_eff), q.nu_eff), nominal=const(q.nominal), lsl=const(q.lsl), usl=const(q.usl),
-                   note=note, source=["value: " + q.value_source, "U: " + u_words(q)])
+                   note=note, source=source)
 
 
 def write_sheet(book: Book, results: dict, quantities: list[Quantity], verdicts: list[Verdict], *,

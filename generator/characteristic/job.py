@@ -314,7 +314,7 @@ def quantities(task: Task, results: dict, k: float = 2.0) -> list[Quantity]:
     """One record per characteristic (its Results row; a position at MMC/LMC also its margin,
     on 'Characteristics', right after it), with the drawing's tolerance, U = k·u with ``k`` (the
     ``[decision] k``, default 2).  Lengths: value mm, u µm; angles: value deg, u µrad, U in deg."""
-    where = f"the points table {task.points_file}" if task.points_file else "the points given in the task file"
+    where = "the points table ([points] file)" if task.points_file else "the points given in the task file ([points] rows)"
     fitted = f"from the features fitted to {where}"
     out = []
     for i, c in enumerate(results["characteristics"]):

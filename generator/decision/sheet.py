@@ -303,8 +303,11 @@ def write_sheet(book: Book, spec: DecisionSpec, quantities: list[Quantity], deci
         risks.write_node_table(book, ws, top + 1, len(COLUMNS) + 2)
         bottom = risks.write_rows(book, ws, top, prior_rows, cache)
     book.cache_cells(ws, cache)
+    # the chart on the table's page when both fit, else on the next page (never split)
+    breaks = [last + 2] if last + 2 + CHART_ROWS > ROWS_PER_PAGE else []
     book.print_setup(ws, landscape=True, title_rows=h, title_columns="A:B", min_scale=READABLE_SCALE,
-                     area=f"A1:{col(c['coverage_probability'])}{bottom}", fit_widths=False, footer_pt=10)
+                     area=f"A1:{col(c['coverage_probability'])}{bottom}", fit_widths=False, footer_pt=10,
+                     row_breaks=breaks)
     return rows
 
 
@@ -332,6 +335,10 @@ def _widths(ws, c: dict[str, int], h: int, last: int, cache: dict[str, Any]) -> 
 #: at 8.5 pt (as many pages across as that needs, the item and characteristic columns repeated on
 #: each)
 READABLE_SCALE = 0.85
+#: rows of a printed page at that scale (A4 landscape, 17.9 cm between the margins, rows of
+#: 0.45 cm: 47; less a margin) and the rows the chart (11 cm) covers
+ROWS_PER_PAGE = 44
+CHART_ROWS = 26
 
 
 NEWTON_NOTE = ("exact specific-risk acceptance limits A = midpoint ± d·u of a two-sided tolerance: the root "

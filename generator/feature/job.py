@@ -250,7 +250,7 @@ def quantities(task: Task, results: dict, k: float = 2.0) -> list[Quantity]:
     and u in the parameter's unit), U = k·u with ``k`` (the ``[decision] k``, default 2).
     Unit-vector components (unit 1) have no record: they are directions, read on Results."""
     fe = results["feature"]
-    fitted_to = (f"least-squares {fe['type']} fitted to {task.points_source}"
+    fitted_to = (f"the least-squares {fe['type']} fitted to {task.points_source}"
                  + (" (the nominal geometry, not a measurement)" if task.sampling is not None else ""))
     out = []
     for i, n in enumerate(fe["parameter_names"]):

@@ -269,14 +269,15 @@ def quantities(task: Task, results: dict, k: float = 2.0) -> list[Quantity]:
     labels = unique_labels([f"{d['from']}→{d['to']}" for d in ds])
     K = float(results["K"])
     source = f"the distance of two points of {task.points_source}"
+    # the columns d_mm, u_um, U_um of Results as "Results!$C$" (+ row): 10^5 distances in seconds
+    d_col, u_col, U_col = (cell(1, c, RESULTS)[:-1] for c in (3, 4, 5))
     out = []
     for i, (d, label) in enumerate(zip(ds, labels)):
         r = i + 2
         out.append(Quantity(label=label, value=d["d_mm"], unit="mm", u=d["u_um"], u_unit="µm", k=K, U_unit="µm",
                             symbol=f"d({label})", ident={"from": d["from"], "to": d["to"]},
                             value_source=source, u_source=U_SOURCE,
-                            cells=Cells(RESULTS, r, cell(r, 3, RESULTS), cell(r, 4, RESULTS), cell(r, 5, RESULTS),
-                                        k="K")))
+                            cells=Cells(RESULTS, r, f"{d_col}{r}", f"{u_col}{r}", f"{U_col}{r}", k="K")))
     return out
 
 

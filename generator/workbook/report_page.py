@@ -40,10 +40,10 @@ from .styles import BOX, HEADER_FONT, TITLE_FONT
 from .xlref import cell, col
 
 SHEET = "Summary"
-#: the table's columns: header, width (characters), number of the column
-COLUMNS = [("characteristic", 17), ("nominal", 11), ("lower limit", 11), ("upper limit", 11), ("value", 13),
-           ("deviation", 10), ("U", 8), ("p_c", 7), ("decision", 17), ("conformity", 21), ("tolerance bar", 13)]
-C = {name: j + 1 for j, (name, _) in enumerate(COLUMNS)}
+#: the table's columns: header -> width (characters); C: header -> number of the column
+COLUMNS = {"characteristic": 16, "nominal": 11, "lower limit": 11, "upper limit": 11, "value": 13, "deviation": 10,
+           "U": 11, "p_c": 7, "decision": 17, "conformity": 22, "tolerance bar": 13}
+C = {name: j + 1 for j, name in enumerate(COLUMNS)}
 LAST = len(COLUMNS)
 #: the columns right of the printed page that hold what the formulas and bars read
 DATA = {name: LAST + 2 + j for j, name in enumerate(
@@ -139,7 +139,7 @@ def write_report_page(book: Book, header: PageHeader, rows: Sequence[PageRow], v
     book.text(ws, r, 1, "Nominal, limits and deviation are in the unit of the value; U in the unit shown.",
               font=NOTE_FONT)
     head = r + 1
-    book.header(ws, head, 1, [name for name, _ in COLUMNS], notes=[
+    book.header(ws, head, 1, list(COLUMNS), notes=[
         "the result (a label of the task)", "nominal value (the task's, or the tolerance's centre), in the unit of "
         "the value", "lower specification limit, in the unit of the value", "upper specification limit",
         "the value decided on (measured, typed, or the task's own: see the line 'value:' below the row)",
@@ -148,7 +148,7 @@ def write_report_page(book: Book, header: PageHeader, rows: Sequence[PageRow], v
         "what the value and U prove whatever the rule (ISO 14253-1:2017, 5.2, 5.3)",
         "value ± U (blue) against the specification limits (red) and the acceptance limits (green), "
         "in units of half the tolerance (limits at ±1; one-sided: see the Decision sheet)"])
-    for name, width in COLUMNS:
+    for name, width in COLUMNS.items():
         ws.column_dimensions[col(C[name])].width = width
     r = head + 1
     breaks = []
@@ -174,7 +174,7 @@ def write_report_page(book: Book, header: PageHeader, rows: Sequence[PageRow], v
         for part in textwrap.wrap(note, TEXT_WIDTH):
             book.text(ws, r, 1, part, font=NOTE_FONT)
             r += 1
-    # scaled to the page width: the columns (COLUMNS, 139 characters) print at 0.75 or more
+    # scaled to the page width: the columns (COLUMNS, 142 characters) print at 0.75 or more
     for row_number in range(1, r + 1):
         ws.row_dimensions[row_number].height = ROW_PT
     book.print_setup(ws, landscape=True, title_rows=(head, head), fit_widths=False, area=f"A1:{col(LAST)}{r}",
@@ -186,12 +186,13 @@ def _verdict(book: Book, ws, r: int, v: Verdict) -> int:
     value = f"{v.value_cell}" if v.value_cell else repr(float(v.value))
     book.text(ws, r, 2, "value")
     book.formula(ws, r, 3, f"={value}", fmt="0.0000", value=float(v.value))
-    book.text(ws, r, 4, v.limit)
+    book.text(ws, r, 4, "limit")
+    book.text(ws, r, 5, v.limit)
     if v.verdict_cell:
-        book.formula(ws, r, 6, f"={v.verdict_cell}", fmt=None, value=v.verdict)
+        book.formula(ws, r, 7, f"={v.verdict_cell}", fmt=None, value=v.verdict)
     else:
-        book.text(ws, r, 6, v.verdict)
-    ws.cell(row=r, column=6).font = HEADER_FONT
+        book.text(ws, r, 7, v.verdict)
+    ws.cell(row=r, column=7).font = HEADER_FONT
     r += 1
     for part in textwrap.wrap(v.rule, TEXT_WIDTH - 20):
         book.text(ws, r, 2, part, font=NOTE_FONT)
@@ -202,6 +203,15 @@ def _verdict(book: Book, ws, r: int, v: Verdict) -> int:
 def _number_format(decimals: int, unit: str) -> str:
     body = "0" + ("." + "0" * decimals if decimals > 0 else "")
     return f'{body}" {unit}"' if unit else body
+
+
+def _fitting(decimals: int, values: Sequence[float], unit: str, width: int) -> int:
+    """The decimals (at most ``decimals``) with which every value, its sign and ``unit`` fit a
+    column ``width`` characters wide: never ``###``; the statement below the row keeps the
+    rounding of GUM 7.2.6."""
+    whole = max((len(str(int(abs(v)))) + (v < 0) for v in values if math.isfinite(v)), default=1)
+    room = width - 2 - whole - (len(unit) + 1 if unit else 0) - 1
+    return max(0, min(decimals, room))
 
 
 def _put(book: Book, ws, r: int, c: int, live: Live | str | None, fmt: str | None, *, dash: str = "—"
@@ -228,10 +238,15 @@ def _row(book: Book, ws, r: int, row: PageRow, same: bool = False) -> int:
         dec_U = 1
     shift = round(math.log10(q.unit_ratio)) if q.unit_ratio > 0 else 0
     dec_value = max(dec_U + shift, 0)
-    fmt_value = _number_format(dec_value, q.unit)
-    fmt_U = _number_format(max(dec_U, 0), q.U_unit)
+    numbers = [float(x.value) for x in (row.value, row.nominal, row.lsl, row.usl) if isinstance(x, Live)]
+    fmt_value = _number_format(_fitting(dec_value, numbers, q.unit, COLUMNS["value"]), q.unit)
+    dec_fit = _fitting(max(dec_U, 0), [U_now], q.U_unit, COLUMNS["U"])
+    # U keeps its two significant digits (GUM 7.2.6): in powers of ten when its decimals do not fit
+    fmt_U = _number_format(dec_fit, q.U_unit) if dec_fit == max(dec_U, 0) else f'0.0E+00" {q.U_unit}"'
+
     book.text(ws, r, C["characteristic"], q.label, font=HEADER_FONT)
-    fmt_plain = _number_format(dec_value, "")
+    fmt_plain = _number_format(_fitting(dec_value, numbers + [-abs(n) for n in numbers], "",
+                                        min(COLUMNS["nominal"], COLUMNS["deviation"])), "")
     for name in ("nominal", "lsl", "usl"):
         column = {"nominal": "nominal", "lsl": "lower limit", "usl": "upper limit"}[name]
         _put(book, ws, r, C[column], getattr(row, name), fmt_plain)
@@ -330,6 +345,6 @@ def _bar(book: Book, ws, r: int, height: int, bar: dict[str, Live]) -> None:
     series.append(ChartSeries("value ± U", ref("bar_x1", "bar_x2"), ref("bar_y1", "bar_y2"), markers=False,
                               colour="1F77B4", dash="solid", bold=True))
     series.append(ChartSeries("value", ref("y", "y"), ref("y_mid", "y_mid"), colour="000000"))
-    width_cm = 0.24 * dict(COLUMNS)["tolerance bar"]
+    width_cm = 0.24 * COLUMNS["tolerance bar"]
     Book.tolerance_bar(ws, f"{col(C['tolerance bar'])}{r}", series, width=width_cm,
                        height=max(1.2, 0.5 * height), x_range=(-BAR_RANGE, BAR_RANGE))
