@@ -27,8 +27,8 @@ from .. import __version__
 from ..build import load_task
 from ..errors import InputError, model_errors_named
 from ..quantities import Quantity
-from ..report import build_time_utc
 from ..workbook.atomic import Staging, sha256
+from ..workbook.provenance import build_time_utc
 from .results import read_results, rows_and_geometry
 
 
