@@ -38,6 +38,7 @@ GROUPS = {
     "budget": "Wojtyła/Płowucha 2023: budgets from the E_L,MPE formula",
     "feature": "Forbes 2022 + 2025: fitted features under the six-factor V_X, and Tables 1-8 of partial features",
     "diagnose": "The mismatch locator: recordings against the machine's model",
+    "validate": "The loop a lab runs: recordings -> calibrate -> validate on calibrated workpieces (ISO/TS 15530-4)",
 }
 
 _STEP = ("26 steps along x, {probes}; Forbes 2025 Table 3's {mpe} parameters")
@@ -53,9 +54,10 @@ ITEMS: tuple[DemoItem, ...] = (
              "perpendicularity, parallelism and positions at MMC against datums A|B|C, each with u "
              "under the six-factor V_X and decided against the drawing-like tolerances of its task",
              "Summary",
-             "each characteristic as a rounded result (value, U, k) with its decision (conforms, does "
-             "not conform, cannot be decided) and the rule it was decided by; the `Decision` sheet "
-             "shows how each decision follows from the limits",
+             "each characteristic with its limits, value and U, the decision under the rule named there "
+             "(conforms, does not conform, cannot be decided), what value and U prove (conformity, "
+             "non-conformity or neither proven) and the rounded statement; the `Decision` sheet shows "
+             "how each decision follows from the limits",
              question="Does this part conform to its drawing?"),
     DemoItem("pointcloud/stepgauge_I_MPE1.xlsx",
              "Forbes 2025 section 7, Table 4 and Figures 4-7: " + _STEP.format(probes="one probe (scenario I)",
@@ -131,6 +133,25 @@ ITEMS: tuple[DemoItem, ...] = (
              "Candidates",
              "the x scale error chosen, and the planted EBX listed as aliased with it, with the "
              "measurement that would separate them"),
+    DemoItem("validate/validate_start/validation.xlsx",
+             "a simulated machine worse than its type-B model (Forbes 2025 Table 3 MPE1): the lab's "
+             "starting tasks validated on step gauges, rings and spheres with calibrated values "
+             "(docs/validate.md section 6)",
+             "Verdict",
+             "the share of rows with E_n <= 1 against the 95.45 % the model claims, and the verdict: the "
+             "model does not hold, its cause (the rows deviate more than the model allows, evenly) and "
+             "the next step (calibrate); each row's E_n on `Rows`",
+             question="Does my uncertainty model hold on this machine?"),
+    DemoItem("validate/calibrate/calibration.xlsx",
+             "the same machine's verification recordings (an ISO 10360-2 test with three styli, a ball "
+             "plate in four passes): its hyper-parameters estimated by REML",
+             "Fit",
+             "each hyper-parameter's start, estimate and u, or why it is not identifiable from these "
+             "records; the fitted model on `Model`, the MPE check and u(d) before and after"),
+    DemoItem("validate/validate_fitted/validation.xlsx",
+             "the fitted model (calibrate's fitted task) on the same calibrated workpieces, which the "
+             "fit never saw",
+             "Verdict", "the count and the verdict with the fitted model: the model holds"),
 )
 
 #: the colours of every book, said once on the index page
@@ -179,9 +200,9 @@ def _questions(rebuild: dict[str, str]) -> list[DemoItem]:
 
 _INTRO = ("Each workbook computes its results with native spreadsheet formulas; beside it are the same "
           "results as JSON (computed by cmmwb's Python core), PNG plots and the task file it was built "
-          "from. Every book opens on its `Instructions` sheet and has a `Results` sheet; the task books "
-          "(all but the diagnoses) also have a one-page `Summary`: the results as rounded statements "
-          "with their decisions, and the task's identity.")
+          "from. Every book opens on its `Instructions` sheet and has a `Results` sheet and a `Summary`, "
+          "the report page a lab signs: the results as rounded statements with their decisions, what "
+          "they rest on, and the identity of the task and its input files (SHA-256).")
 _REBUILD = ("The commands run in this folder (`cmmwb` is the program the README's first command installed: "
             "`.venv/bin/cmmwb` in the clone). Edit a task file first to make the book your own; a book "
             "you edited is kept unless you add `--force` (which keeps a `.bak` copy).")

@@ -49,6 +49,7 @@ NUMERIC_MODULES = {
     "test_budget_dof",
     "test_model_paths",
     "test_diagnose_effect_formulas",
+    "test_validate_core", "test_validate_cli", "test_validate_book", "test_validate_loop",
 }
 
 

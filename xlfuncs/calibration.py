@@ -286,6 +286,9 @@ def run(files: list[FileFit], task: pc.Parameters, *, feedback: str = "compensat
     verdict (default ISO 14253-1); ``indicated``: refit with the effects the locator indicates
     but does not name (:func:`indicated_effects`)."""
     cal = fit(files, task) if cal is None else cal
+    prof: list[dict] = []
+    if profiles:     # a profile that reaches a higher peak moves the fit there (checks.profiles_at_maximum)
+        cal, prof = checks.profiles_at_maximum(cal)
     findings, effect_rows = effects_at_fit(cal, files)
     changes: list[cp.Change] = []
     notes: list[str] = []
@@ -299,7 +302,6 @@ def run(files: list[FileFit], task: pc.Parameters, *, feedback: str = "compensat
     chi2, compensated = chi2_before_after(files, task, final, feedback)
     u_d = u_of_d(files, task, cal, final, findings, changes, feedback, mpe)
     mpe_json = mpe_checks(task, cal, final, changes, feedback, mpe, u_d["P_mm"], rule) if mpe else None
-    prof = [checks.profile(cal, n) for n in cal.free] if profiles else []
     ind = indicated_effects(cal, files, task, refit=not any(f.set.structured for f in files)) if indicated else None
     return CalibrationRun(cal, files, feedback, final, findings, effect_rows, changes, notes, chi2, compensated,
                           u_d, mpe_json, prof, residuals(cal), ind)

@@ -17,6 +17,7 @@ from cmmwb.xlfuncs import conformity as cf
 from ..quantities import Quantity
 from ..workbook.book import Book
 from ..workbook.report_page import Live, PageHeader, PageRow, write_report_page
+from ..workbook.xlref import norm_s_dist
 
 #: the outcome of each rule, a formula of the block's names (``conformity``: the same for every rule)
 OUTCOME = {
@@ -69,7 +70,7 @@ def decision_block(book: Book, ws, row: int, dec: dict, u_from: str) -> int:
                    note="the largest probability of false acceptance (JCGM 106:2012, 9.3)")
         r += 1
     put("U_C_max", "U_C_max", "k_C_max*u_C_max", dec["U"], "0.0000", "expanded uncertainty of C_max")
-    put("p_c", "p_c_C_max", "NORMSDIST((1-C_max)/u_C_max)", dec["p_c"], "0.0000",
+    put("p_c", "p_c_C_max", norm_s_dist("(1-C_max)/u_C_max"), dec["p_c"], "0.0000",
         "probability that C_max <= 1 (JCGM 106:2012, 7.3, one-sided)")
     put("w", "w_C_max", GUARD[rule], dec["w"], "0.0000", "guard band of the rule (positive: inside the limit)")
     put("A_U", "A_U_C_max", "1-w_C_max", dec["acceptance_limit"], "0.0000", "acceptance limit of C_max")

@@ -174,6 +174,8 @@ def summary(result: dict) -> str:
     zero = [h for h in result["hyper_parameters"] if h["status"] == "zero"]
     parts = ["Estimated: " + (", ".join(f"{h['name']} = {h['estimate']:.3g} ± {h['u']:.2g} {h['unit']}"
                                          for h in est) or "nothing") + "."]
+    if result.get("multimodal"):
+        parts.append(result["multimodal"])
     if zero:
         parts.append("At zero (not seen in these records): " + ", ".join(h["name"] for h in zero) + ".")
     if non:

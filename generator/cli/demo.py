@@ -1,5 +1,5 @@
-"""``cmmwb demo --out DIR``: every worked example of the three papers, the characteristic plate and
-the mismatch-locator demonstrations into one folder, each task file beside its book, and the
+"""``cmmwb demo --out DIR``: every worked example of the three papers, the characteristic plate, the
+mismatch-locator demonstrations and the validation loop into one folder, each task file beside its book, and the
 folder's index (:mod:`generator.demo_index`); a few lines on the console, ending with the index's
 path (``--verbose``: every book's headline results too)."""
 
@@ -14,8 +14,8 @@ from .. import __version__
 from ..build import build_task
 from ..demo_index import ITEMS, write_index
 from ..jobs import JOBS
-from ..report import provenance
 from ..workbook.atomic import Staging
+from ..workbook.provenance import provenance
 from .build import print_built
 from .common import add_command
 
@@ -25,8 +25,9 @@ EXAMPLES_DIR = Path(__file__).resolve().parents[1] / "examples"
 def register(sub) -> None:
     s = add_command(sub, "demo", "build every worked example of the three papers",
                     "Builds the worked examples of the three papers and a drawing's characteristics "
-                    "(workbooks, JSON, PNG plots, each book's task file beside it) and the mismatch-locator "
-                    "demonstrations into one folder, and writes DIR/index.html (and DIR/index.md): which book "
+                    "(workbooks, JSON, PNG plots, each book's task file beside it), the mismatch-locator "
+                    "demonstrations and the validation loop (recordings -> calibrate -> validate) into one "
+                    "folder, and writes DIR/index.html (and DIR/index.md): which book "
                     "shows which paper's result or answers which question, the sheet to look at first and the "
                     "command that rebuilds it. Prints a few lines ending with the index's path.",
                     ("cmmwb demo --out cmmwb-demo",
@@ -45,6 +46,7 @@ def register(sub) -> None:
 
 def run(args) -> int:
     from ..diagnosis.run import demo as diagnosis_demo  # the locator (scipy): only when run
+    from ..validation.loop import demo as validation_demo
 
     out = Path(args.out)
     if args.pdf:
@@ -69,6 +71,11 @@ def run(args) -> int:
             case = f.parent.relative_to(out).as_posix()
             rebuild[f"{case}/{f.name}"] = (f"cmmwb diagnose {case}/recordings.csv --task {case}/task.toml "
                                            f"--out {case}")
+    loop = out / "validate"
+    for f in validation_demo(loop, verbose=args.verbose, force=args.force):
+        if f.suffix == ".xlsx":
+            rebuild[f.relative_to(out).as_posix()] = validation_command(f.parent.relative_to(out).as_posix(),
+                                                                        loop.relative_to(out).as_posix())
     printed = ""
     if args.pdf:
         from ..workbook.pdf import print_books
@@ -93,6 +100,19 @@ def run(args) -> int:
     print("Which book shows what, the sheet to look at first and how to rebuild it:")
     print(f"  {index[0]}")
     return 0
+
+
+def validation_command(step: str, loop: str) -> str:
+    """The command, run in the demo folder, that rebuilds the book of the validation loop's ``step``
+    (its folder, ``validate/calibrate`` or ``validate/validate_start``/``validate_fitted``), from
+    the files the loop wrote into ``loop`` (docs/validate.md section 6)."""
+    name = step.rsplit("/", 1)[-1]
+    if name == "calibrate":
+        return (f"cmmwb calibrate {loop}/iso.csv {loop}/plate.csv --task {loop}/validation/start_lengths.toml "
+                f"--profiles no --out {step}")
+    tasks = {"validate_start": (f"{loop}/validation/start_lengths.toml", f"{loop}/validation/start_features.toml"),
+             "validate_fitted": (f"{loop}/calibrate/fitted.toml", f"{loop}/validation/fitted_features.toml")}[name]
+    return f"cmmwb validate {loop}/validation/results.csv " + " ".join(f"--task {t}" for t in tasks) + f" --out {step}"
 
 
 def copy_task(example: Path, out_dir: Path, force: bool = False) -> Path:

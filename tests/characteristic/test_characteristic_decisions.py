@@ -15,7 +15,6 @@ import pytest
 from cmmwb.generator import decision
 from cmmwb.generator.errors import InputError
 from cmmwb.generator.workbook import report_page
-from cmmwb.generator.workbook.recalc import recalculate
 from cmmwb.xlfuncs import conformity as cf
 
 from tests.helpers import ENGINES, EXAMPLES, recalc

@@ -119,7 +119,7 @@ def test_a_k_typed_on_the_decision_sheet_changes_the_summary_statement(tmp_path)
     wb[sheet][ref.replace("$", "")].value = 3
     edited = tmp_path / "k3.xlsx"
     wb.save(edited)
-    v = recalculate(edited, "formulas")["Summary"]
+    v = recalc(edited, "formulas")["Summary"]
     statements = [t for t in v.values() if isinstance(t, str) and "coverage probability" in t]
     assert len(statements) >= 4
     assert all(t.endswith("(k = 3, coverage probability ≈ 99.73 %)") for t in statements), statements
