@@ -207,7 +207,8 @@ def mpe_verdict_text(f: dict) -> str:
     if d["U"] is None:
         return (head + f" ({'within' if d['within_limit'] else 'above'} the limit 1; no u(C_max): nothing was "
                 "estimated, so no decision rule could be applied).")
-    return (head + f", U = {d['U']:.2g} (k = {d['k']:g}) against C_max <= 1, {d['rule_name']} rule: "
+    return (head + f", U = {d['U']:.2g} (dimensionless, as C_max; k = {d['k']:g}) against C_max <= 1, "
+            f"{d['rule_name']} rule: "
             f"{d['outcome']}; {d['conformity']} ({d['conformity_zone']}; p_c = {d['p_c']:.3f}).")
 
 

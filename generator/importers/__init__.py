@@ -44,7 +44,7 @@ def run_import(src: Path, out: Path, *, features: list[str] | None = None, kind:
 
     doc = qif.read_qif(src)
     report = [f"QIF {doc.version}: {len(doc.sets)} point sets, {len(doc.features)} features with points",
-              f"length unit: {doc.unit_name} -> mm (x {doc.mm_per_unit:g})",
+              f"length unit: {doc.unit_name}" + ("" if doc.mm_per_unit == 1.0 else f" -> mm (x {doc.mm_per_unit:g})"),
               "frame: the file's primary coordinate system (sets in other frames are refused)"]
     report += [f"not imported: {s}" for s in doc.not_read]
     if out.suffix.lower() == ".csv":
@@ -116,8 +116,8 @@ def _write_recordings(doc, src: Path, out: Path, features: list[str] | None,
         raise InputError("exists already (use --force to overwrite)", file=out)
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
-    buf.write(f"# imported by cmmwb import from {_comment(src.name)} (QIF {doc.version}): coordinates in mm "
-              f"(converted from {_comment(doc.unit_name)})\n"
+    buf.write(f"# imported by cmmwb import from {_comment(src.name)} (QIF {doc.version}): "
+              f"{_comment(_coordinates_note(doc.unit_name, doc.mm_per_unit))}\n"
               "# nominal points are the closest points on the nominal elements; nx ny nz their outward "
               "normals; group is the feature\n")
     w.writerow(["id", "x_nom", "y_nom", "z_nom", "x", "y", "z", "nx", "ny", "nz", "group"])

@@ -47,9 +47,16 @@ WORKSHOP = (
     "cmmwb simulate --layout iso10360 --repeats 1 --out iso.csv",   # 35 lengths: calibrate in seconds
     "cmmwb simulate --layout stepgauge --out stepgauge.csv",
     "cmmwb simulate --layout ballplate --out plate.csv",
+    "cmmwb simulate --validation ballplate,stepgauge --out vlengths",   # validate's results and tasks
+    "cmmwb simulate --validation ring --out vfeatures",
 )
 COPIES = {"machine.toml": "gauge.toml", "filled_in.xlsx": "gauge/my_pointcloud.xlsx",
-          "filled.xlsx": "gauge/my_pointcloud.xlsx"}
+          "filled.xlsx": "gauge/my_pointcloud.xlsx",
+          "results.csv": "vlengths/results.csv", "lengths.toml": "vlengths/validation_lengths.toml",
+          "fitted.toml": "vlengths/validation_lengths.toml",
+          "validation_lengths_points.csv": "vlengths/validation_lengths_points.csv",
+          "features.toml": "vfeatures/validation_features.toml",
+          "validation_features_points.csv": "vfeatures/validation_features_points.csv"}
 
 #: runnable commands that are not run here, and the test module that runs them instead
 ELSEWHERE = {
@@ -252,12 +259,20 @@ def test_the_index_says_what_the_books_show(demo):
     aliased = json.loads((out / "diagnose" / "aliased" / "diagnosis.json").read_text(encoding="utf-8"))
     assert [e["name"] for e in aliased["effects"]] == ["scale_x"]
     assert any(x["name"] == "EBX" and x["aliased_with"] == "scale_x" for x in aliased["not_identifiable"])
+    start, fitted = (json.loads((out / "validate" / step / "validation.json").read_text(encoding="utf-8"))
+                     for step in ("validate_start", "validate_fitted"))
+    assert not start["verdict"]["holds"] and "calibrate" in start["verdict"]["next_step"]   # "does not hold"
+    assert fitted["verdict"]["holds"]                                                        # "holds"
 
 
 #: a number of a rebuilt book's JSON that must come back the same
 REBUILT = {"budget/knuckle.xlsx": ("budget/knuckle.json", lambda d: d["characteristics"][0]["u_um"]),
            "diagnose/concealed/diagnosis.xlsx": ("diagnose/concealed/diagnosis.json",
-                                                 lambda d: d["effects"][0]["estimate"])}
+                                                 lambda d: d["effects"][0]["estimate"]),
+           "validate/calibrate/calibration.xlsx": ("validate/calibrate/calibration.json",
+                                                   lambda d: d["fitted_parameters"]["sigma_ET_um"]),
+           "validate/validate_start/validation.xlsx": ("validate/validate_start/validation.json",
+                                                       lambda d: d["count"]["within"])}
 
 
 @pytest.mark.parametrize("book", list(REBUILT))
@@ -288,14 +303,15 @@ def test_the_conformity_doc_quotes_the_demo_statement(demo):
 # ---- what the commands print -------------------------------------------------------------------
 
 def test_every_printed_uncertainty_has_its_unit(workshop):
-    """In everything the shown commands printed, a u, U or ± is followed by its unit."""
+    """In everything the shown commands printed, a u, U or ± is followed by its unit (or says that
+    its quantity has none: the U of C_max, a ratio)."""
     for text in RUNNABLE:
         if not any(k in text for k in LIBREOFFICE):
             run_shown(text, workshop)
     bare = []
     for text, (p, _) in _results.items():
         for m in re.finditer(r"(\b[uU]\w* = |± )([-+]?\d[\d.]*(?:e[-+]?\d+)?)(?![\d.])\s*(\S*)", p.stdout):
-            if not m.group(3).startswith(("µ", "mm", "deg", "ppm", "nm")):
+            if not m.group(3).startswith(("µ", "mm", "deg", "ppm", "nm", "(dimensionless")):
                 bare.append(f"{text}: ...{m.group(0)}")
     assert not bare, "\n".join(bare)
 
@@ -334,9 +350,11 @@ def test_the_verbose_demo_lists_each_book_and_still_ends_with_the_index(tmp_path
     from cmmwb.generator.cli import demo as demo_cli
     from cmmwb.generator.cli import main
     from cmmwb.generator.diagnosis import run as diagnosis
+    from cmmwb.generator.validation import loop
 
     monkeypatch.setattr(demo_cli, "JOBS", {"budget": budget})
     monkeypatch.setattr(diagnosis, "demo", lambda out_dir, verbose=True, force=False: [])
+    monkeypatch.setattr(loop, "demo", lambda out_dir, verbose=True, force=False: [])
     assert main(["demo", "--out", str(tmp_path / "d"), "--verbose"]) == 0
     out = capsys.readouterr().out.splitlines()
     assert any(line.startswith("[budget] knuckle") for line in out)
@@ -353,9 +371,11 @@ def test_a_demo_over_an_edited_task_file_refuses_unless_forced(tmp_path, monkeyp
     from cmmwb.generator.cli import demo as demo_cli
     from cmmwb.generator.cli import main
     from cmmwb.generator.diagnosis import run as diagnosis
+    from cmmwb.generator.validation import loop
 
     monkeypatch.setattr(demo_cli, "JOBS", {"budget": budget})
     monkeypatch.setattr(diagnosis, "demo", lambda out_dir, verbose=True, force=False: [])
+    monkeypatch.setattr(loop, "demo", lambda out_dir, verbose=True, force=False: [])
     out = tmp_path / "d"
     assert main(["demo", "--out", str(out)]) == 0
     task = out / "budget" / "knuckle.toml"

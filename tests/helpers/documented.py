@@ -116,12 +116,15 @@ def displayed_in(path: Path) -> list[Shown]:
 
 
 def inline_in(path: Path) -> list[Shown]:
-    """The backticked ``cmmwb ...`` spans of one document (a span may wrap onto the next line)."""
-    text = path.read_text(encoding="utf-8")
+    """The backticked ``cmmwb ...`` spans of one document (a span may wrap onto the next line); not
+    the fenced blocks (:func:`displayed_in` reads those), nor a line the program prints (``cmmwb
+    recalc: engine gnumeric ...``: a command word followed by a colon)."""
+    text = re.sub(r"^```.*?^```", lambda m: "\n" * m.group(0).count("\n"),
+                  path.read_text(encoding="utf-8"), flags=re.S | re.M)
     out = []
     for m in re.finditer(r"`([^`]+)`", text):
         span = " ".join(m.group(1).split())
-        if _PROGRAM.match(span):
+        if _PROGRAM.match(span) and not re.match(r"^\S*cmmwb(?: [a-z][\w-]*)*:", span):
             line = text.count("\n", 0, m.start()) + 1
             out.append(Shown(re.sub(r"^\.venv/bin/cmmwb", "cmmwb", span), f"{path.relative_to(ROOT)}:{line}"))
     return out
@@ -169,6 +172,7 @@ def parser_problems(shown: Shown) -> list[str]:
     all_parsers = parsers()
     problems = []
     for segment in shown.segments:
+        segment = segment.split(" | ", 1)[0]     # what cmmwb's output is piped into is not cmmwb's
         try:
             tokens = shlex.split(segment, comments=True)
         except ValueError as e:
