@@ -23,7 +23,7 @@ from cmmwb.xlfuncs.limits import coordinate_problem
 
 from .. import __version__
 from ..errors import InputError, model_errors_named
-from ..taskfile import COMMON_TABLES, check_keys, number, table, task_kind_and_name, text_list
+from ..taskfile import COMMON_TABLES, check_keys, number, place, table, task_kind_and_name, text_list
 from ..taskkind import always_exact
 from ..workbook.book import BookAdditions
 from ..workbook.xlref import check_name
@@ -213,8 +213,10 @@ def load(path: Path, doc: dict) -> Task:
     for n, entry in enumerate(raw, start=1):
         c = _read_characteristic(path, n, entry, points, ds)
         if c.name.lower() in seen:
+            first = place(path, f"[[characteristics]] #{seen[c.name.lower()]} key 'name'")
             raise _err(path, f"{c.where} key 'name'",
-                       f"{c.name!r} is also the name of characteristic #{seen[c.name.lower()]}")
+                       f"{c.name!r} is also the name of characteristic #{seen[c.name.lower()]} (at {first}; "
+                       "names are sheet names: letter case aside, each is another)")
         seen[c.name.lower()] = n
         chars.append(c)
     task = Task(path, name, mpe, points, ds, chars, list(notes))

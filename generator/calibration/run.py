@@ -27,6 +27,7 @@ from cmmwb.xlfuncs import calibration_checks as checks
 from cmmwb.xlfuncs import compensation as cp
 from cmmwb.xlfuncs import pointcloud as pc
 from cmmwb.xlfuncs import reml
+from cmmwb.xlfuncs.errors import ModelError
 from cmmwb.xlfuncs.locator import diagnose as dg
 from cmmwb.xlfuncs.locator import effects as fx
 from cmmwb.xlfuncs.locator.recordings import RecordingsError, write_recordings
@@ -35,6 +36,7 @@ from cmmwb.xlfuncs.locator.report import effect_estimates
 from .. import __version__
 from ..diagnosis.run import read_recordings
 from ..errors import InputError, model_errors_named
+from ..taskcloud import read_mpe
 from ..workbook.atomic import Staging
 
 #: the u(d) grid and the MPE check use the pointcloud workbook's grid (the MPE sheet is shared)
@@ -42,8 +44,9 @@ GRID_POINTS = 101
 DEFAULT_L_MAX_MM = 1000.0
 
 
-def parse_mpe(text: str | None, doc: dict | None, probes) -> dict | None:
-    """The MPE statement: ``--mpe A,B[,K]`` or the task's [mpe] (P_mm: the longest probe)."""
+def parse_mpe(text: str | None, doc: dict | None, probes, path: Path | None = None) -> dict | None:
+    """The MPE statement: ``--mpe A,B[,K]`` or the task's [mpe] (its one reader,
+    :func:`generator.taskcloud.read_mpe`; P_mm: the longest probe)."""
     longest = max((float(np.linalg.norm(p.offset_mm)) for p in probes), default=0.0)
     if text is not None:
         parts = [p.strip() for p in text.split(",")]
@@ -55,14 +58,8 @@ def parse_mpe(text: str | None, doc: dict | None, probes) -> dict | None:
             raise InputError(f"--mpe: expected A,B or A,B,K (positive numbers), got {text!r}")
         return {"A_um": vals[0], "B_mm": vals[1], "K": vals[2] if len(vals) == 3 else 2.0,
                 "P_mm": longest, "L_max_mm": DEFAULT_L_MAX_MM}
-    if doc and isinstance(doc.get("mpe"), dict):
-        m = doc["mpe"]
-        try:
-            return {"A_um": float(m["A_um"]), "B_mm": float(m["B_mm"]), "K": float(m.get("K", 2.0)),
-                    "P_mm": float(m.get("P_mm", longest)), "L_max_mm": float(m.get("L_max_mm", DEFAULT_L_MAX_MM))}
-        except (KeyError, TypeError, ValueError):
-            raise InputError("[mpe] needs numbers A_um and B_mm") from None
-    return None
+    m = read_mpe(path or Path("task.toml"), doc, probes) if doc else None
+    return None if m is None else {"A_um": m.A_um, "B_mm": m.B_mm, "K": m.K, "P_mm": m.P_mm, "L_max_mm": m.L_max_mm}
 
 
 def _effect_columns(prep, names: list[str], path: Path):
@@ -130,8 +127,11 @@ def run_calibrate(paths: list[Path], model: dg.Model, out_dir: Path, *, task_pat
         sets.append(s)
         per_file.append({"path": path, "rec": rec, "prep": prep, "diag": diag, "chosen": chosen,
                          "labels": labels})
-    with model_errors_named(task_label or paths[0]):
+    try:
         cal = cb.calibrate(sets, model.params)
+    except ModelError as e:   # a file's own problem names that file, the others the task
+        item = e.item if e.item is not None and e.item[0] == "sets" else None
+        raise InputError(str(e), file=paths[item[1]] if item else (task_label or paths[0])) from None
 
     # -- the effects at the fitted model, fed back ---------------------------------------------
     findings, effect_rows = [], []

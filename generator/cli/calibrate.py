@@ -4,12 +4,13 @@ hyper-parameters from the machine's recordings by REML (docs/calibrate.md;
 
 from __future__ import annotations
 
+from contextlib import nullcontext
 from dataclasses import replace
 from pathlib import Path
 
 from cmmwb.xlfuncs.model import MPE1
 
-from ..taskfile import read_toml
+from ..taskfile import naming_lines, read_toml
 from .common import add_command
 
 
@@ -71,7 +72,8 @@ def run(args) -> int:
     doc = None
     if task_path is not None:
         doc = read_toml(task_path)
-    mpe = parse_mpe(args.mpe, doc, model.probes)
+    with naming_lines(task_path) if task_path is not None else nullcontext():
+        mpe = parse_mpe(args.mpe, doc, model.probes, task_path)
     result, files = run_calibrate([Path(p) for p in args.recordings], model, Path(args.out), task_path=task_path,
                                   task_label=label, effects=args.effects, feedback=args.feedback, mpe=mpe,
                                   alpha=args.alpha, workbook=not args.no_workbook, force=args.force,
