@@ -12,7 +12,8 @@ Task file::
     [[frames]]          name, primary, secondary, tertiary      (datum reference frames)
     [[characteristics]] name, type, features = [...], method (LS | MZ), frame, datum, nominal,
                         nominal_position_mm, zone (planar | diametral), material_condition
-                        (RFS | MMC | LMC), size, internal, direction, lsl, usl, tolerance_mm
+                        (RFS | MMC | LMC), size, internal, direction, lsl, usl, tolerance_mm,
+                        measured (the value measured elsewhere: the points then give only u)
 
     [decision]          rule, r, max_pfa, k   (optional; ISO 14253-1 and k = 2 when absent)
     [report]            lab, operator, cmm, artefact, job_id, notes
@@ -52,7 +53,7 @@ FEATURE_KEYS = {"name", "type", "ids", "id_prefix", "circle_plane", "axis_hint"}
 FRAME_KEYS = {"name", "primary", "secondary", "tertiary"}
 CHAR_KEYS = {"name", "type", "features", "method", "frame", "datum", "nominal",
              "nominal_position_mm", "zone", "material_condition", "size", "internal",
-             "direction", "lsl", "usl", "tolerance_mm"}
+             "direction", "lsl", "usl", "tolerance_mm", "measured"}
 
 
 @dataclass
@@ -230,7 +231,7 @@ def _read_characteristics(path, doc, features: dict[str, ch.FeatureSpec], frames
                 raise InputError(f"unknown feature {f!r}; the [[features]] are {', '.join(features)}",
                                  file=path, where=f"{sec} features")
         kw: dict = {}
-        for k in ("nominal", "lsl", "usl"):
+        for k in ("nominal", "lsl", "usl", "measured"):
             if k in t:
                 kw[k] = _tolerance_number(path, t, sec, k, lo_zero=False)
         if "tolerance_mm" in t:
@@ -371,6 +372,9 @@ def _row(r: ch.Result) -> dict:
         "bonus_mm": r.bonus_mm, "zone_mm": r.zone_mm, "margin_mm": r.margin_mm,
         "u_margin_um": r.u_margin_um,
         "contact_points": [],
+        # issue 33: a value measured elsewhere (a QIF file's) decided with the u of these points
+        "value_source": "measured" if c.measured is not None else "points",
+        "points_value": r.points_value,
     }
     return out
 
@@ -412,6 +416,10 @@ def write_plots(task: Task, results: dict, out_dir: Path) -> list[Path]:
 
 def summary(results: dict) -> list[str]:
     lines = []
+    given = [r["name"] for r in results["characteristics"] if r.get("value_source") == "measured"]
+    if given:
+        lines.append(f"{len(given)} of {len(results['characteristics'])} values are measured values given in the "
+                     "task ('measured'); their u comes from this task's points: see its notes for what those are")
     for r in results["characteristics"]:
         small = r["unit"] == "mm" and r["type"] not in ch.SIZE_TYPES + ("distance",)
         v, unit = (r["value"] * 1e3, "µm") if small else (r["value"], r["unit"])

@@ -8,11 +8,13 @@ no traceback and nothing written.  Before issue 33 each of these was accepted wi
 number, stopped with an internal error (exit 1), or said what was wrong without saying where.
 
 ``FAMILY`` maps each case to its family: ``names`` (two things given one name), ``tolerances``,
-``edge`` (numbers at the edge of what the arithmetic holds), ``messages`` (the place named).
+``edge`` (numbers at the edge of what the arithmetic holds), ``messages`` (the place named), ``qif``
+(QIF units, references and the stand-in route).
 """
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 from make_bad_files import POINTCLOUD_CSV, POINTCLOUD_TASK
@@ -298,3 +300,65 @@ def a_typo_in_the_mpe_of_calibrate(tmp):
 def a_negative_mpe_in_calibrate(tmp):
     return calibrate(tmp, task=MACHINE.replace("[parameters]", "[mpe]\nA_um = 1.5\nB_mm = -500\n\n[parameters]")), \
         "machine.toml", ["[mpe] B_mm (line 7)", "must be positive"]
+
+
+# -- QIF files (the unit systems, references, the stand-in route) -----------------------------------
+
+QIF_DATA = HERE.parent / "data" / "qif"
+
+
+def qif_edit(tmp: Path, source: str, old: str, new: str, argv_tail: list[str]) -> list[str]:
+    """A copy of a QIF file of tests/data/qif with one text replaced, and the import's arguments."""
+    text = (QIF_DATA / source).read_text(encoding="utf-8")
+    assert old in text, old
+    (tmp / "part.qif").write_text(text.replace(old, new, 1), encoding="utf-8")
+    return ["import", str(tmp / "part.qif"), *argv_tail]
+
+
+@case("qif")
+def a_qif_unit_factor_that_is_not_a_number(tmp):
+    return qif_edit(tmp, "nist_sms_plate_excerpt.qif", "<Factor>0.001</Factor>", "<Factor>0,001</Factor>",
+                    ["--out", str(tmp / "copy.qif")]), "part.qif", [
+        "FileUnits/PrimaryUnits/LinearUnit/UnitConversion/Factor", "not a list of numbers"]
+
+
+@case("qif")
+def a_qif_file_in_inches_whose_factor_says_millimetres(tmp):
+    return qif_edit(tmp, "nist_sms_plate_excerpt.qif", "<UnitName>mm</UnitName>", "<UnitName>inch</UnitName>",
+                    ["--out", str(tmp / "copy.qif")]), "part.qif", ["UnitName 'inch' but UnitConversion/Factor 0.001"]
+
+
+@case("qif")
+def a_qif_length_unit_without_a_factor_and_unknown(tmp):
+    return qif_edit(tmp, "nist_sms_plate_excerpt.qif", "<UnitName>mm</UnitName>\n        <UnitConversion>\n"
+                    "          <Factor>0.001</Factor>\n        </UnitConversion>",
+                    "<UnitName>thou</UnitName>", ["--stand-in", "--out", str(tmp / "t.toml")]), "part.qif", [
+        "FileUnits/PrimaryUnits/LinearUnit", "length unit 'thou' without UnitConversion/Factor"]
+
+
+@case("qif")
+def a_qif_measured_value_of_a_feature_the_file_does_not_have(tmp):
+    return qif_edit(tmp, "nist_sms_plate_excerpt.qif", "<Id>34</Id>", "<Id>9999</Id>",
+                    ["--out", str(tmp / "copy.qif")]), "part.qif", ["DiameterCharacteristicActual id=35", "measured feature 9999"]
+
+
+@case("qif")
+def a_qif_point_set_id_used_twice(tmp):
+    text = (QIF_DATA / "QIF_PTS_SAMPLE.QIF").read_text(encoding="utf-8")
+    first, second = re.findall(r'<MeasuredPointSet id="(\d+)"', text)[:2]
+    return qif_edit(tmp, "QIF_PTS_SAMPLE.QIF", f'<MeasuredPointSet id="{second}"', f'<MeasuredPointSet id="{first}"',
+                    ["--out", str(tmp / "t.toml"), "--feature", "CIRCLE1"]), "part.qif", [
+        f"point set id {first} is used twice"]
+
+
+@case("qif")
+def a_stand_in_part_that_the_file_does_not_have(tmp):
+    return qif_edit(tmp, "nist_sms_plate_excerpt.qif", "<!--", "<!--",
+                    ["--stand-in", "--part", "17", "--out", str(tmp / "t.toml")]), "part.qif", [
+        "--part", "no part '17'"]
+
+
+@case("qif")
+def a_stand_in_task_asked_for_as_recordings(tmp):
+    return qif_edit(tmp, "nist_sms_plate_excerpt.qif", "<!--", "<!--",
+                    ["--stand-in", "--out", str(tmp / "t.csv")]), "t.csv", ["--out must end in .toml"]

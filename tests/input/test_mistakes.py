@@ -28,8 +28,8 @@ def run_cli(capsys, *args) -> tuple[int, str, str]:
 
 
 def test_every_family_has_its_cases():
-    assert {f: sum(1 for v in FAMILY.values() if v == f) >= 5 for f in ("names", "tolerances", "edge", "messages")} \
-        == dict.fromkeys(("names", "tolerances", "edge", "messages"), True)
+    families = ("names", "tolerances", "edge", "messages", "qif")
+    assert {f: sum(1 for v in FAMILY.values() if v == f) >= 5 for f in families} == dict.fromkeys(families, True)
 
 
 @pytest.mark.parametrize("name", sorted(CASES))

@@ -54,6 +54,8 @@ class Result:
     s_A_margin: np.ndarray | None = None
     u_margin_um: float | None = None
     zone_iterations: int | None = None
+    #: the value of the task's points; ``value`` is the spec's ``measured`` value when it gives one
+    points_value: float | None = None
 
     @property
     def name(self) -> str:
@@ -515,7 +517,9 @@ def _evaluate_one(jf: JointFit, frames: Mapping[str, FrameSpec], c: Characterist
         its = frozen.get("iterations")
     else:
         value, frozen = VALUE[c.type](ctx, c, consts, None)
-    value = float(value[0])
+    value = points_value = float(value[0])
+    if c.measured is not None:      # measured elsewhere: these points give only the sensitivities (u)
+        value = float(c.measured)
     s_A, s_Xd = _sensitivities(jf, frames, c, consts, frozen)
     s_X = s_Xd + s_A @ jf.G
     active = np.array([], int)
@@ -525,7 +529,7 @@ def _evaluate_one(jf: JointFit, frames: Mapping[str, FrameSpec], c: Characterist
                  s_A=s_A,
                  s_X=s_X, smooth=c.type in SMOOTH_TYPES or (
                      c.type in ORIENTATION_TYPES and role(ctx.geom(c.features[0])) == AXIS),
-                 active=active, zone_iterations=its)
+                 active=active, zone_iterations=its, points_value=points_value)
     if c.type == "position":
         res.bonus_mm = 0.0
         bonus = _bonus(c, by_name)
