@@ -175,7 +175,20 @@ def hostile_pointcloud_task(tmp: Path) -> Path:
     return tmp / "cloud.toml"
 
 
-@pytest.mark.parametrize("make", [hostile_pointcloud_task, hostile_characteristic_task])
+def hostile_feature_task(tmp: Path) -> Path:
+    """The milled face of the feature examples with formula-like point and probe ids."""
+    pts = (EXAMPLES / "feature_plane_face.csv").read_text(encoding="utf-8")
+    pts = re.sub(r"(?m)^F(\d+),", lambda m: f'"=F{m.group(1)}""{TOKEN}""",', pts)
+    pts = re.sub(r",P2$", f',@{TOKEN}2', pts, flags=re.M)
+    (tmp / "feature_plane_face.csv").write_text(pts, encoding="utf-8")
+    toml = (EXAMPLES / "feature_plane_face.toml").read_text(encoding="utf-8")
+    toml = toml.replace('id = "P2"', f'id = "@{TOKEN}2"').replace("weights = { F13 = 0.5 }",
+                                                                   f"weights = {{ {json.dumps(f'=F13{chr(34)}{TOKEN}{chr(34)}')} = 0.5 }}")
+    (tmp / "face.toml").write_text(toml, encoding="utf-8")
+    return tmp / "face.toml"
+
+
+@pytest.mark.parametrize("make", [hostile_pointcloud_task, hostile_characteristic_task, hostile_feature_task])
 def test_no_formula_of_a_built_book_holds_user_text_outside_summary_and_decision(tmp_path, make):
     task = make(tmp_path)
     assert run("build", task, "--out", tmp_path / "out", "--no-plots") == 0
