@@ -205,3 +205,30 @@ def test_no_formula_of_the_calibration_holds_user_text(diagnosed, tmp_path):
     assert formulas_with_user_text(tmp_path / "cal" / "calibration.xlsx") == []
     fitted = (tmp_path / "cal" / "fitted.toml").read_text(encoding="utf-8")
     assert json.dumps(PROBE) in fitted
+
+
+def test_extra_columns_of_recordings_named_like_formulas_or_like_cmmwb_columns(tmp_path):
+    """An extra column headed =HYPERLINK("http://ZQX") stopped diagnose with KeyError:
+    '=HYPERLINK("http' (its name was parsed as an effect's column 'name:label'); one headed
+    residual_um took the key of the derived column.  Both are the user's columns, shown as given
+    (the second marked as the recordings'), their cells text, the refit unchanged."""
+    assert run("simulate", "--layout", "iso10360", "--sigma-um", "0.3", "--out", tmp_path / "sim.csv") == 0
+    lines, out, header = (tmp_path / "sim.csv").read_text(encoding="utf-8").splitlines(), [], False
+    for line in lines:
+        if not line.startswith("#") and not header:
+            line, header = line + f',"=HYPERLINK(""http://{TOKEN}"")",residual_um', True
+        elif not line.startswith("#"):
+            line += f",@SUM({TOKEN}),note"
+        out.append(line)
+    (tmp_path / "rec.csv").write_text("\n".join(out) + "\n", encoding="utf-8")
+    assert run("diagnose", tmp_path / "rec.csv", "--sigma-um", "0.3", "--out", tmp_path / "d", "--no-plots") == 0
+    book = tmp_path / "d" / "diagnosis.xlsx"
+    result = json.loads((tmp_path / "d" / "diagnosis.json").read_text(encoding="utf-8"))
+    values = recalc(book, "formulas")
+    heads = [v for k, v in values["Records"].items() if re.fullmatch(r"[A-Z]+1", k)]
+    assert f'=HYPERLINK("http://{TOKEN}")' in heads and "residual_um (recordings)" in heads
+    assert heads.count("residual_um") == 1
+    rows = {r["quantity"]: r for r in results_rows(values)}
+    exp, _ = expected_rows(result)
+    assert all(close(rows[q]["value"], v) for q, v in exp.items())
+    assert formulas_with_user_text(book) == []
