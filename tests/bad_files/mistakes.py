@@ -248,7 +248,7 @@ def an_mpe_of_nan_in_calibrate(tmp):
 
 
 @case("edge")
-def a_secondary_datum_tilted_from_the_primary_by_a_hair(tmp):
+def a_tertiary_datum_plane_parallel_to_the_primary_within_a_hair(tmp):
     """The plate's top face T as tertiary datum beside A: nearly parallel planes put the origin 3.9 km
     away and the positions at 3.9e6 mm, without a word."""
     return plate(tmp, ('tertiary = "C"', 'tertiary = "T"')), "plate.toml", [
