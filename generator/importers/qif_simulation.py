@@ -251,7 +251,7 @@ def item_lines(doc: QifCharacteristics, u: dict[str, float], source: dict[str, s
         if d.type == "position" and d.material_condition in ("MMC", "LMC"):
             why = doc.bonus_problem(it)
             size = doc.size_of(it)
-            tol += (f" at {d.material_condition}: {why}; not decided at {d.material_condition} (RFS would ignore "
+            tol += (f" {why}; not decided at {d.material_condition} (RFS would ignore "
                     "the bonus)" if why else
                     f" at {d.material_condition}, bonus from {size.name} "
                     f"({'hole' if it.internal else 'pin'})")

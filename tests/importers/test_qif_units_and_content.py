@@ -147,6 +147,62 @@ def test_the_copy_says_where_each_uncertainty_comes_from(tmp_path):
     assert qc.read_characteristics(tmp_path / "copy.qif").table() == qc.read_characteristics(EXCERPT).table()
 
 
+def test_a_zone_of_width_zero_regardless_of_feature_size_is_said_and_not_decided(tmp_path):
+    """FLATNESS1's ToleranceValue 0.5 made 0 (RFS): nothing could conform, and the file's PASS was
+    turned into 'does not conform' without a word.  Now the report and the stand-in task say it,
+    and the built task decides the other characteristics but not this one."""
+    zero = _without(EXCERPT, tmp_path, "<ToleranceValue>0.5</ToleranceValue>", "<ToleranceValue>0</ToleranceValue>")
+    _, report = run_import(zero, tmp_path / "copy.qif")
+    flat = next(r for r in report if r.startswith("FLATNESS1 "))
+    assert "ToleranceValue 0 regardless of feature size" in flat and "not decided" in flat
+    _, report = run_import(zero, tmp_path / "plate.toml", stand_in=True)
+    assert main(["build", str(tmp_path / "plate.toml"), "--out", str(tmp_path / "out"), "--no-plots"]) == 0
+    results = json.loads((tmp_path / "out" / "plate.json").read_text(encoding="utf-8"))
+    assert any(n.startswith("FLATNESS1: ToleranceValue 0 regardless of feature size") for n in results["notes"])
+    decided = {d["characteristic"] for d in results["decisions"]}
+    assert "FLATNESS1" not in decided and "DS002" in decided and "POSITION1 margin" in decided
+
+
+def _mmc_without_bonus(tmp: Path, how: str) -> Path:
+    """The excerpt with POSITION1's bonus made impossible: ``no_side`` drops the InternalExternal of
+    its hole (is the MMC size the smallest or the largest diameter?); ``no_size`` moves the
+    position's measurements onto the flatness's feature, where no diameter is measured."""
+    text = EXCERPT.read_text(encoding="utf-8")
+    if how == "no_side":
+        assert text.count("<InternalExternal>INTERNAL</InternalExternal>") == 1
+        text = text.replace("<InternalExternal>INTERNAL</InternalExternal>", "")
+    else:
+        moved = {"34": "11", "190": "185"}         # part 183 / 238: the hole -> the face of FLATNESS1
+        text, n = re.subn(r'(<PositionCharacteristicActual id="\d+">.*?<FeatureActualIds n="1">\s*<Id>)(\d+)(</Id>)',
+                          lambda m: m.group(1) + moved[m.group(2)] + m.group(3), text, flags=re.S)
+        assert n == 2
+    out = tmp / f"plate_{how}.qif"
+    out.write_text(text, encoding="utf-8")
+    return out
+
+
+@pytest.mark.parametrize("how, why", [
+    ("no_side", "does not say whether the feature is a hole or a pin"),
+    ("no_size", "the file has no diameter of its feature (33) to take the bonus from"),
+])
+def test_an_mmc_position_whose_bonus_cannot_be_taken_says_why_and_is_not_decided(tmp_path, how, why):
+    """A position at MMC without a size to take its bonus from was decided as RFS (against 0.25
+    mm without the bonus) without a word."""
+    src = _mmc_without_bonus(tmp_path, how)
+    _, report = run_import(src, tmp_path / "copy.qif")
+    pos = next(r for r in report if r.startswith("POSITION1 "))
+    assert why in pos and "not decided at MMC" in pos and "bonus from DIAMETER4" not in pos
+    run_import(src, tmp_path / "plate.toml", stand_in=True)
+    assert main(["build", str(tmp_path / "plate.toml"), "--out", str(tmp_path / "out"), "--no-plots"]) == 0
+    results = json.loads((tmp_path / "out" / "plate.json").read_text(encoding="utf-8"))
+    note = next(n for n in results["notes"] if n.startswith("POSITION1: "))
+    assert why in note and "not decided" in note
+    p = next(c for c in results["characteristics"] if c["name"] == "POSITION1")
+    assert p["material_condition"] == "RFS" and p["tolerance_mm"] is None
+    assert p["value"] == pytest.approx(0.035777087639955, rel=1e-12)        # the file's value of part 183
+    assert not any(d["characteristic"].startswith("POSITION1") for d in results["decisions"])
+
+
 def _without(path: Path, tmp: Path, old: str, new: str) -> Path:
     text = path.read_text(encoding="utf-8")
     assert old in text
