@@ -104,6 +104,44 @@ def test_the_uncertainty_written_back_is_in_the_files_own_unit(files, key, tmp_p
         assert float(u_other[k]) * UNITS[key][2] == pytest.approx(float(u_mm[k]), rel=5e-3), k   # 3 digits
 
 
+def test_a_qif3_file_in_inches_with_points_gets_the_same_u_written_in_inches(tmp_path):
+    """The QIF 3 sample (points and characteristics) with every length divided by 25.4 and
+    LinearUnit inch, factor 0.0254: the same values (lengths; the angle's values were scaled too
+    and are left out), and the same u, from the file's own points (7) and from the stand-in (4),
+    written in inches (before: in mm, 25.4 times too large)."""
+    ns = "{http://qifstandards.org/xsd/qif3}"
+    number = re.compile(r"\s*-?[\d.eE+-]+(\s+-?[\d.eE+-]+)*\s*")
+    ET.register_namespace("", ns[1:-1])
+    tree = ET.parse(SAMPLE)
+    for el in tree.getroot().iter():
+        if isinstance(el.tag, str) and el.tag.removeprefix(ns) in LENGTHS + ("Points", "ProbeRadius") \
+                and el.text and number.fullmatch(el.text):
+            el.text = " ".join(repr(float(v) / 25.4) for v in el.text.split())
+    lu = tree.getroot().find(f"{ns}FileUnits/{ns}PrimaryUnits/{ns}LinearUnit")
+    lu.find(f"{ns}UnitName").text = "inch"
+    lu.find(f"{ns}UnitConversion/{ns}Factor").text = "0.0254"
+    tree.write(tmp_path / "inch.qif", encoding="utf-8", xml_declaration=True)
+    mm, inch = qc.read_characteristics(SAMPLE).table(), qc.read_characteristics(tmp_path / "inch.qif").table()
+    lengths = [(a, b) for a, b in zip(mm, inch) if a["kind"] != "AngleBetween"]
+    assert len(lengths) == len(mm) - 1
+    for a, b in lengths:
+        for k in ("nominal", "lsl", "usl", "tolerance", "value"):
+            assert (a[k] is None and b[k] is None) or b[k] == pytest.approx(a[k], rel=1e-9, abs=1e-12), (k, a, b)
+    _, report = run_import(tmp_path / "inch.qif", tmp_path / "inch_copy.qif")
+    run_import(SAMPLE, tmp_path / "mm_copy.qif")
+
+    def written(path):
+        return {m.get("id"): float(m.find(f"{ns}Value").get("combinedUncertainty"))
+                for m in ET.parse(path).getroot().iter()
+                if isinstance(m.tag, str) and m.tag.endswith("CharacteristicMeasurement")
+                and m.find(f"{ns}Value") is not None and m.find(f"{ns}Value").get("combinedUncertainty")}
+    u_mm, u_inch = written(tmp_path / "mm_copy.qif"), written(tmp_path / "inch_copy.qif")
+    assert len(u_mm) == 11 and set(u_inch) == set(u_mm)
+    for k in u_mm:
+        assert u_inch[k] * 25.4 == pytest.approx(u_mm[k], rel=6e-3), k           # 3 digits written
+    assert "in the file's own units (inch, degree)" in " ".join(report)
+
+
 def test_a_unit_conversion_that_is_not_a_number_names_the_file_and_the_element(tmp_path):
     bad = tmp_path / "bad.qif"
     bad.write_text(EXCERPT.read_text(encoding="utf-8").replace("<Factor>0.001</Factor>", "<Factor>milli</Factor>"),
