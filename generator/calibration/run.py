@@ -28,6 +28,7 @@ from cmmwb.xlfuncs import compensation as cp
 from cmmwb.xlfuncs import pointcloud as pc
 from cmmwb.xlfuncs import reml
 from cmmwb.xlfuncs.errors import ModelError
+from cmmwb.xlfuncs.limits import plausibility_problem
 from cmmwb.xlfuncs.locator import diagnose as dg
 from cmmwb.xlfuncs.locator import effects as fx
 from cmmwb.xlfuncs.locator.recordings import RecordingsError, write_recordings
@@ -37,6 +38,7 @@ from .. import __version__
 from ..diagnosis.run import read_recordings
 from ..errors import InputError, model_errors_named
 from ..taskcloud import read_mpe
+from ..taskfile import note
 from ..workbook.atomic import Staging
 
 #: the u(d) grid and the MPE check use the pointcloud workbook's grid (the MPE sheet is shared)
@@ -56,6 +58,10 @@ def parse_mpe(text: str | None, doc: dict | None, probes, path: Path | None = No
             raise InputError(f"--mpe: expected A,B or A,B,K (numbers), got {text!r}") from None
         if len(vals) not in (2, 3) or not all(math.isfinite(v) and v > 0 for v in vals):
             raise InputError(f"--mpe: expected A,B or A,B,K (positive numbers), got {text!r}")
+        for key, v in zip(("A_um", "B_mm"), vals):      # a unit mix-up (mm for µm) is warned about
+            problem = plausibility_problem(key, v)
+            if problem:
+                note(problem, where="--mpe")
         return {"A_um": vals[0], "B_mm": vals[1], "K": vals[2] if len(vals) == 3 else 2.0,
                 "P_mm": longest, "L_max_mm": DEFAULT_L_MAX_MM}
     m = read_mpe(path or Path("task.toml"), doc, probes) if doc else None
@@ -83,13 +89,15 @@ def _effect_columns(prep, names: list[str], path: Path):
 def run_calibrate(paths: list[Path], model: dg.Model, out_dir: Path, *, task_path: Path | None = None,
                   task_label: str = "", effects: str = "auto", feedback: str = "compensate",
                   mpe: dict | None = None, alpha: float = 0.01, workbook: bool = True, force: bool = False,
-                  profiles: str = "auto", covariance: str = "auto") -> tuple[dict, list[Path]]:
+                  profiles: str = "auto", covariance: str = "auto",
+                  warnings: list[str] | tuple[str, ...] = ()) -> tuple[dict, list[Path]]:
     """Calibrate from ``paths`` into ``out_dir`` (all or nothing); returns the JSON and the files.
     ``covariance``: the record covariance of the fit, ``dense``, ``structured`` or ``auto`` (dense
     up to ``reml.DENSE_MAX_OBS`` observations per file, structured above).  ``profiles``: the
     likelihood profiles (about 9 refits per estimated hyper-parameter), ``yes``, ``no`` or
     ``auto`` (only when every file has the dense covariance: on a structured one each refit is a
-    large fit of its own)."""
+    large fit of its own).  ``warnings``: what the task's readers noted (an implausible value);
+    the JSON's ``warnings`` add what was detected in each recordings file."""
     from ..taskfile import read_toml
 
     if not (0.0 < alpha < 1.0):
@@ -221,7 +229,8 @@ def run_calibrate(paths: list[Path], model: dg.Model, out_dir: Path, *, task_pat
               "u_d": {"P_mm": P_mm, "d_mm": d.tolist(), "before_um": u_before.tolist(),
                       "after_um": u_after.tolist(), "uncompensated_um": u_uncomp},
               "mpe_check": mpe_json, "profiles": prof,
-              "profiles_note": profiles_note, "residuals": resid}
+              "profiles_note": profiles_note, "residuals": resid,
+              "warnings": [*warnings, *(f"{f['path']}, {n}" for f in per_file for n in getattr(f["rec"], "notes", ()))]}
     result["summary"] = summary(result)
     with Staging(out_dir, force=force) as tmp:
         (tmp / "calibration.json").write_text(json.dumps(result, indent=1, ensure_ascii=False, allow_nan=False)

@@ -80,3 +80,25 @@ def test_a_name_given_twice_is_refused_in_the_reader_not_replaced(tmp_path):
     with pytest.raises(InputError) as err:
         names.add("F", "[[frames]] #2 name")
     assert "[[frames]] #1 name (line 2)" in str(err.value) and names.where("F") == "[[frames]] #1 name"
+
+
+@pytest.mark.parametrize("where", ["[mpe]", "--mpe"])
+def test_an_mpe_in_millimetres_given_to_calibrate_is_warned_about(tmp_path, capsys, where):
+    """A_um = 1500 (1.5 µm written as if the unit were nm, or an MPE in mm pasted as µm): build and
+    diagnose warned about it, calibrate said only 'the fitted model meets the specification'."""
+    import json
+
+    from mistakes import MACHINE, calibrate
+
+    task = MACHINE.replace("[parameters]", "[mpe]\nA_um = 1500\nB_mm = 500\n\n[parameters]") if where == "[mpe]" \
+        else MACHINE
+    argv = calibrate(tmp_path, task=task) + (["--mpe", "1500,500"] if where == "--mpe" else [])
+    code, out, err = run_cli(capsys, *argv)
+    assert code == 0, err
+    warning = "A_um = 1500 µm is larger than what coordinate measuring machines have (0.05 to 500 µm)"
+    lines = [line for line in err.splitlines() if line.startswith("cmmwb: warning:")]
+    assert len(lines) == 1 and warning in lines[0] and where in lines[0], err
+    assert ("machine.toml" in lines[0]) == (where == "[mpe]")
+    result = json.loads((tmp_path / "cal" / "calibration.json").read_text(encoding="utf-8"))
+    assert [w for w in result["warnings"] if warning in w] == [lines[0].removeprefix("cmmwb: warning: ")]
+    assert result["mpe_check"]["fitted"]["margin"] > 0.99      # "meets the specification": now with the warning
