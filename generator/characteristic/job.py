@@ -25,7 +25,6 @@ characteristic kind's tolerances, docs/conformity.md): 'Decision' and 'Summary' 
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -302,10 +301,14 @@ def _read_characteristics(path, doc, features: dict[str, ch.FeatureSpec], frames
         if "nominal_position_mm" in t:
             v = t["nominal_position_mm"]
             if (not isinstance(v, list) or len(v) not in (2, 3) or
-                    not all(isinstance(x, (int, float)) and not isinstance(x, bool) and
-                            math.isfinite(x) and coordinate_problem(float(x)) is None for x in v)):
-                raise InputError("must be two or three numbers (frame coordinates, mm)",
+                    not all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in v)):
+                raise InputError(f"must be two or three numbers (frame coordinates, mm), got {v!r}",
                                  file=path, where=f"{sec} nominal_position_mm")
+            for k, x in enumerate(v):     # nan, inf, 1e300: the coordinate's own problem, not 'not numbers'
+                problem = coordinate_problem(float(x))
+                if problem:
+                    raise InputError(f"{'xyz'[k]}: {problem}", file=path,
+                                     where=f"{sec} nominal_position_mm")
             kw["nominal_position_mm"] = tuple(float(x) for x in v)
         if typ in MZ_MIN_POINTS and kw.get("method") == "MZ":
             m = len(features[feats[0]].indices)

@@ -242,6 +242,13 @@ def a_position_without_a_frame(tmp):
 
 
 @case("edge")
+def a_nominal_position_of_1e300_mm(tmp):
+    """Was 'a decision needs a finite value' naming no key (the position of 2e300 mm was computed)."""
+    return plate(tmp, ('nominal_position_mm = [70.0, 40.0]', 'nominal_position_mm = [1e300, 40.0]')), "plate.toml", [
+        "[[characteristics]] #18 nominal_position_mm (line", "x: coordinate 1e+300 mm is outside the plausible"]
+
+
+@case("edge")
 def an_mpe_of_nan_in_calibrate(tmp):
     return calibrate(tmp, task=MACHINE.replace("[parameters]", "[mpe]\nA_um = nan\nB_mm = 500\n\n[parameters]")), \
         "machine.toml", ["[mpe] A_um (line 6)", "finite"]
