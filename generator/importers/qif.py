@@ -131,6 +131,24 @@ def _children(el, name: str):
     return [c for c in el if _local(c.tag) == name]
 
 
+def unique_ids(path: Path, root) -> None:
+    """Every ``id`` of a QIF document names one element (the QIF 3 schema's ``QIFIdUnique`` over
+    all elements): an id given twice is refused naming both elements, because every reference to
+    it (a feature's point set, a characteristic's feature, a measured value's item, ``--part``)
+    would silently reach one of them."""
+    first: dict[str, str] = {}
+    for el in root.iter():
+        i = el.get("id")
+        if i is None or not isinstance(el.tag, str):
+            continue
+        here = f"{_local(el.tag)} id={i}"
+        if i in first:
+            raise InputError(f"id {i} is used twice (also {first[i]}, the first): QIF ids name one element "
+                             "each, and a reference to this one would reach either", file=path,
+                             where=f"{here} (the second)")
+        first[i] = here
+
+
 def _numbers(path: Path, text: str | None, where: str) -> np.ndarray:
     try:
         v = np.array([float(t) for t in (text or "").split()], dtype=float)
@@ -284,6 +302,7 @@ def read_qif(path: str | Path) -> QifDocument:
             dia = diameters.get(nominal_def.get(f.nominal_id, ""))
             if dia is not None:
                 f.nominal["Diameter"] = dia
+    unique_ids(path, root)      # after the point sets, whose own message says what a twice-used id breaks
     if not doc.sets:
         other = ("; its characteristics: --out COPY.qif writes a copy with their uncertainties, --stand-in "
                  "--out TASK.toml a characteristic task on a simulated stand-in part that cmmwb build decides "

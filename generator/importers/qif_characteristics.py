@@ -48,7 +48,7 @@ from defusedxml import ElementTree as DET
 
 from ..errors import InputError
 from ..workbook.guarded import read_bytes
-from .qif import file_units
+from .qif import file_units, unique_ids
 
 #: QIF characteristic kinds -> xlfuncs.characteristics types
 KIND_MAP = {
@@ -258,6 +258,7 @@ def read_characteristics(path: str | Path) -> QifCharacteristics:
         raise InputError(f"not a QIF document (root element {_local(root.tag)!r})", file=path)
     ns = root.tag[1:].split("}")[0] if root.tag.startswith("{") else ""
     fu = file_units(path, root)
+    unique_ids(path, root)
     mm, deg, units = fu.mm_per_unit, fu.deg_per_unit, fu.text
     chars = _child(root, "Characteristics")
     if chars is None:

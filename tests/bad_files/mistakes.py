@@ -369,3 +369,27 @@ def a_stand_in_part_that_the_file_does_not_have(tmp):
 def a_stand_in_task_asked_for_as_recordings(tmp):
     return qif_edit(tmp, "nist_sms_plate_excerpt.qif", "<!--", "<!--",
                     ["--stand-in", "--out", str(tmp / "t.csv")]), "t.csv", ["--out must end in .toml"]
+
+
+@case("qif")
+def a_qif_measured_value_id_used_twice(tmp):
+    """The position's measured value took the diameter's id 35: the copy's u went to one of them."""
+    return qif_edit(tmp, "nist_sms_plate_excerpt.qif", '<PositionCharacteristicActual id="41">',
+                    '<PositionCharacteristicActual id="35">', ["--out", str(tmp / "copy.qif")]), "part.qif", [
+        "PositionCharacteristicActual id=35 (the second)", "id 35 is used twice",
+        "also DiameterCharacteristicActual id=35, the first"]
+
+
+@case("qif")
+def two_qif_parts_with_one_id(tmp):
+    """--part 183 took the first of two parts with that id without a word."""
+    return qif_edit(tmp, "nist_sms_plate_excerpt.qif", '<MeasurementResults id="238">', '<MeasurementResults id="183">',
+                    ["--stand-in", "--part", "183", "--out", str(tmp / "t.toml")]), "part.qif", [
+        "MeasurementResults id=183 (the second)", "id 183 is used twice"]
+
+
+@case("qif")
+def a_qif_characteristic_item_id_used_twice(tmp):
+    return qif_edit(tmp, "nist_sms_plate_excerpt.qif", '<DiameterCharacteristicItem id="23">',
+                    '<DiameterCharacteristicItem id="14">', ["--out", str(tmp / "copy.qif")]), "part.qif", [
+        "DiameterCharacteristicItem id=14 (the second)", "also FlatnessCharacteristicItem id=14, the first"]
