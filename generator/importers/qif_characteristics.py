@@ -46,6 +46,8 @@ from xml.etree import ElementTree as ET
 
 from defusedxml import ElementTree as DET
 
+from cmmwb.xlfuncs.limits import coordinate_problem
+
 from ..errors import InputError
 from ..workbook.guarded import read_bytes
 from .qif import file_units, unique_ids
@@ -233,7 +235,10 @@ def _text(el, name):
     return None if c is None or c.text is None else c.text.strip()
 
 
-def _num(path, el, name, where, scale=1.0):
+def _num(path, el, name, where, scale=1.0, *, angle=False):
+    """The number of the child ``name`` of ``el`` times ``scale`` (to mm, or degrees for an
+    ``angle``), None without one; a length beyond the coordinate range (+-100 m) is refused like
+    every coordinate cmmwb reads (xlfuncs/limits.py)."""
     t = _text(el, name)
     if t is None:
         return None
@@ -243,6 +248,9 @@ def _num(path, el, name, where, scale=1.0):
         raise InputError(f"{name} is not a number: {t[:40]!r}", file=path, where=where) from None
     if not math.isfinite(v):
         raise InputError(f"{name} is not finite", file=path, where=where)
+    problem = None if angle else coordinate_problem(v * scale)
+    if problem:
+        raise InputError(f"{name} {t.strip()[:40]}: {problem}", file=path, where=where)
     return v * scale
 
 
@@ -273,8 +281,8 @@ def read_characteristics(path: str | Path) -> QifCharacteristics:
         zs = _child(d, "ZoneShape")
         df = Definition(
             id=d.get("id"), kind=kind, name=_text(d, "Name") or d.get("id"),
-            lsl=None if tol is None else _num(path, tol, "MinValue", where, scale),
-            usl=None if tol is None else _num(path, tol, "MaxValue", where, scale),
+            lsl=None if tol is None else _num(path, tol, "MinValue", where, scale, angle=kind in ANGLE_KINDS),
+            usl=None if tol is None else _num(path, tol, "MaxValue", where, scale, angle=kind in ANGLE_KINDS),
             tolerance=_num(path, d, "ToleranceValue", where, mm),
             material_condition=MATERIAL.get(_text(d, "MaterialCondition") or "", None),
             diametral=zs is not None and _child(zs, "DiametricalZone") is not None,
@@ -291,7 +299,8 @@ def read_characteristics(path: str | Path) -> QifCharacteristics:
                              file=path, where="CharacteristicNominals")
         d = defs[did]
         scale = deg if d.kind in ANGLE_KINDS else mm
-        nominals[n.get("id")] = (d, _num(path, n, "TargetValue", f"nominal {n.get('id')}", scale))
+        nominals[n.get("id")] = (d, _num(path, n, "TargetValue", f"nominal {n.get('id')}", scale,
+                                         angle=d.kind in ANGLE_KINDS))
     feature_items, measured_features, side = _features(root)
     items: dict[str, Item] = {}
     for it in _child(chars, "CharacteristicItems") or []:
@@ -326,12 +335,12 @@ def read_characteristics(path: str | Path) -> QifCharacteristics:
             scale = deg if it.definition.kind in ANGLE_KINDS else mm
             st = _child(a, "Status")
             fm = _child(a, "FeatureMeasurementIds") or _child(a, "FeatureActualIds") or []
+            here = f"MeasurementResults id={mr.get('id')}/{_local(a.tag)} id={a.get('id')}"
             missing = [c.text.strip() for c in fm if c.text and c.text.strip() not in measured_features]
             if missing:
                 raise InputError(f"names the measured feature {missing[0]}, which the file does not have (no "
-                                 "FeatureMeasurement or FeatureActual with that id)", file=path,
-                                 where=f"MeasurementResults id={mr.get('id')}/{_local(a.tag)} id={a.get('id')}")
-            actuals.append(Actual(it, _num(path, a, "Value", f"actual {a.get('id')}", scale),
+                                 "FeatureMeasurement or FeatureActual with that id)", file=path, where=here)
+            actuals.append(Actual(it, _num(path, a, "Value", here, scale, angle=it.definition.kind in ANGLE_KINDS),
                                   None if st is None else _text(st, "CharacteristicStatusEnum"),
                                   [c.text.strip() for c in fm if c.text]))
         ins = _child(mr, "InspectionStatus")

@@ -393,3 +393,12 @@ def a_qif_characteristic_item_id_used_twice(tmp):
     return qif_edit(tmp, "nist_sms_plate_excerpt.qif", '<DiameterCharacteristicItem id="23">',
                     '<DiameterCharacteristicItem id="14">', ["--out", str(tmp / "copy.qif")]), "part.qif", [
         "DiameterCharacteristicItem id=14 (the second)", "also FlatnessCharacteristicItem id=14, the first"]
+
+
+@case("qif")
+def a_qif_measured_value_of_1e300(tmp):
+    """Was written into the stand-in task, which build then refused naming the task, not the QIF."""
+    return qif_edit(tmp, "nist_sms_plate_excerpt.qif", "<Value>0.008</Value>", "<Value>1e300</Value>",
+                    ["--stand-in", "--out", str(tmp / "t.toml")]), "part.qif", [
+        "MeasurementResults id=183/PerpendicularityCharacteristicActual id=30", "Value 1e300",
+        "outside the plausible machine range"]
