@@ -233,6 +233,10 @@ def _read_characteristics(path, doc, features: dict[str, ch.FeatureSpec], frames
         for k in ("nominal", "lsl", "usl", "measured"):
             if k in t:
                 kw[k] = _tolerance_number(path, t, sec, k, lo_zero=False)
+        if "lsl" in kw and "usl" in kw and not kw["lsl"] < kw["usl"]:
+            raise InputError(f"{cname}: the lower limit lsl = {kw['lsl']:g} must be below the upper usl = "
+                             f"{kw['usl']:g}",
+                             file=path, where=f"{sec} lsl")
         if "tolerance_mm" in t:
             kw["tolerance_mm"] = _tolerance_number(path, t, sec, "tolerance_mm", lo_zero=True)
         for k in ("method", "frame", "datum", "zone", "material_condition", "size"):

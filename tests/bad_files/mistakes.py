@@ -291,6 +291,13 @@ def a_minimum_zone_flatness_of_three_points(tmp):
 
 
 @case("messages")
+def a_characteristic_with_its_limits_swapped(tmp):
+    """Was refused naming '[[characteristics]] dia_H1', no key and no line."""
+    return plate(tmp, ("lsl = 10.0\nusl = 10.05", "lsl = 10.05\nusl = 10.0")), "plate.toml", [
+        "[[characteristics]] #1 lsl (line 91)", "lsl = 10.05 must be below the upper usl = 10"]
+
+
+@case("messages")
 def identical_calibration_records(tmp):
     """One line copied: the message named the task, not the recordings."""
     return calibrate(tmp, LENGTHS + "L5,0,10,0,200,10,0,200,199.9996\n"), "rec.csv", [
