@@ -292,14 +292,18 @@ def test_a_characteristics_only_file_names_the_routes_it_has(tmp_path, capsys):
                          ["no measured points", "--out COPY.qif", "--stand-in --out TASK.toml"])
 
 
-@pytest.mark.parametrize("topic", [[], ["import"]])
+@pytest.mark.parametrize("topic", [[], ["import"], ["build"], ["new"]])
 def test_every_help_names_the_characteristics_route(capsys, topic):
+    """The help of cmmwb, import, and of the two commands a task is started (new) and decided
+    (build) with."""
     with pytest.raises(SystemExit):
         main([*topic, "--help"])
     text = " ".join(capsys.readouterr().out.split())
     assert "characteristics" in text
-    if topic:
+    if topic == ["import"]:
         assert "--out COPY.qif" in text and "--stand-in" in text and "--part" in text
+    elif topic:
+        assert "cmmwb import results.qif --stand-in --out plate.toml" in text
 
 
 @pytest.fixture(scope="module")
