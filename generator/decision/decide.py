@@ -141,6 +141,9 @@ def read_spec(path: Path, doc: dict, kind: str) -> DecisionSpec | None:
                          f"{kind} task's U uses its own coverage factor", file=path, where=f"[{SECTION}] k")
     if k is not None and not (0 < k <= 10):
         raise InputError(f"must be a coverage factor in (0, 10], got {k!r}", file=path, where=f"[{SECTION}] k")
+    if r is not None and r > 10:     # like k: r = 1e300 accepted (guarded_rejection) any value at all
+        raise InputError(f"must be a guard-band factor in [0, 10] (w = r·U), got {r!r}", file=path,
+                         where=f"[{SECTION}] r")
     try:
         rule = cf.DecisionRule(rule_kind, 1.0 if r is None else r, 0.05 if pfa is None else pfa)
     except ModelError as e:

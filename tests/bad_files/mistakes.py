@@ -230,6 +230,14 @@ def a_false_acceptance_of_1e_minus_17(tmp):
 
 
 @case("edge")
+def a_guard_band_factor_of_1e300(tmp):
+    """guarded_rejection with r = 1e300 accepted every value up to 1e297 mm beyond the limits."""
+    toml = with_tolerance("guarded_rejection", tol_mm=0.01).replace('rule = "guarded_rejection"\n',
+                                                                     'rule = "guarded_rejection"\nr = 1e300\n')
+    return small(tmp, toml), "small.toml", ["[decision] r", "guard-band factor in [0, 10]"]
+
+
+@case("edge")
 def a_secondary_datum_given_as_a_list(tmp):
     return plate(tmp, ('secondary = "B"', 'secondary = ["B"]')), "plate.toml", [
         "[[frames]] #1 secondary (line", "the name of one datum feature"]
