@@ -58,3 +58,26 @@ def test_ctrl_c_to_a_slow_build_keeps_what_a_fast_build_finished_in_its_new_fold
     assert names == [".cmmwb-manifest.json", "fast.json", "fast.xlsx"], names     # nothing of the slow build
     manifest = json.loads((out / ".cmmwb-manifest.json").read_text(encoding="utf-8"))
     assert manifest["tasks"] == {"fast": ["fast.json", "fast.xlsx"]}
+
+
+def test_a_ctrl_c_during_the_commit_says_the_outputs_were_written(tmp_path, capsys, monkeypatch):
+    """Ctrl-C while a build moves its outputs into DIR is held back until they are all there; the
+    build then ends with 130, and says that its outputs were written (it said only 'interrupted',
+    as if nothing had been: a two-process test read it so and failed when the signal came then)."""
+    import os
+
+    from cmmwb.generator.cli import main
+    from cmmwb.generator.workbook import atomic
+
+    commit = atomic.Staging._commit
+
+    def commit_with_ctrl_c(self):
+        os.kill(os.getpid(), signal.SIGINT)      # arrives in the middle of the commit
+        commit(self)
+
+    monkeypatch.setattr(atomic.Staging, "_commit", commit_with_ctrl_c)
+    fast = write_random_task(tmp_path, seed=2, m=5, name="fast")
+    out = tmp_path / "D"
+    assert main(["build", str(fast), "--out", str(out), "--no-plots"]) == 130
+    assert capsys.readouterr().err.strip() == f"cmmwb: interrupted after its outputs were written, complete, into {out}"
+    assert sorted(p.name for p in out.iterdir()) == [".cmmwb-manifest.json", "fast.json", "fast.xlsx"]
