@@ -24,7 +24,7 @@ from cmmwb.xlfuncs.limits import coordinate_problem
 from .. import __version__
 from ..errors import InputError, model_errors_named
 from ..quantities import Cells, Quantity, ToleranceKeys
-from ..taskfile import COMMON_TABLES, check_keys, number, table, task_kind_and_name, text_list
+from ..taskfile import COMMON_TABLES, check_keys, number, place, table, task_kind_and_name, text_list
 from ..taskkind import always_exact, no_verdicts
 from ..workbook.book import RESULTS, BookAdditions
 from ..workbook.xlref import cell, check_name
@@ -218,8 +218,10 @@ def load(path: Path, doc: dict) -> Task:
     for n, entry in enumerate(raw, start=1):
         c = _read_characteristic(path, n, entry, points, ds)
         if c.name.lower() in seen:
+            first = place(path, f"[[characteristics]] #{seen[c.name.lower()]} key 'name'")
             raise _err(path, f"{c.where} key 'name'",
-                       f"{c.name!r} is also the name of characteristic #{seen[c.name.lower()]}")
+                       f"{c.name!r} is also the name of characteristic #{seen[c.name.lower()]} (at {first}; "
+                       "names are sheet names: letter case aside, each is another)")
         seen[c.name.lower()] = n
         chars.append(c)
     task = Task(path, name, mpe, points, ds, chars, list(notes))

@@ -18,7 +18,9 @@ def register(sub) -> None:
                     ("cmmwb build gauge.toml --out gauge",
                      "cmmwb build gauge.toml --out gauge --force      # after editing the workbook",
                      "cmmwb build bore.toml --out bore --no-plots --cache none",
-                     "cmmwb build knuckle.toml --out knuckle --pdf    # and a printed PDF for the audit file"))
+                     "cmmwb build knuckle.toml --out knuckle --pdf    # and a printed PDF for the audit file",
+                     "cmmwb import results.qif --stand-in --out plate.toml && cmmwb build plate.toml --out plate"
+                     "   # a QIF file's characteristics decided (docs/import.md)"))
     s.add_argument("task", metavar="TASK.toml", help="the task file (see cmmwb new)")
     s.add_argument("--out", required=True, metavar="DIR", help="output folder (created if missing)")
     s.add_argument("--no-plots", action="store_true", help="skip the PNG plots (default: write them)")

@@ -154,14 +154,14 @@ def parse_effect(text: str, probes) -> tuple[str, object]:
     if name == "probe_qualification":
         if ":" not in value:
             raise InputError("expected probe_qualification=PROBE:dx,dy,dz (µm)", where=where)
-        pid, vec = value.split(":", 1)
+        pid, vec = value.rsplit(":", 1)      # a probe id may hold ":" (the numbers do not)
         return name, {pid.strip(): numbers(vec, 3)}
     if name == "offset_drift":
         return name, numbers(value, 3)
     if name == "probe_lobing":
         if ":" not in value:
             raise InputError("expected probe_lobing=PROBE:c2,s2,c3,s3,c4,s4 (µm)", where=where)
-        pid, vec = value.split(":", 1)
+        pid, vec = value.rsplit(":", 1)      # a probe id may hold ":" (the numbers do not)
         return name, {pid.strip(): numbers(vec, 6)}
     if name in sm.STRAIGHTNESS_NAMES:
         return name, numbers(value, 2)       # c2, c3 (µm): orders 2 and 3 of the travel

@@ -17,7 +17,7 @@ from cmmwb.xlfuncs.distributed import get_backend
 from cmmwb.xlfuncs.locator import diagnose as dg
 from cmmwb.xlfuncs.locator import simulate as sm
 from cmmwb.xlfuncs.locator.recordings import RecordingsError, parse_recordings, write_recordings
-from cmmwb.xlfuncs.memory import ResourceError, check_diagnose_fits
+from cmmwb.xlfuncs.memory import ResourceError, check_diagnose_fits, check_records_fit
 from cmmwb.xlfuncs.model import MPE1  # Forbes 2025 Table 3, MPE1: the model of the demonstrations
 
 from .. import __version__
@@ -60,6 +60,11 @@ def read_recordings(path: Path):
     from ..workbook.guarded import read_text
 
     text = read_text(path, "recordings")   # a regular file within its size cap, UTF-8
+    lines = text.count("\n") + (not text.endswith("\n")) - text.count("\n#") - text.startswith("#")
+    try:
+        check_records_fit(max(lines - 1, 0))       # before parsing: the data lines are the records
+    except ResourceError as e:
+        raise InputError(str(e), file=path) from None
     try:
         return parse_recordings(text)
     except RecordingsError as e:

@@ -25,11 +25,24 @@ AQDEF_SUFFIXES = (".dfq", ".dfd", ".dfx")
 
 
 def run_import(src: Path, out: Path, *, features: list[str] | None = None, kind: str | None = None,
-               normals: str = "file", force: bool = False) -> tuple[list[Path], list[str]]:
+               normals: str = "file", force: bool = False, stand_in: bool = False,
+               part: str | None = None) -> tuple[list[Path], list[str]]:
     """Import ``src`` into ``out`` (``.toml``: a task with its points CSV beside it; ``.csv``:
-    recordings).  Returns the files written and the report lines (what was read, converted,
-    derived and left out)."""
+    recordings; ``.qif``: a copy with the characteristics' u; ``stand_in``: the characteristics as
+    a characteristic task of the simulated stand-in part, the values of ``part``).  Returns the
+    files written and the report lines (what was read, converted, derived and left out)."""
     src, out = Path(src), Path(out)
+    if (stand_in or part is not None) and src.suffix.lower() not in QIF_SUFFIXES:
+        raise InputError("--stand-in and --part read a QIF file's characteristics", file=src)
+    if part is not None and not stand_in:
+        raise InputError("--part chooses the measured part of a --stand-in task; give --stand-in too",
+                         where="--part")
+    if stand_in:
+        if features or kind:
+            raise InputError("--stand-in writes every characteristic of the file on the stand-in part: leave "
+                             "--feature and --kind out", where="--stand-in")
+        from .qif_stand_in import write_stand_in_task
+        return write_stand_in_task(src, out, part=part, force=force)
     suffix = src.suffix.lower()
     if suffix in AQDEF_SUFFIXES:
         from .aqdef import import_aqdef
