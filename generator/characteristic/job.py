@@ -36,7 +36,6 @@ from cmmwb.xlfuncs.errors import ModelError
 from cmmwb.xlfuncs.limits import coordinate_problem
 
 from .. import __version__
-from ..decision.decide import margin_label as decision_margin_label
 from ..errors import InputError
 from ..quantities import Cells, Quantity, ToleranceKeys
 from ..taskcloud import check_label, read_point_cloud
@@ -325,7 +324,7 @@ def _read_characteristics(path, doc, features: dict[str, ch.FeatureSpec], frames
                                  f"feature {feats[0]!r} has {m}", file=path, where=f"{sec} method")
         chars.append(ch.CharacteristicSpec(cname, typ, feats, **kw))
         places.append(sec)
-    margins = {decision_margin_label(c.name): c.name for c in chars
+    margins = {margin_label(c.name): c.name for c in chars
                if c.type == "position" and c.material_condition != "RFS"}
     for c, sec in zip(chars, places):
         if c.name in margins:
