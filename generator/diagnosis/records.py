@@ -130,15 +130,15 @@ def _record_sheet(book: Book, rec, sheet: str, columns: list[str], derived: list
     xi = {k: len(cols) + i + 1 for i, k in enumerate(extras)}
     ci.update({k: len(cols) + len(extras) + i + 1 for i, k in enumerate(derived)})
     taken = {shown(h, mm_columns) for h in cols + derived}
-    texts = ([shown(h, mm_columns) for h in cols] + [f"{h} (recordings)" if h in taken else h for h in extras]
+    heads = ([shown(h, mm_columns) for h in cols] + [f"{h} (recordings)" if h in taken else h for h in extras]
              + [shown(h, mm_columns) for h in derived])
-    book.header(ws, 1, 1, texts, [notes.get(h) for h in cols] + [None] * len(extras) + [notes.get(h) for h in derived])
+    book.header(ws, 1, 1, heads, [notes.get(h) for h in cols] + [None] * len(extras) + [notes.get(h) for h in derived])
     # the headers wrap (an effect's column is named "squareness_xy:squareness_xy (µm per µrad)"):
     # the columns are as wide as their numbers, fewer pages across
-    for c in range(1, len(texts) + 1):
+    for c in range(1, len(heads) + 1):
         cell_ = ws.cell(row=1, column=c)
         cell_.alignment = Alignment(wrap_text=True, vertical="top")
-    ws.row_dimensions[1].height = LINE_PT * max(wrapped_lines(t, HEADER_WIDTH) for t in texts) + 2
+    ws.row_dimensions[1].height = LINE_PT * max(wrapped_lines(t, HEADER_WIDTH) for t in heads) + 2
     for k, v in data.items():
         _input_column(book, ws, 2, ci[k], v)
     texts = {"id": rec.ids, **texts}
