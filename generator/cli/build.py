@@ -19,7 +19,7 @@ def register(sub) -> None:
                      "cmmwb build gauge.toml --out gauge --force      # after editing the workbook",
                      "cmmwb build bore.toml --out bore --no-plots --cache none",
                      "cmmwb build knuckle.toml --out knuckle --pdf    # and a printed PDF for the audit file",
-                     "cmmwb import results.qif --stand-in --out plate.toml && cmmwb build plate.toml --out plate"
+                     "cmmwb import results.qif --stand-in --out nist_plate.toml && cmmwb build nist_plate.toml --out nist_plate"
                      "   # a QIF file's characteristics decided (docs/import.md)"))
     s.add_argument("task", metavar="TASK.toml", help="the task file (see cmmwb new)")
     s.add_argument("--out", required=True, metavar="DIR", help="output folder (created if missing)")

@@ -37,8 +37,8 @@ def register(sub) -> None:
                      "cmmwb import part.qif --out gauge.toml --feature SPH_1 --feature SPH_2   # a pointcloud task",
                      "cmmwb import part.qif --out part.csv && cmmwb diagnose part.csv --task bore.toml --out diag",
                      "cmmwb import results.qif --out results_u.qif      # the characteristics' u, in a copy",
-                     "cmmwb import results.qif --stand-in --part 183 --out plate.toml && cmmwb build plate.toml "
-                     "--out plate"))
+                     "cmmwb import results.qif --stand-in --part 158 --out nist_plate.toml && cmmwb build nist_plate.toml "
+                     "--out nist_plate"))
     s.add_argument("file", metavar="FILE",
                    help="a QIF file (.qif) or an AQDEF file (.dfq, .dfd with its .dfx)")
     s.add_argument("--out", required=True, help="task file to write (.toml; the points go to the .csv "

@@ -19,7 +19,7 @@ def register(sub) -> None:
                     ("cmmwb new pointcloud --out gauge.toml   # also writes gauge_points.csv",
                      "cmmwb new budget --out knuckle.toml", "cmmwb new feature --out bore.toml",
                      "cmmwb new characteristic --out plate.toml   # also writes plate_points.csv",
-                     "cmmwb import results.qif --stand-in --out plate.toml   # a characteristic task from a QIF "
+                     "cmmwb import results.qif --stand-in --out nist_plate.toml   # a characteristic task from a QIF "
                      "file's characteristics (docs/import.md)"))
     s.add_argument("kind", choices=KINDS, help="task kind: " + ", ".join(KINDS))
     s.add_argument("--out", required=True, metavar="TASK.toml", help="task file to write")

@@ -114,6 +114,8 @@ def workshop(tmp_path_factory) -> Path:
     for name, source in COPIES.items():
         shutil.copy2(shop / source, shop / name)
     write_part_qif(shop / "part.qif")
+    # a QIF results file with characteristics and no points (NIST's SMS plate, public domain)
+    shutil.copy2(ROOT / "tests" / "data" / "qif" / "nist_sms_plate_results.qif", shop / "results.qif")
     (shop / "workbook_templates").mkdir()
     shutil.copy2(ROOT / "workbook_templates" / "pointcloud_template.xlsx", shop / "workbook_templates")
     return shop

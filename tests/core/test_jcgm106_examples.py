@@ -241,7 +241,13 @@ def test_bearing_acceptance_limit_in_the_json(bearing_book):
         a_u_um = (d["acceptance_limits_mm"][1] - 50.0) / scale[d["characteristic"]]
         assert abs(a_u_um - SUNCAL["A_U_um"]) <= 1e-9 and printed(a_u_um, 1.67, 2)
         assert d["p_c"] == pytest.approx(cf.norm_cdf((T_U_UM - eta) / U_M_UM), rel=1e-9)
-    assert [d["outcome"] for d in results["decisions"]] == [cf.CONFORMS, cf.DOES_NOT_CONFORM, cf.DOES_NOT_CONFORM]
+    # the rule's outcome (guarded acceptance) and, apart from it, what value and U prove (ISO 14253-1)
+    assert [d["outcome"] for d in results["decisions"]] == [cf.ACCEPTED, cf.REJECTED, cf.REJECTED]
+    for d in results["decisions"]:
+        usl, U_mm = d["usl_mm"], d["U_um"] / 1000
+        expected = (cf.CONFORMITY_PROVEN if d["value_mm"] <= usl - U_mm else
+                    cf.NONCONFORMITY_PROVEN if d["value_mm"] > usl + U_mm else cf.NEITHER_PROVEN)
+        assert d["conformity"] == expected, d
 
 
 @pytest.mark.parametrize("engine", ENGINES)
@@ -319,14 +325,14 @@ def specific_risk_book(tmp_path_factory):
 def test_specific_risk_limits_in_the_json_are_exact(specific_risk_book):
     results, _, c_ms = specific_risk_book
     d0, d1, d2 = results["decisions"]
-    assert d0["acceptance_interval_empty"] and d0["outcome"] == cf.DOES_NOT_CONFORM
+    assert d0["acceptance_interval_empty"] and d0["outcome"] == cf.REJECTED
     for d in (d1, d2):
         tol = cf.Tolerance(d["lsl_mm"], d["usl_mm"])
         lo, hi = cf.acceptance_limits_for_p_c(tol, d["u_um"], 0.95)
         assert close(d["acceptance_limits_mm"][1], hi, rel=1e-12) and close(d["acceptance_limits_mm"][0], lo, rel=1e-12)
         assert cf.probability_of_conformance(d["acceptance_limits_mm"][1], d["u_um"], tol) == pytest.approx(0.95, abs=1e-9)
         # the value at the one-sided limit T_U - z·u: inside T_U - z·u, beyond the exact limit, p_c < 0.95
-        assert d["value_mm"] > d["acceptance_limits_mm"][1] and d["p_c"] < 0.95 and d["outcome"] == cf.DOES_NOT_CONFORM
+        assert d["value_mm"] > d["acceptance_limits_mm"][1] and d["p_c"] < 0.95 and d["outcome"] == cf.REJECTED
     assert d1["w_um"] > cf.norm_ppf(0.95) * d1["u_um"] * 1.01      # C_m = 1: the far tail matters
 
 
@@ -345,7 +351,7 @@ def test_specific_risk_limits_in_the_workbook_are_exact(specific_risk_book, engi
         assert close(a_u, hi, rel=1e-9) and close(a_l, lo, rel=1e-9)
         if i:
             assert cf.probability_of_conformance(a_u, d["u_um"], tol) == pytest.approx(0.95, abs=1e-6)
-        assert v[at(8 + i, "outcome")] == d["outcome"] == cf.DOES_NOT_CONFORM
+        assert v[at(8 + i, "outcome")] == d["outcome"] == cf.REJECTED
 
 
 # -- 9.5: global risks of a normal process in the Decision sheet ---------------------------------

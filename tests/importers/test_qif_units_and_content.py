@@ -174,7 +174,7 @@ def test_an_item_measured_several_times_per_part_shows_every_value(tmp_path):
     """DIAMETER4 is a pattern of four holes: the report showed the last value only."""
     _, report = run_import(EXCERPT, tmp_path / "copy.qif")
     dia = next(r for r in report if r.startswith("DIAMETER4 "))
-    assert "part 183 (4 measurements): 4.486 PASS, 4.481 PASS, 4.481 PASS, 4.482 PASS" in dia
+    assert "part 183 (4 measurements): 4.486 mm PASS, 4.481 mm PASS, 4.481 mm PASS, 4.482 mm PASS" in dia
 
 
 def test_the_copy_says_where_each_uncertainty_comes_from(tmp_path):
@@ -303,7 +303,7 @@ def test_every_help_names_the_characteristics_route(capsys, topic):
     if topic == ["import"]:
         assert "--out COPY.qif" in text and "--stand-in" in text and "--part" in text
     elif topic:
-        assert "cmmwb import results.qif --stand-in --out plate.toml" in text
+        assert "cmmwb import results.qif --stand-in --out nist_plate.toml" in text
 
 
 @pytest.fixture(scope="module")

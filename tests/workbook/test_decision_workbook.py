@@ -120,8 +120,9 @@ def test_a_k_typed_on_the_decision_sheet_changes_the_summary_statement(tmp_path)
     edited = tmp_path / "k3.xlsx"
     wb.save(edited)
     v = recalc(edited, "formulas")["Summary"]
-    statements = [t for t in v.values() if isinstance(t, str) and "coverage probability" in t]
-    assert len(statements) >= 4
+    statements = [t for t in v.values() if isinstance(t, str) and "coverage probability ≈" in t]
+    # one statement per result: r0_mm (decided) and the axis point x_A_mm, y_A_mm
+    assert sorted(t.split(" = ")[0] for t in statements) == ["r0_mm", "x_A_mm", "y_A_mm"], statements
     assert all(t.endswith("(k = 3, coverage probability ≈ 99.73 %)") for t in statements), statements
 
 
