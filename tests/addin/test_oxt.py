@@ -224,6 +224,7 @@ def _relink_refused(capsys, book: Path, out: Path, *words: str) -> None:
     assert not out.exists()
 
 
+@pytest.mark.foreign_books   # a macro workbook and a CSV named .xlsx: hostile files on purpose
 def test_relink_runs_the_workbook_guard_first(tmp_path, capsys, large_book):
     """A macro workbook was relinked by LibreOffice without a word."""
     book = tmp_path / "plate.xlsx"
@@ -234,6 +235,7 @@ def test_relink_runs_the_workbook_guard_first(tmp_path, capsys, large_book):
     _relink_refused(capsys, book, tmp_path / "plate.ods", "vbaProject")
 
 
+@pytest.mark.foreign_books
 def test_relink_of_a_csv_named_xlsx(tmp_path, capsys):
     book = tmp_path / "points.xlsx"
     book.write_text("id,x,y,z\nA,0,0,0\n", encoding="utf-8")
