@@ -50,6 +50,7 @@ from . import blocked as bl
 from . import features as ft
 from . import pointcloud as pc
 from .errors import ModelError
+from .model.hyperparameters import PROBE_OVERRIDES
 
 __all__ = [
     "cmm_v_block", "cmm_v_et", "cmm_v_er", "cmm_v_p", "cmm_pair_block", "cmm_pair_blocks",
@@ -127,8 +128,7 @@ def parse_probes(probes: Any) -> tuple[pc.Probe, ...]:
                              f"sigma_P0_um, sigma_P_um, lambda_P), got {len(r)}")
         pid = _text(r[0])
         off = tuple(_number(r[1 + a], f"probe {pid} p{'xyz'[a]}_mm") for a in range(3))
-        sig = [_number(r[4 + q], f"probe {pid} {n}") for q, n in
-               enumerate(("sigma_PQ_um", "sigma_P0_um", "sigma_P_um", "lambda_P"))]
+        sig = [_number(r[4 + q], f"probe {pid} {n}") for q, n in enumerate(PROBE_OVERRIDES)]
         out.append(pc.Probe(pid, off, *sig))
     if not out:
         raise ModelError("probes: no probe given")

@@ -31,6 +31,7 @@ from cmmwb.xlfuncs.locator import diagnose as dg
 from cmmwb.xlfuncs.locator import effects as fx
 from cmmwb.xlfuncs.locator.recordings import RecordingsError, write_recordings
 from cmmwb.xlfuncs.locator.report import effect_estimates
+from cmmwb.xlfuncs.model.hyperparameters import PROBE_OVERRIDES
 
 from .. import __version__
 from ..diagnosis.run import read_recordings
@@ -288,7 +289,7 @@ def fitted_toml(doc: dict | None, params: pc.Parameters, result: dict) -> str:
     doc["parameters"] = {k: float(getattr(params, k)) for k in pc.Parameters.__dataclass_fields__}
     dropped = []
     for p in doc.get("probes", []) or []:
-        for k in ("sigma_PQ_um", "sigma_P0_um", "sigma_P_um", "lambda_P"):
+        for k in PROBE_OVERRIDES:
             if k in p:
                 dropped.append(f"{p.get('id', '?')}.{k}")
                 del p[k]

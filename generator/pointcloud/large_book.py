@@ -33,6 +33,7 @@ import numpy as np
 
 from cmmwb.xlfuncs import blocked as bl
 from cmmwb.xlfuncs import pointcloud as pc
+from cmmwb.xlfuncs.model.hyperparameters import HYPER, PROBE_OVERRIDES, of_factor
 
 from .. import __version__
 from ..errors import InputError
@@ -236,13 +237,13 @@ def _write_snapshot(book: Book, ws, task, c0: int) -> None:
                  "largest rounding difference accepted", "|now - build| <= tolerance"])
     rows: list[tuple[str, float, str, float]] = []
     p = task.params
-    for key in ("sigma_ET_um", "lambda_ET_mm", "sigma_ER_urad", "lambda_ER_mm"):
+    for key in (*of_factor("ET"), *of_factor("ER")):
         v = getattr(p, key)
         rows.append((key, v, key, 1e-12 * abs(v)))
     for k, probe in enumerate(task.cloud.probes):
         res = probe.resolved(p)
         vals = [(f"p{'xyz'[a]}_mm", res.offset_mm[a]) for a in range(3)] + \
-               [(key, getattr(res, key)) for key in ("sigma_P0_um", "sigma_P_um", "lambda_P")]
+               [(key, getattr(res, key)) for key in PROBE_OVERRIDES if HYPER[key].factor == "P"]
         for key, v in vals:
             rows.append((f"probe {probe.id} {key}", float(v), f"probe{k + 1}_{key}", 1e-12 * abs(v)))
     m = task.cloud.m

@@ -35,7 +35,6 @@ from openpyxl.utils import column_index_from_string, get_column_letter, range_bo
 from .atomic import replacing
 
 MODES = ("results", "all", "none")
-FACTORS = ("R", "PQ", "S", "ET", "ER", "P")
 #: what the feature Results show where u_um or u_urad does not apply (generator.feature.book)
 FEATURE_NOT_APPLICABLE = "—"
 ERRORS = {"#NULL!", "#DIV/0!", "#VALUE!", "#REF!", "#NAME?", "#NUM!", "#N/A", "#GETTING_DATA"}
@@ -61,7 +60,7 @@ def results_table(kind: str, results: dict) -> list[dict[str, Any]]:
     """The rows of the ``Results`` sheet as the JSON gives them, keyed by column name."""
     if kind == "pointcloud":
         return [{"from": d["from"], "to": d["to"], "d_mm": d["d_mm"], "u_um": d["u_um"], "U_um": d["U_um"],
-                 **{f"u_{f}_um": d["components_um"][f] for f in FACTORS}} for d in results["distances"]]
+                 **{f"u_{f}_um": u for f, u in d["components_um"].items()}} for d in results["distances"]]
     if kind == "budget":
         return [{"name": c["name"], "variant": c["variant"], "value_mm": c["value_mm"], "u_um": c["u_um"],
                  "U_um": c["U_um"]} for c in results["characteristics"]]

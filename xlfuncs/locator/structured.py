@@ -38,6 +38,7 @@ from .. import lowrank as lr
 from .. import pointcloud as pc
 from ..errors import ModelError
 from ..model import G_S, skew
+from ..model.hyperparameters import PROBE_OVERRIDES
 
 #: points per block of the passes over U
 BLOCK_POINTS = 4096
@@ -158,7 +159,7 @@ class StructuredCovariance:
         if "ER" in self.facs:
             LER = self.facs["ER"][0].rows(self.U_ram[sl]).T * (p.sigma_ER_urad * pc.MILLI)
         N = cloud.N[sl]
-        sPQ, s0, sp = (self.pa[n][sl] for n in ("sigma_PQ_um", "sigma_P0_um", "sigma_P_um"))
+        sPQ, s0, sp = (self.pa[n][sl] for n in PROBE_OVERRIDES[:3])   # sigma_PQ_um, sigma_P0_um, sigma_P_um
         offsets = np.array([pr.offset_mm for pr in cloud.probes], dtype=float).reshape(-1, 3)
         for q in range(len(cloud.probes)):
             here = np.flatnonzero(kp == q)

@@ -32,23 +32,23 @@ import numpy as np
 
 from ..errors import ModelError
 from .geometry import G_S, skew, sq_dists
+from .hyperparameters import PROBE_OVERRIDES, S_COLUMNS
 from .parameters import FACTORS, MILLI, Parameters, PointCloud
 
 
 def V_S_diag_um_per_mm2(params: Parameters) -> np.ndarray:
     """Diagonal of V_B of eq. (13), converted from ppm² to (µm/mm)²."""
-    s = np.array([params.sigma_S_ppm, params.sigma_Sa_ppm, params.sigma_Sa_ppm, params.sigma_Sa_ppm,
-                  params.sigma_Q_ppm, params.sigma_Q_ppm, params.sigma_Q_ppm]) * MILLI
+    s = np.array([getattr(params, n) for n in S_COLUMNS]) * MILLI
     return s**2
 
 
 def probe_arrays(cloud: PointCloud, params: Parameters) -> dict[str, np.ndarray]:
-    """Per point (length m): the sigma_PQ_um, sigma_P0_um, sigma_P_um and lambda_P of its probe,
-    per-probe overrides resolved against the task-wide defaults."""
+    """Per point (length m): the hyper-parameters a probe may override (``PROBE_OVERRIDES``:
+    sigma_PQ_um, sigma_P0_um, sigma_P_um, lambda_P) of its probe, per-probe overrides resolved
+    against the task-wide defaults."""
     probes = [p.resolved(params) for p in cloud.probes]
     k = cloud.probe_index
-    return {n: np.array([getattr(p, n) for p in probes], dtype=float)[k]
-            for n in ("sigma_PQ_um", "sigma_P0_um", "sigma_P_um", "lambda_P")}
+    return {n: np.array([getattr(p, n) for p in probes], dtype=float)[k] for n in PROBE_OVERRIDES}
 
 
 def gauss_kernel(D2: np.ndarray, lam2, d_log_lambda: bool = False) -> np.ndarray:

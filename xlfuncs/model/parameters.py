@@ -14,8 +14,9 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from ..errors import ModelError
+from .hyperparameters import FACTORS, MACHINE_SIGMAS, PARTNER, PROBE_OVERRIDES
 
-FACTORS: tuple[str, ...] = ("R", "PQ", "S", "ET", "ER", "P")
+__all__ = ["FACTORS", "MILLI", "MAX_PARAMETER", "MIN_LENGTH_SCALE", "Parameters", "Probe", "PointCloud"]
 
 #: conversion of ppm*mm (or µrad*mm) to µm
 MILLI = 1e-3
@@ -36,7 +37,8 @@ def _check_length_scale(lam_name: str, lam: float, sigma_name: str, sigma: float
 class Parameters:
     """Statistical hyper-parameters of Forbes 2025, Tables 1 and 3 (task-file names and units).
 
-    ``sigma_PQ_um``, ``sigma_P0_um``, ``sigma_P_um`` and ``lambda_P`` are defaults that a
+    One field per record of :data:`xlfuncs.model.hyperparameters.HYPERPARAMETERS`, in its order
+    (checked by ``tests/core/test_hyperparameters.py``); those with ``per_probe`` are defaults that a
     probe may override.
     """
 
@@ -53,11 +55,8 @@ class Parameters:
     sigma_P_um: float = 0.0
     lambda_P: float = 0.0
 
-    #: names of the standard-deviation parameters, rescaled by C_max (section 6.8)
-    SIGMAS = (
-        "sigma_R_um", "sigma_S_ppm", "sigma_Sa_ppm", "sigma_Q_ppm", "sigma_PQ_um",
-        "sigma_ET_um", "sigma_ER_urad", "sigma_P0_um", "sigma_P_um",
-    )
+    #: names of the machine's standard-deviation parameters, rescaled by C_max (section 6.8)
+    SIGMAS = MACHINE_SIGMAS
 
     def __post_init__(self) -> None:
         for name in self.__dataclass_fields__:
@@ -68,8 +67,7 @@ class Parameters:
                 raise ModelError(f"{name} must not be negative, got {value!r}")
             if value > MAX_PARAMETER:
                 raise ModelError(f"{name} = {value!r} is beyond any CMM (at most {MAX_PARAMETER:g})")
-        for sigma, lam in (("sigma_ET_um", "lambda_ET_mm"), ("sigma_ER_urad", "lambda_ER_mm"),
-                           ("sigma_P_um", "lambda_P")):
+        for lam, sigma in PARTNER.items():
             _check_length_scale(lam, getattr(self, lam), sigma, getattr(self, sigma))
 
     def scaled(self, factor: float) -> "Parameters":
@@ -94,11 +92,13 @@ class Probe:
     def resolved(self, params: Parameters) -> "Probe":
         """A copy with every ``None`` replaced by the task-wide default."""
         vals = {n: getattr(params, n) if getattr(self, n) is None else getattr(self, n)
-                for n in ("sigma_PQ_um", "sigma_P0_um", "sigma_P_um", "lambda_P")}
+                for n in PROBE_OVERRIDES}
         for n, v in vals.items():
             if not math.isfinite(v) or v < 0 or v > MAX_PARAMETER:
                 raise ModelError(f"probe {self.id}: {n} must be a finite number from 0 to {MAX_PARAMETER:g}")
-        _check_length_scale(f"probe {self.id}: lambda_P", vals["lambda_P"], "sigma_P_um", vals["sigma_P_um"])
+        for lam, sigma in PARTNER.items():
+            if lam in vals:
+                _check_length_scale(f"probe {self.id}: {lam}", vals[lam], sigma, vals[sigma])
         return replace(self, **vals)
 
 
