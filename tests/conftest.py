@@ -43,6 +43,7 @@ NUMERIC_MODULES = {
     "test_budget_dof",
     "test_model_paths",
     "test_diagnose_effect_formulas",
+    "test_workpiece", "test_hyperparameters",
 }
 
 

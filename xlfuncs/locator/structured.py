@@ -43,6 +43,18 @@ from ..model.hyperparameters import PROBE_OVERRIDES
 #: points per block of the passes over U
 BLOCK_POINTS = 4096
 
+#: the factor W is not (yet) a block of U: what the structured operators answer a task with it
+NO_WORKPIECE = ("the factor W (the workpiece's temperature, [workpiece]) is not in the structured record "
+                "covariance of large recordings: use the dense covariance (--exact; diagnose: at most "
+                "6,000 point observations by default, calibrate: --covariance dense) or leave [workpiece] "
+                "out of the task (or set [workpiece] enabled = false)")
+
+
+def refuse_workpiece(cloud: pc.PointCloud) -> None:
+    """:data:`NO_WORKPIECE` as a ModelError when the cloud carries the factor W, switched on."""
+    if cloud.W_on:
+        raise ModelError(NO_WORKPIECE)
+
 
 @dataclass
 class StructuredCovariance:
@@ -59,6 +71,7 @@ class StructuredCovariance:
         p = self.params
         if p.sigma_R_um <= 0:
             raise ModelError("the structured record covariance needs sigma_R_um > 0")
+        refuse_workpiece(self.cloud)
         self.d = p.sigma_R_um ** 2
         cloud = self.cloud
         self.pa = pc.probe_arrays(cloud, p)

@@ -16,7 +16,10 @@ Derived here: ``FACTORS``, ``NAMES``, ``UNITS``, ``PARTNER``, ``LINEAR``, ``GP``
 units of the workbooks' Inputs sheet.  ``tests/core/test_hyperparameters.py`` checks that
 :class:`xlfuncs.model.Parameters` has exactly these fields, in this order.
 
-Forbes 2025 (Tables 1 and 3, eq. 28) gives the six machine factors R, PQ, S, ET, ER, P.
+Forbes 2025 (Tables 1 and 3, eq. 28) gives the six machine factors R, PQ, S, ET, ER, P; the
+seventh, W, is the workpiece's thermal expansion (``docs/workpiece.md``): its standard deviations
+are u(alpha) and u(T) of the part, read from the task's ``[workpiece]`` table, and it is not part of
+the machine's MPE statement.
 """
 
 from __future__ import annotations
@@ -31,7 +34,7 @@ ROLES = ("linear", "gp", "lambda")
 
 @dataclass(frozen=True)
 class Factor:
-    """An influence factor of eq. (28) (Forbes 2025 section 2.4)."""
+    """An influence factor of eq. (28) (Forbes 2025 section 2.4), or the workpiece's W."""
 
     label: str           # "R", "PQ", ...: the key of V_X components, JSON u_<label>_um
     name: str            # what metrologists call it
@@ -75,6 +78,10 @@ FACTOR_RECORDS: tuple[Factor, ...] = (
            "rotation errors, eq. (25): sigma_ER^2 exp(-||u_i - u_j||^2/lambda_ER^2) G_k(i) G_k(j)^T"),
     Factor("P", "probing",
            "probing, eq. (27): n_i n_j^T (sigma_P0^2 + sigma_P^2 exp(-||n_i - n_j||^2/lambda_P^2)), same probe"),
+    Factor("W", "workpiece temperature",
+           "workpiece thermal expansion (docs/workpiece.md): u^2(eps) (x_i - x0)(x_j - x0)^T, "
+           "u^2(eps) = (T - 20)^2 u^2(alpha) + alpha^2 u^2(T) (+ the uncorrected expansion, RSS)",
+           machine=False),
 )
 
 HYPERPARAMETERS: tuple[Hyperparameter, ...] = (
@@ -124,9 +131,18 @@ HYPERPARAMETERS: tuple[Hyperparameter, ...] = (
                    "Length scale (chordal, unit sphere) of the probing GP, eq. (27)", (0.01, 10.0),
                    "many probing directions with one probe, some close together (a densely probed sphere)",
                    partner="sigma_P_um", per_probe=True, range_unit="(unit normals)"),
+    Hyperparameter("u_alpha_ppm_per_K", "ppm/K", "W", "linear", "u(alpha)",
+                   "u of the part's alpha (1e-6/K): the term (T - 20) u(alpha) of u(eps)", (0.01, 20.0),
+                   "records of one artefact at several temperatures show one draw of its alpha error: the "
+                   "locator's 'thermal_expansion' effect estimates that draw (fit it and feed it back); the "
+                   "spread needs several artefacts of the material", table="workpiece"),
+    Hyperparameter("u_T_K", "K", "W", "linear", "u(T)",
+                   "u of the part's temperature T (K): the term alpha u(T) of u(eps)", (0.001, 10.0),
+                   "a second, calibrated thermometer on the artefact (a thermometer's error is common to "
+                   "all records and acts as a scale error)", table="workpiece"),
 )
 
-#: the factors of eq. (28), in the order of the V_X components and the JSON
+#: the factors of eq. (28) and W, in the order of the V_X components and the JSON
 FACTORS: tuple[str, ...] = tuple(f.label for f in FACTOR_RECORDS)
 #: the machine's factors (its MPE statement's model: Forbes 2025 eq. (28))
 MACHINE_FACTORS: tuple[str, ...] = tuple(f.label for f in FACTOR_RECORDS if f.machine)
@@ -159,3 +175,9 @@ def of_factor(factor: str) -> tuple[str, ...]:
 def in_table(table: str) -> tuple[str, ...]:
     """The hyper-parameters a task file reads from ``[table]``."""
     return tuple(h.name for h in HYPERPARAMETERS if h.table == table)
+
+
+def in_use(params) -> tuple[str, ...]:
+    """The hyper-parameters a report of ``params`` lists: those of ``[parameters]`` always, the
+    others (the part's u(alpha), u(T)) when they are not zero."""
+    return tuple(h.name for h in HYPERPARAMETERS if h.table == "parameters" or getattr(params, h.name) != 0)

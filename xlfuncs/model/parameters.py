@@ -15,6 +15,7 @@ import numpy as np
 
 from ..errors import ModelError
 from .hyperparameters import FACTORS, MACHINE_SIGMAS, PARTNER, PROBE_OVERRIDES
+from .workpiece import Workpiece
 
 __all__ = ["FACTORS", "MILLI", "MAX_PARAMETER", "MIN_LENGTH_SCALE", "Parameters", "Probe", "PointCloud"]
 
@@ -54,6 +55,8 @@ class Parameters:
     sigma_P0_um: float = 0.0
     sigma_P_um: float = 0.0
     lambda_P: float = 0.0
+    u_alpha_ppm_per_K: float = 0.0
+    u_T_K: float = 0.0
 
     #: names of the machine's standard-deviation parameters, rescaled by C_max (section 6.8)
     SIGMAS = MACHINE_SIGMAS
@@ -106,7 +109,9 @@ class Probe:
 class PointCloud:
     """Measured points x_i (mm), outward unit normals n_i and the probe used for each point.
 
-    ``probe_index[i]`` indexes ``probes``.  ``labels`` are the point ids.
+    ``probe_index[i]`` indexes ``probes``.  ``labels`` are the point ids.  ``workpiece``: the part's
+    thermal state (the factor W, :mod:`xlfuncs.model.workpiece`; None: no W), ``temperature_C``
+    the temperature at each point's probing (records of a calibration; None: the part's T).
     """
 
     X_mm: np.ndarray
@@ -114,6 +119,8 @@ class PointCloud:
     probe_index: np.ndarray
     probes: tuple[Probe, ...]
     labels: tuple[str, ...] = field(default=())
+    workpiece: Workpiece | None = None
+    temperature_C: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         X = np.asarray(self.X_mm, dtype=float)
@@ -134,6 +141,16 @@ class PointCloud:
         object.__setattr__(self, "probe_index", k)
         if not self.labels:
             object.__setattr__(self, "labels", tuple(f"X{i + 1}" for i in range(X.shape[0])))
+        if self.temperature_C is not None:
+            t = np.asarray(self.temperature_C, dtype=float)
+            if t.shape != (X.shape[0],) or not np.all(np.isfinite(t)):
+                raise ModelError("temperatures must be one finite number (°C) per point")
+            object.__setattr__(self, "temperature_C", t)
+
+    @property
+    def W_on(self) -> bool:
+        """Whether the factor W acts (a workpiece, switched on)."""
+        return self.workpiece is not None and self.workpiece.enabled
 
     @property
     def m(self) -> int:
