@@ -23,6 +23,7 @@ from cmmwb.xlfuncs.pointcloud import Parameters, PointCloud, Probe
 
 from .errors import InputError, model_errors_named
 from .taskfile import check_keys, note, number, string, table, vector3
+from .taskworkpiece import apply_workpiece
 from .workbook.guarded import MAX_BYTES, read_text
 
 MAX_CSV_BYTES = MAX_BYTES["points"]
@@ -268,7 +269,8 @@ def read_points_rows(path: Path, rows, probes: tuple[Probe, ...]) -> PointTable:
 
 
 def read_point_cloud(path: Path, doc: dict) -> tuple[PointCloud, Parameters, PointTable]:
-    """The point-cloud model of a task: points (``[points] file`` or ``rows``), probes, parameters."""
+    """The point-cloud model of a task: points (``[points] file`` or ``rows``), probes, parameters,
+    and the part's temperature (``[workpiece]``, the factor W: :mod:`generator.taskworkpiece`)."""
     params = read_parameters(path, doc)
     probes = read_probes(path, doc)
     pts = table(path, doc, "points")
@@ -296,4 +298,5 @@ def read_point_cloud(path: Path, doc: dict) -> tuple[PointCloud, Parameters, Poi
             p.resolved(params)
         cloud = PointCloud(tablep.X_mm, tablep.N, np.array([index[p] for p in tablep.probe_ids]),
                            probes, tablep.labels)
+    cloud, params = apply_workpiece(path, doc, cloud, params)
     return cloud, params, tablep

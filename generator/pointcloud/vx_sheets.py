@@ -9,7 +9,8 @@ Sheets written:
 ``Points``  id, x, y, z (mm), outward normal, probe; derived probe offset p and ram position x - p
 ``Coords``  one row per coordinate (x1, y1, z1, x2, ...): the columns the V blocks broadcast over,
             the rows of G_X|S (eq. 11) and of the rotation sensitivity G_k (eq. 24)
-``V_R`` ... ``V_P`` and ``V_X``  the contributions and their sum (µm²)
+``V_R`` ... ``V_P``, ``V_W`` and ``V_X``  the contributions and their sum (µm²); V_W is the part's
+            thermal expansion (docs/workpiece.md), from the workpiece inputs on Inputs
 """
 
 from __future__ import annotations
@@ -17,10 +18,12 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from cmmwb.xlfuncs.model.hyperparameters import FACTOR_RECORDS, HYPERPARAMETERS, PROBE_OVERRIDES, S_COLUMNS, in_table
+from cmmwb.xlfuncs.model.workpiece import PREFIX
 from cmmwb.xlfuncs.pointcloud import FACTORS, Parameters, PointCloud
 
 from ..workbook.book import Book
 from ..workbook.styles import FMT_COORD
+from ..workbook.workpiece import U_EPS, write_workpiece_inputs
 from ..workbook.xlref import Block, cell
 
 # Workbook limit for native V_X formulas: 3m x 3m array formulas per factor.  Measured:
@@ -75,6 +78,8 @@ def write_inputs(book: Book, params: Parameters, cloud: PointCloud, extra: list[
         book.text(ws, r, 3, PARAM_UNITS[key])
         book.text(ws, r, 4, PARAM_NOTES[key])
         r += 1
+    # the part's temperature, the factor W (its rows follow the hyper-parameters: one name/value range)
+    r = write_workpiece_inputs(book, ws, r, cloud.workpiece, {k: getattr(params, k) for k in in_table("workpiece")})
     for key, value, unit, meaning, lo in extra:
         book.text(ws, r, 1, key)
         book.input(ws, r, 2, key, value, lo=lo, note=meaning)
@@ -134,7 +139,7 @@ def write_points(book: Book, cloud: PointCloud, probe_rows: dict) -> tuple[Block
 COORD_COLS = ["coordinate", "point", "axis", "index", "probe_no", "ux_mm", "uy_mm", "uz_mm",
               "n_axis", "nx", "ny", "nz",
               "GS_aa", "GS_xx", "GS_yy", "GS_zz", "GS_xy", "GS_xz", "GS_yz",
-              "GR_x", "GR_y", "GR_z", *PROBE_OVERRIDES]
+              "GR_x", "GR_y", "GR_z", *PROBE_OVERRIDES, "w_mm"]
 
 
 def write_coords(book: Book, cloud: PointCloud, probe_rows: dict) -> dict[str, Block]:
@@ -171,6 +176,9 @@ def write_coords(book: Book, cloud: PointCloud, probe_rows: dict) -> dict[str, B
                 _ref_or_zero(book, ws, r, ci["GR_x"] + c, v)
             for c, key in enumerate(PROBE_OVERRIDES):
                 book.formula(ws, r, ci[key], f"={cell(pr, 5 + c, 'Inputs')}", fmt="General")
+            # x_i - x0 of this coordinate: the part expands about the fixture point (docs/workpiece.md)
+            book.formula(ws, r, ci["w_mm"], f"={cell(prow, 2 + a, 'Points')}-{PREFIX}fixture_{'xyz'[a]}_mm",
+                         fmt="General")
     n3 = 3 * cloud.m
     ws.freeze_panes = "C2"
     return {name: Block("Coords", 2, ci[name], n3, 1) for name in COORD_COLS} | {
@@ -194,7 +202,7 @@ def _sqdist(cols: list[Block]) -> str:
 
 
 def v_formulas(c: dict[str, Block], vb: Block) -> dict[str, str]:
-    """Array formulas (3m x 3m, µm²) of the six contributions of eq. (28)."""
+    """Array formulas (3m x 3m, µm²) of the six contributions of eq. (28) and the part's W."""
     same_probe = f"({c['probe_no'].ref}={_t(c['probe_no'])})"
     same_axis = f"({c['axis'].ref}={_t(c['axis'])})"
     D2 = _sqdist([c["ux_mm"], c["uy_mm"], c["uz_mm"]])
@@ -210,6 +218,8 @@ def v_formulas(c: dict[str, Block], vb: Block) -> dict[str, str]:
               f"*MMULT({c['GR'].ref},TRANSPOSE({c['GR'].ref}))",
         "P": f"={same_probe}*{c['n_axis'].ref}*{_t(c['n_axis'])}*({c['sigma_P0_um'].ref}*{_t(c['sigma_P0_um'])}"
              f"+{c['sigma_P_um'].ref}*{_t(c['sigma_P_um'])}*EXP(-({DN2})/({lam2}+({lam2}=0))))",
+        # docs/workpiece.md: u^2(eps) (x_i - x0)(x_j - x0)^T, u(eps) in ppm (1 ppm x 1 mm = 0.001 µm)
+        "W": f"=({U_EPS}*0.001)^2*({c['w_mm'].ref}*{_t(c['w_mm'])})",
     }
 
 
@@ -248,7 +258,7 @@ def write_V_sheets(book: Book, cloud: PointCloud, coords: dict[str, Block], vb: 
         target = Block(ws.title, 2, 2, n3, n3)
         if f == "X":
             formula = "=" + "+".join(out[g].ref for g in FACTORS)
-            note = "V_X = sum of the six contributions, Forbes 2025 eq. (28)"
+            note = "V_X = sum of the contributions, Forbes 2025 eq. (28), and the part's V_W (docs/workpiece.md)"
         else:
             formula = formulas[f]
             note = f"V_{f}: {FACTOR_TITLES[f]}"

@@ -2,17 +2,17 @@
 LibreOffice agree with the JSON of the Python core to relative 1e-9."""
 
 import json
+import math
 
 import openpyxl
 import pytest
 
 from cmmwb.generator.cli import build_task
 from cmmwb.generator.workbook.recalc import results_rows
+from cmmwb.xlfuncs.pointcloud import FACTORS
 
 from tests.helpers import ENGINES, EXAMPLES, close, recalc
-from tests.helpers.tasks import write_random_task
-
-FACTORS = ("R", "PQ", "S", "ET", "ER", "P")
+from tests.helpers.tasks import WORKPIECE_ALL_TERMS, write_random_task
 
 
 def expected_rows(results):
@@ -50,12 +50,32 @@ def test_random_clouds_with_every_factor_agree_with_json(tmp_path, seed, probes,
     assert_workbook_matches_json(tmp_path / "out" / f"random_{seed}.xlsx", results, engine)
 
 
+@pytest.mark.parametrize("engine", ENGINES)
+def test_the_part_temperature_is_live_in_every_engine(tmp_path, engine):
+    """The factor W with every term (docs/workpiece.md): V_W, the Budget's u_W and the Results agree
+    with the JSON, and u_W is d u(eps) exactly (23.1 x 1e-6/K, 3.5 K, corrected 1e-6/K off, 0.4 K across)."""
+    task = write_random_task(tmp_path, 3, m=6, probes=2, workpiece=WORKPIECE_ALL_TERMS)
+    results, _ = build_task(task, tmp_path / "out", plots=False)
+    u_eps = math.sqrt((3.5 * 1.0) ** 2 + 23.1**2 * (0.3**2 + 0.4**2 / 12) + (1.0 * 3.5) ** 2)
+    for d in results["distances"]:
+        assert d["components_um"]["W"] == pytest.approx(d["d_mm"] * u_eps * 1e-3, rel=1e-13)
+    assert_workbook_matches_json(tmp_path / "out" / "random_3.xlsx", results, engine)
+    values = recalc(tmp_path / "out" / "random_3.xlsx", engine)
+    assert close(values["Inputs"][_named(tmp_path / "out" / "random_3.xlsx", "workpiece_u_eps_ppm")], u_eps)
+
+
+def _named(book, name: str) -> str:
+    """The cell (A1 form, no $) a defined name points at."""
+    wb = openpyxl.load_workbook(book)
+    return next(iter(wb.defined_names[name].destinations))[1].replace("$", "")
+
+
 def test_workbook_layout_for_people(tmp_path):
     results, files = build_task(EXAMPLES / "stepgauge_II_MPE1.toml", tmp_path)
     wb = openpyxl.load_workbook(tmp_path / "stepgauge_II_MPE1.xlsx")
     assert wb.sheetnames[0] == "Instructions" and "Results" in wb.sheetnames
     assert [c.value for c in wb["Results"][1]] == ["from", "to", "d_mm", "u_um", "U_um", "u_R_um", "u_PQ_um",
-                                                   "u_S_um", "u_ET_um", "u_ER_um", "u_P_um"]
+                                                   "u_S_um", "u_ET_um", "u_ER_um", "u_P_um", "u_W_um"]
     # inputs are bound to names equal to the task keys
     for name in ("sigma_R_um", "sigma_ET_um", "lambda_ER_mm", "A_um", "B_mm", "K"):
         assert name in wb.defined_names
