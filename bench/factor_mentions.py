@@ -51,11 +51,12 @@ def _docstrings(tree: ast.AST) -> set[int]:
     return ids
 
 
-def _is_writer(tree: ast.AST) -> bool:
+def _is_writer(tree: ast.AST, rel: str) -> bool:
     for node in ast.walk(tree):
         if isinstance(node, ast.ImportFrom) and node.module and \
                 (node.module.endswith("workbook.book") or (node.module.endswith("workbook")
-                                                            and any(a.name == "book" for a in node.names))):
+                                                            and any(a.name == "book" for a in node.names))
+                 or (node.module == "book" and node.level == 1 and rel.startswith("generator/workbook/"))):
             return True
     return False
 
@@ -84,7 +85,7 @@ def mentions(factor: str, root: Path = ROOT) -> dict[str, dict[str, set[int]]]:
                 lines.add(node.lineno)
         if not lines:
             continue
-        place = "record" if rel == RECORD else "writers" if _is_writer(tree) else "elsewhere"
+        place = "record" if rel == RECORD else "writers" if _is_writer(tree, rel) else "elsewhere"
         out[place][rel] = lines
     return out
 

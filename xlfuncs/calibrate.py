@@ -132,6 +132,9 @@ def _why_insensitive(name: str, sets: list[RecordSet], values: dict[str, float] 
         return "every probe offset is zero: a rotation of the ram moves no stylus tip"
     if factor == "P":
         return "no normals in the records, or every point probed along one direction per probe"
+    if factor == "W":
+        return ("no record away from 20 °C (temperature_C, or the task's T): the artefact's expansion does not "
+                "act" if name == "u_alpha_ppm_per_K" else "the artefact's alpha is zero: its temperature does not act")
     far = _beyond_travel(name, sets, values) if values else None
     return far or "the records carry no information on it after the fixed effects"
 
@@ -149,6 +152,14 @@ def _why_weak(name: str, sets: list[RecordSet], corr_row: np.ndarray | None, fre
             parts.append("one probe offset: a rotation moves every tip like a translation of the ram")
     if factor == "S":
         parts.append("one machine shows one draw of each scale/squareness parameter")
+    if factor == "W":
+        temps = {float(t) for s in sets for t in (s.op.cloud.temperature_C if s.op.cloud.temperature_C is not None
+                                                   else [s.op.cloud.workpiece.T_degC])}
+        if len(temps) <= 1:
+            parts.append("every record at one temperature: the artefact's expansion is a scale error, one with "
+                         "the machine's scale (sigma_S)")
+        parts.append("one artefact shows one draw of its alpha error and one thermometer one draw of its error: "
+                     "the 'thermal_expansion' effect estimates the alpha draw (records at several temperatures)")
     if corr_row is not None:
         j = int(np.argmax(np.abs(corr_row)))
         if abs(corr_row[j]) > 0.7:

@@ -97,9 +97,13 @@ class DenseRecordCovariance:
             dims = 2 if prep.design.dims == 2 else 3
             self.keep = np.array([3 * i + a for i in range(prep.rec.n) for a in range(dims)])
         self.basis = {}
+        # what C holds at every hyper-parameter zero: nothing but the part's temperature difference and
+        # uncorrected expansion (the factor W, docs/workpiece.md), known, not fitted
+        zero = self.components(pc.Parameters())
+        self.const = sum(zero.values())
         for name in LINEAR:
             comps = self.components(pc.Parameters(**{name: 1.0}))
-            self.basis[name] = comps[FACTOR[name]]
+            self.basis[name] = comps[FACTOR[name]] - zero[FACTOR[name]]
 
     def components(self, params: pc.Parameters, d_log_lambda: bool = False) -> dict[str, np.ndarray]:
         """The factors' record covariances (the same functions as ``diagnose``)."""
@@ -113,7 +117,7 @@ class DenseRecordCovariance:
 
     def evaluate(self, values: dict[str, float], free: list[str]) -> tuple[np.ndarray, list[np.ndarray]]:
         """C at ``values`` and dC/dphi_k for every name in ``free`` (phi = log value)."""
-        C = np.zeros((self.n, self.n))
+        C = np.array(self.const, dtype=float) if np.ndim(self.const) else np.zeros((self.n, self.n))
         d: dict[str, np.ndarray] = {}
         for name in LINEAR:
             v = values[name]

@@ -31,7 +31,7 @@ from cmmwb.xlfuncs.locator import diagnose as dg
 from cmmwb.xlfuncs.locator import effects as fx
 from cmmwb.xlfuncs.locator.recordings import RecordingsError, write_recordings
 from cmmwb.xlfuncs.locator.report import effect_estimates
-from cmmwb.xlfuncs.model.hyperparameters import PROBE_OVERRIDES
+from cmmwb.xlfuncs.model.hyperparameters import PROBE_OVERRIDES, in_table, in_use
 
 from .. import __version__
 from ..diagnosis.run import read_recordings
@@ -155,7 +155,8 @@ def run_calibrate(paths: list[Path], model: dg.Model, out_dir: Path, *, task_pat
         if feedback == "none" or not findings:
             final, changes, notes = cal.params, [], []
         else:
-            final, changes, notes = cp.feed_back(cal.params, findings, feedback)
+            final, changes, notes = cp.feed_back(cal.params, findings, feedback, workpiece=model.workpiece)
+    part = cp.fed_back_workpiece(model.workpiece, findings, feedback)
 
     # -- chi2 of the records before (task) and after (fitted task, compensated records) ---------
     chi2 = {"before": 0.0, "dof_before": 0, "after": 0.0, "dof_after": 0}
@@ -186,7 +187,8 @@ def run_calibrate(paths: list[Path], model: dg.Model, out_dir: Path, *, task_pat
     u_uncomp = None
     if feedback == "compensate" and changes and all(f.name in cp.EFFECT_FACTOR for f in findings):
         # the same machine, the effects not corrected: they must be carried as a factor
-        u_uncomp = pc.summary_components_um(d, cp.feed_back(cal.params, findings, "factor")[0], P_mm)["u"].tolist()
+        u_uncomp = pc.summary_components_um(d, cp.feed_back(cal.params, findings, "factor",
+                                                            workpiece=model.workpiece)[0], P_mm)["u"].tolist()
     mpe_json = None
     if mpe:
         mpe_json = {"fitted": checks.mpe_consistency(final, mpe["A_um"], mpe["B_mm"], mpe["K"], P_mm, L_max,
@@ -217,7 +219,7 @@ def run_calibrate(paths: list[Path], model: dg.Model, out_dir: Path, *, task_pat
               "changes": [{"parameter": c.parameter, "before": c.before, "after": c.after, "effects": c.effects,
                            "how": c.how} for c in changes],
               "notes": notes,
-              "fitted_parameters": {k: float(getattr(final, k)) for k in pc.Parameters.__dataclass_fields__},
+              "fitted_parameters": {k: float(getattr(final, k)) for k in in_use(final)},
               "chi2": chi2,
               "u_d": {"P_mm": P_mm, "d_mm": d.tolist(), "before_um": u_before.tolist(),
                       "after_um": u_after.tolist(), "uncompensated_um": u_uncomp},
@@ -228,7 +230,7 @@ def run_calibrate(paths: list[Path], model: dg.Model, out_dir: Path, *, task_pat
         (tmp / "calibration.json").write_text(json.dumps(result, indent=1, ensure_ascii=False, allow_nan=False)
                                               + "\n", encoding="utf-8")
         made = [tmp / "calibration.json"]
-        (tmp / "fitted.toml").write_text(fitted_toml(doc, final, result), encoding="utf-8")
+        (tmp / "fitted.toml").write_text(fitted_toml(doc, final, result, part), encoding="utf-8")
         made.append(tmp / "fitted.toml")
         pts = (doc or {}).get("points")
         if task_path is not None and isinstance(pts, dict) and isinstance(pts.get("file"), str):
@@ -280,13 +282,21 @@ def summary(result: dict) -> str:
     return " ".join(parts)
 
 
-def fitted_toml(doc: dict | None, params: pc.Parameters, result: dict) -> str:
+def fitted_toml(doc: dict | None, params: pc.Parameters, result: dict, workpiece=None) -> str:
     """The task with the fitted [parameters] (probe overrides of the fitted sigmas removed: the fit
-    is task-wide), the calibration stated in comments and in [task] notes."""
+    is task-wide) and, with a [workpiece], its u(alpha), u(T) and the artefact's alpha a compensated
+    ``thermal_expansion`` gives (``workpiece``), the calibration stated in comments and in [task]
+    notes."""
     import tomli_w
 
     doc = json.loads(json.dumps(doc)) if doc else {}
-    doc["parameters"] = {k: float(getattr(params, k)) for k in pc.Parameters.__dataclass_fields__}
+    doc["parameters"] = {k: float(getattr(params, k)) for k in in_table("parameters")}
+    if isinstance(doc.get("workpiece"), dict):      # the artefact's u(alpha), u(T) (the factor W)
+        doc["workpiece"].update({k: float(getattr(params, k)) for k in in_table("workpiece")})
+        if workpiece is not None and workpiece.alpha_corr_ppm_per_K is not None:
+            doc["workpiece"].pop("material", None)   # thermal_expansion compensated: the fitted alpha
+            doc["workpiece"]["alpha_ppm_per_K"] = workpiece.alpha_ppm_per_K
+            doc["workpiece"]["alpha_corr_ppm_per_K"] = workpiece.alpha_corr_ppm_per_K
     dropped = []
     for p in doc.get("probes", []) or []:
         for k in PROBE_OVERRIDES:
