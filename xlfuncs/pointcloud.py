@@ -393,7 +393,8 @@ def _all_pairs_block(cloud, params, pa, b, out, base=0, ws=None):
                 np.maximum(var[f], 0.0, out=var[f])
         total = np.add(var["R"], var["PQ"], out=ws("total", d.shape))
         for f in FACTORS[2:]:
-            total += var[f]
+            if var[f].flags.writeable:       # (a read-only broadcast here is the 0 of a factor that is off)
+                total += var[f]
     start = pos - base
     p = start
     w = m - 1 - i0
