@@ -1,15 +1,21 @@
 """pytest hooks of the whole suite: one BLAS thread per xdist worker, the ``numerics`` marker
-(``NUMERIC_MODULES``), LibreOffice tests skipped where LibreOffice is missing.  What tests share
-(paths, the three-engine comparison, writers of tasks) is in ``tests/helpers/``."""
+(``NUMERIC_MODULES``), LibreOffice and Gnumeric tests skipped where the engine is missing, the
+Open XML validator over every workbook a test writes, and the session's count of the cells each
+engine gave the tests.  What tests share (paths, the four-engine comparison, writers of tasks) is
+in ``tests/helpers/``."""
 
 from __future__ import annotations
 
 import os
+from collections import Counter
 
 import numpy  # noqa: F401  (loads OpenBLAS, so that its threads can be limited below)
 import pytest
 
-from cmmwb.generator.workbook.recalc import soffice
+from cmmwb.generator.workbook.recalc import installed
+
+from tests.helpers import ENGINE_CELLS
+from tests.helpers.openxml import Watch
 
 if os.environ.get("PYTEST_XDIST_WORKER"):
     # the suite runs as `-n 2` workers on a 2-core machine: one BLAS thread each, or the two
@@ -48,16 +54,72 @@ NUMERIC_MODULES = {
 
 
 def pytest_collection_modifyitems(config, items):
-    """Marks the numerically sensitive tests (``numerics``).  LibreOffice tests are skipped where
-    LibreOffice is missing, except in CI, where a missing LibreOffice is an installation error and
-    must fail loudly."""
+    """Marks the numerically sensitive tests (``numerics``).  LibreOffice (Gnumeric) tests are
+    skipped where LibreOffice (Gnumeric's ssconvert) is missing, except in CI, where a missing
+    engine is an installation error and must fail loudly."""
     for item in items:
         if item.module.__name__.rsplit(".", 1)[-1] in NUMERIC_MODULES:
             item.add_marker(pytest.mark.numerics)
-    if soffice() is not None or os.environ.get("CI"):
+    if os.environ.get("CI"):
         return
-    skip = pytest.mark.skip(reason="LibreOffice (soffice) not installed")
-    for item in items:
-        if "libreoffice" in item.keywords:
-            item.add_marker(skip)
+    for engine, program in (("libreoffice", "LibreOffice (soffice)"), ("gnumeric", "Gnumeric (ssconvert)")):
+        if installed(engine):
+            continue
+        skip = pytest.mark.skip(reason=f"{program} not installed")
+        for item in items:
+            if engine in item.keywords:
+                item.add_marker(skip)
+
+
+# -- every workbook a test writes passes the Open XML validator (docs/engines.md, Excel) ----------
+
+_watch: Watch | None = None
+
+
+@pytest.fixture(autouse=True)
+def _every_workbook_written_passes_the_open_xml_validator(request, tmp_path_factory):
+    """After each test, the ``.xlsx`` files new under this worker's temporary folder (the test's
+    ``tmp_path`` and its fixtures' folders) go through the validator: no errors but the
+    validator's documented false positives (``tests.helpers.openxml``).  A test that writes
+    hostile or other programs' files on purpose is marked ``foreign_books``."""
+    global _watch
+    yield
+    if _watch is None:
+        _watch = Watch(tmp_path_factory.getbasetemp())
+    found = _watch.check(skip=request.node.get_closest_marker("foreign_books") is not None)
+    if found:
+        pytest.fail(f"{len(found)} Open XML validator error(s):\n" + "\n".join(found[:20]), pytrace=False)
+
+
+# -- the session summary: cells per engine, books validated ------------------------------------------
+
+_totals: Counter = Counter()
+
+
+def _session_counts() -> Counter:
+    counts = Counter({f"cells {e}": n for e, n in ENGINE_CELLS.items()})
+    if _watch is not None:
+        counts.update({"books validated": _watch.validated, "books same as one validated": _watch.same,
+                       "validator ms": round(1000 * _watch.seconds)})
+    return counts
+
+
+def pytest_sessionfinish(session):
+    if hasattr(session.config, "workeroutput"):          # an xdist worker: hand the counts over
+        session.config.workeroutput["cmmwb_counts"] = dict(_session_counts())
+
+
+def pytest_testnodedown(node, error):
+    _totals.update(getattr(node, "workeroutput", {}).get("cmmwb_counts", {}))
+
+
+def pytest_terminal_summary(terminalreporter):
+    counts = _totals or _session_counts()
+    if not counts:
+        return
+    cells = ", ".join(f"{k[6:]} {counts[k]:,}" for k in sorted(counts) if k.startswith("cells "))
+    terminalreporter.write_line(f"engine cells the tests read and compared: {cells or 'none'}")
+    terminalreporter.write_line(
+        f"Open XML validator: {counts['books validated']:,} workbooks validated, {counts['books same as one validated']:,} "
+        f"the same as one of them, {counts['validator ms'] / 1000:.0f} s")
 

@@ -17,7 +17,7 @@ from cmmwb.xlfuncs import global_risk as gr
 
 from ..workbook.book import Book
 from ..workbook.styles import FMT_MM, FMT_UM, HEADER_FONT
-from ..workbook.xlref import Block, cell, quote_sheet
+from ..workbook.xlref import Block, cell, norm_s_dist, quote_sheet
 
 #: the risk table's columns (below the chart), units in the names
 RISK_COLUMNS = ["item", "characteristic", "process_mean_mm", "process_sd_um", "u_um", "p_nonconforming",
@@ -119,10 +119,10 @@ def write_rows(book: Book, ws, top: int, rows: list[dict], cache: dict[str, Any]
         v1, v2, v3, v4, x_l, x_u = (at(n) for n in ("v1", "v2", "v3", "v4", "x_L", "x_U"))
 
         def phi(x: str) -> str:
-            return f"_xlfn.NORM.S.DIST({x},FALSE)"
+            return norm_s_dist(x, cumulative=False)
 
         def cdf(z: str) -> str:
-            return f"_xlfn.NORM.S.DIST({z},TRUE)"
+            return norm_s_dist(z)
 
         def P0(t: str) -> str:
             return cdf(f"(({t})-{mean})/{s0}")

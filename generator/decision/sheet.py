@@ -2,8 +2,8 @@
 :mod:`generator.decision.decide` as live formulas.
 
 The sheet computes everything from the Results cells and its own inputs (limits, measured
-values, r, max_pfa, k) with formulas all three engines accept (``_xlfn.NORM.S.DIST``,
-``_xlfn.NORM.S.INV``, measured in ``docs/engines.md``); JCGM 106:2012, 7.3-7.4.
+values, r, max_pfa, k) with formulas all four engines accept (``_xlfn.NORM.DIST`` through
+``xlref.norm_s_dist``, ``_xlfn.NORM.S.INV``, measured in ``docs/engines.md``); JCGM 106:2012, 7.3-7.4.
 """
 
 from __future__ import annotations
@@ -20,7 +20,7 @@ from cmmwb.xlfuncs.statement import decimals_for
 
 from ..workbook.book import Book, ChartSeries
 from ..workbook.styles import FMT_MM, FMT_UM, HEADER_FONT, TITLE_FONT
-from ..workbook.xlref import cell, col, quote_sheet
+from ..workbook.xlref import cell, col, norm_s_dist, quote_sheet
 from . import risks
 from .decide import DecisionSpec, rows_of
 
@@ -210,9 +210,9 @@ def write_sheet(book: Book, kind: str, spec: DecisionSpec, results: dict, decisi
                 cache[at(r_name)] = d["acceptance_limits_mm"][j]
         terms = []
         if usl is not None:
-            terms.append(f"_xlfn.NORM.S.DIST(({usl}-{y})*1000/{u},TRUE)")
+            terms.append(norm_s_dist(f"({usl}-{y})*1000/{u}"))
         if lsl is not None:
-            terms.append(f"_xlfn.NORM.S.DIST(({lsl}-{y})*1000/{u},TRUE)")
+            terms.append(norm_s_dist(f"({lsl}-{y})*1000/{u}"))
         pc = terms[0] if usl is not None else f"1-{terms[0]}"
         if len(terms) == 2:
             pc = f"{terms[0]}-{terms[1]}"
@@ -308,15 +308,15 @@ def _newton_cells(book: Book, ws, r: int, c: dict[str, int], at, d: dict, lsl: s
     book.formula(ws, r, c["newton_s0"], f"=MAX(0,{hc}-_xlfn.NORM.S.INV(1-decision_max_pfa))^2", fmt="0.000000")
     for j in range(1, cf.NEWTON_STEPS + 1):
         s = at(f"newton_s{j - 1}")
-        g = (f"_xlfn.NORM.S.DIST({hc}-SQRT({s}),TRUE)+_xlfn.NORM.S.DIST({hc}+SQRT({s}),TRUE)"
+        g = (f"{norm_s_dist(f'{hc}-SQRT({s})')}+{norm_s_dist(f'{hc}+SQRT({s})')}"
              f"-2+decision_max_pfa")
-        dg = (f"IF({s}>0,(_xlfn.NORM.S.DIST({hc}+SQRT({s}),FALSE)-_xlfn.NORM.S.DIST({hc}-SQRT({s}),FALSE))"
-              f"/(2*SQRT({s})),-{hc}*_xlfn.NORM.S.DIST({hc},FALSE))")
+        dg = (f"IF({s}>0,({norm_s_dist(f'{hc}+SQRT({s})', False)}-{norm_s_dist(f'{hc}-SQRT({s})', False)})"
+              f"/(2*SQRT({s})),-{hc}*{norm_s_dist(hc, False)})")
         book.formula(ws, r, c[f"newton_s{j}"], f"=MAX(0,{s}-({g})/({dg}))", fmt="0.000000")
     for j, v in enumerate(iterates):
         cache[at(f"newton_s{j}")] = v
     last = at(f"newton_s{cf.NEWTON_STEPS}")
-    w = (f"=IF(_xlfn.NORM.S.DIST({hc},TRUE)-_xlfn.NORM.S.DIST(-{hc},TRUE)<1-decision_max_pfa,"
+    w = (f"=IF({norm_s_dist(hc)}-{norm_s_dist(f'-{hc}')}<1-decision_max_pfa,"
          f"({usl}-{lsl})*1000/2*(1+1E-9),({hc}-SQRT({last}))*{u})")
     note = ("two-sided tolerance: w = (h - √s_N)·u from the Newton columns at the right, so that p_c = 1 - max_pfa "
             "exactly on A (JCGM 106:2012, 7.4 eq. (12)); half the tolerance (nothing accepted) when even the "

@@ -26,6 +26,7 @@ from openpyxl.worksheet.worksheet import Worksheet
 from .. import __version__
 from .atomic import replacing
 from .pagesetup import FIT_WIDTH_MAX_CELLS, fit_widths, page_setup, size_to_page
+from .sharedstrings import share_strings
 from .styles import (
     BOX,
     DEFAULT_FILL,
@@ -282,6 +283,11 @@ class Book:
         from openpyxl.chart import ScatterChart, Series  # noqa: F811
 
         chart = ScatterChart()
+        # ECMA-376 requires c:scatterStyle as the first child of c:scatterChart (openpyxl leaves it
+        # out unless it is set; Excel may repair or drop a drawing without it).  How each series
+        # is drawn (markers, lines, no smoothing) is set per series below, so the style is the
+        # one Excel writes itself.
+        chart.scatterStyle = "lineMarker"
         chart.title = title
         chart.style = 13
         chart.x_axis.title = x_title
@@ -521,6 +527,13 @@ class Formula(str):
 
 
 def save_atomic(wb: Workbook, path: Path) -> Path:
+    """Save ``wb`` atomically, its text cells as shared strings (:mod:`.sharedstrings`: the form
+    Excel writes, so Excel does not rewrite a book it only opened)."""
     with replacing(path, ".xlsx.tmp") as tmp:
-        wb.save(tmp)
+        written = tmp.with_name(tmp.name + ".openpyxl")
+        try:
+            wb.save(written)
+            share_strings(written, tmp)
+        finally:
+            written.unlink(missing_ok=True)
     return Path(path)

@@ -23,7 +23,6 @@ never as formulas.
 from __future__ import annotations
 
 import math
-import posixpath
 import re
 import zipfile
 from pathlib import Path
@@ -33,15 +32,14 @@ from xml.sax.saxutils import escape
 from openpyxl.utils import column_index_from_string, get_column_letter, range_boundaries
 
 from .atomic import replacing
+from .cached_values import sheet_parts
+from .sharedstrings import texts
 
 MODES = ("results", "all", "none")
 #: what the feature Results show where u_um or u_urad does not apply (generator.feature.book)
 FEATURE_NOT_APPLICABLE = "—"
 ERRORS = {"#NULL!", "#DIV/0!", "#VALUE!", "#REF!", "#NAME?", "#NUM!", "#N/A", "#GETTING_DATA"}
 
-_SHEET = re.compile(rb'<sheet\b[^>]*?\bname="([^"]*)"[^>]*?\br:id="([^"]*)"')
-_REL = re.compile(rb'<Relationship\b[^>]*?\bId="([^"]*)"[^>]*?\bTarget="([^"]*)"')
-_REL2 = re.compile(rb'<Relationship\b[^>]*?\bTarget="([^"]*)"[^>]*?\bId="([^"]*)"')
 _ROW = re.compile(rb"<row\b([^>]*?)(/>|>(.*?)</row>)", re.S)
 _CELL = re.compile(rb"<c\b([^>]*?)(/>|>(.*?)</c>)", re.S)
 _ATTR_R = re.compile(rb'\br="([A-Z]+)([0-9]+)"')
@@ -52,6 +50,8 @@ _REF_ATTR = re.compile(rb'\bref="([A-Z]+[0-9]+(?::[A-Z]+[0-9]+)?)"')
 _ARRAY = re.compile(rb'\bt="array"')
 _SINGLE_REF = re.compile(r"^=?(?:(?:'((?:[^']|'')+)'|([A-Za-z_][A-Za-z0-9_.]*))!)?\$?([A-Z]{1,3})\$?([0-9]+)$")
 _HEADER_TEXT = re.compile(rb"<t[^>]*>(.*?)</t>", re.S)
+_SHARED = re.compile(rb'\bt="s"')
+_V_TEXT = re.compile(rb"<v>([0-9]+)</v>")
 
 
 # -- what the Results sheet holds, per kind (the contract of docs/cli.md) ----------------
@@ -90,23 +90,6 @@ def results_table(kind: str, results: dict) -> list[dict[str, Any]]:
 
 
 # -- the xlsx parts ------------------------------------------------------------------------------
-
-def sheet_parts(z: zipfile.ZipFile) -> dict[str, str]:
-    """Sheet title -> part name (``xl/worksheets/sheet3.xml``)."""
-    wb = z.read("xl/workbook.xml")
-    rels = z.read("xl/_rels/workbook.xml.rels")
-    targets = {i: t for i, t in _REL.findall(rels)}
-    targets.update({i: t for t, i in _REL2.findall(rels)})
-    out = {}
-    for name, rid in _SHEET.findall(wb):
-        target = targets.get(rid)
-        if target is None:
-            continue
-        t = target.decode()
-        part = t.lstrip("/") if t.startswith("/") else posixpath.normpath(posixpath.join("xl", t))
-        out[_unescape(name.decode())] = part
-    return out
-
 
 def _unescape(s: str) -> str:
     return (s.replace("&lt;", "<").replace("&gt;", ">").replace("&quot;", '"').replace("&apos;", "'")
@@ -189,16 +172,24 @@ def _rewrite(xml: bytes, values: dict[str, Any], *, arrays: bool) -> tuple[bytes
     return xml[:open_end] + body + xml[end:], count
 
 
-def _results_header(xml: bytes) -> dict[str, str]:
-    """Column name -> column letter of the Results sheet's first row (inline strings)."""
+def _results_header(xml: bytes, shared: list[str]) -> dict[str, str]:
+    """Column name -> column letter of the Results sheet's first row (shared strings, looked up
+    in ``shared``, or inline strings)."""
     for rm in _ROW.finditer(xml):
         if re.search(rb'\br="1"', rm.group(1)) is None:
             continue
         out = {}
         for cm in _CELL.finditer(rm.group(3) or b""):
             am = _ATTR_R.search(cm.group(1))
+            if not am:
+                continue
+            if _SHARED.search(cm.group(1)):
+                v = _V_TEXT.search(cm.group(3) or b"")
+                if v and int(v.group(1)) < len(shared):
+                    out[shared[int(v.group(1))]] = am.group(1).decode()
+                continue
             t = _HEADER_TEXT.search(cm.group(3) or b"")
-            if am and t:
+            if t:
                 out[_unescape(t.group(1).decode("utf-8"))] = am.group(1).decode()
         return out
     return {}
@@ -260,7 +251,7 @@ def _results_values(z: zipfile.ZipFile, parts: dict[str, str], kind: str, result
     if "Results" not in parts:
         return {}
     xml = z.read(parts["Results"])
-    header = _results_header(xml)
+    header = _results_header(xml, texts(z))
     values: dict[str, Any] = {}
     for r, row in enumerate(results_table(kind, results), start=2):
         for name, value in row.items():

@@ -4,8 +4,12 @@
 * ``libreoffice``: a real LibreOffice (``soffice --headless``) with a private profile that forces a
   full recalculation on load (``OOXMLRecalcMode`` = 0, see ``docs/engines.md``), converting to a
   fresh ``.xlsx`` whose cached values are then read with openpyxl.
+* ``gnumeric``: Gnumeric's ``ssconvert --recalc`` on a copy without cached values
+  (``generator.workbook.gnumeric``), read the same way.
 
-Both return ``{sheet name: {cell coordinate: value}}`` for every cell that holds a value.
+Each returns ``{sheet name: {cell coordinate: value}}`` for every cell that holds a value.
+:func:`default_engine` is the fastest one installed (``FASTEST_FIRST``, measured in
+``docs/engines.md``).
 """
 
 from __future__ import annotations
@@ -17,6 +21,7 @@ import shutil
 import subprocess
 import sys
 import tempfile
+from concurrent.futures import ThreadPoolExecutor
 from contextlib import contextmanager
 from pathlib import Path
 from types import SimpleNamespace
@@ -25,7 +30,13 @@ from typing import Any
 import openpyxl
 from openpyxl.utils import get_column_letter, range_boundaries
 
-ENGINES = ("formulas", "libreoffice")
+from .cached_values import read_values
+from .gnumeric import GnumericError, recalculate_into, sheet_as_text, ssconvert
+
+ENGINES = ("formulas", "libreoffice", "gnumeric")
+#: the engines by speed on cmmwb's books (docs/engines.md: the knuckle and a step gauge take
+#: Gnumeric well under 1 s, LibreOffice 3-8 s, ``formulas`` 24-34 s)
+FASTEST_FIRST = ("gnumeric", "libreoffice", "formulas")
 Values = dict[str, dict[str, Any]]
 
 _KEY = re.compile(r"^'?\[(?P<book>[^\]]+)\](?P<sheet>.+?)'?!(?P<ref>[A-Z]+[0-9]+(:[A-Z]+[0-9]+)?)$")
@@ -54,6 +65,20 @@ def soffice() -> str | None:
     return None
 
 
+def installed(engine: str) -> bool:
+    """Whether ``engine`` can run here (``formulas`` always can: it is a dependency)."""
+    if engine == "libreoffice":
+        return soffice() is not None
+    if engine == "gnumeric":
+        return ssconvert() is not None
+    return engine == "formulas"
+
+
+def default_engine() -> str:
+    """The fastest engine installed here."""
+    return next(e for e in FASTEST_FIRST if installed(e))
+
+
 def recalculate(path: str | Path, engine: str = "formulas", timeout_s: float = 600) -> Values:
     """Recompute every formula of the workbook at ``path`` and return all cell values."""
     path = Path(path)
@@ -61,6 +86,8 @@ def recalculate(path: str | Path, engine: str = "formulas", timeout_s: float = 6
         return _recalc_formulas(path)
     if engine == "libreoffice":
         return _recalc_libreoffice(path, timeout_s)
+    if engine == "gnumeric":
+        return _recalc_gnumeric(path, timeout_s)
     raise ValueError(f"unknown engine {engine!r}; choose one of {', '.join(ENGINES)}")
 
 
@@ -170,21 +197,63 @@ def _recalc_libreoffice(path: Path, timeout_s: float) -> Values:
         return read_cached(result)
 
 
+#: the second starting value of every formula cell in :func:`recalculate_checking_cycles`
+CYCLE_SEED = 7.25
+
+
+def recalculate_checking_cycles(path: str | Path, sheet: str = "Results",
+                                timeout_s: float = 600) -> tuple[Values, list[str]]:
+    """Gnumeric's values of the workbook at ``path`` (from no cached values), and the cells of
+    ``sheet`` (``Results!B2``, in row order) whose value changes when every formula cell starts
+    from :data:`CYCLE_SEED` instead: the cells there a circular reference reaches (Gnumeric
+    iterates a cycle from its cells' starting values and gives no error value;
+    ``generator.workbook.gnumeric``).  Empty for a book without a circular reference.  The two
+    runs go side by side; the second one writes only ``sheet``, as text."""
+    path = Path(path)
+    with ThreadPoolExecutor(2) as pool, tempfile.TemporaryDirectory(prefix="cmmwb_gnumeric_") as tmp:
+        first = pool.submit(_recalc_gnumeric, path, timeout_s)
+        again = pool.submit(sheet_as_text, path, tmp, sheet, timeout_s, CYCLE_SEED)
+        try:
+            values, seeded = first.result(), again.result()
+        except GnumericError as e:
+            raise RecalcError(str(e)) from None
+    cells = values.get(sheet, {})
+    return values, [f"{sheet}!{ref}" for ref in sorted(set(cells) | set(seeded), key=_row_major)
+                    if not _same(cells.get(ref), seeded.get(ref))]
+
+
+def _row_major(ref: str) -> tuple[int, int]:
+    c0, r0, _, _ = range_boundaries(ref)
+    return r0, c0
+
+
+def _same(value, text: str | None) -> bool:
+    """Whether a value read from Gnumeric's .xlsx is the text its CSV export wrote for the cell."""
+    if value is None or text is None:
+        return value is None and text is None
+    if isinstance(value, bool):
+        return text == ("TRUE" if value else "FALSE")
+    if isinstance(value, (int, float)):
+        try:
+            return float(text) == float(value)
+        except ValueError:
+            return False
+    return text == str(value)
+
+
+def _recalc_gnumeric(path: Path, timeout_s: float, seed: float | None = None) -> Values:
+    with tempfile.TemporaryDirectory(prefix="cmmwb_gnumeric_") as tmp:
+        try:
+            out = recalculate_into(path, tmp, timeout_s, seed)
+        except GnumericError as e:
+            raise RecalcError(str(e)) from None
+        return read_cached(out)
+
+
 def read_cached(path: str | Path) -> Values:
-    """Cached values of every cell of a saved workbook (as LibreOffice or Excel left them)."""
-    wb = openpyxl.load_workbook(path, data_only=True)
-    try:
-        out: Values = {}
-        for ws in wb.worksheets:
-            cells = {}
-            for row in ws.iter_rows():
-                for c in row:
-                    if c.value is not None:
-                        cells[c.coordinate] = c.value
-            out[ws.title] = cells
-        return out
-    finally:
-        wb.close()
+    """Cached values of every cell of a saved workbook (as LibreOffice, Gnumeric or Excel left
+    them), read from its XML (``generator.workbook.cached_values``)."""
+    return read_values(path)
 
 
 def results_rows(values: Values, sheet: str = "Results") -> list[dict[str, Any]]:

@@ -120,7 +120,7 @@ def check(path: Path, *, max_cells: int = MAX_CELLS) -> None:
             strings += len(_SHARED_STRING.findall(data))
             if cells > max_cells:
                 raise InputError(f"more than {max_cells:,} cells: too large for this command (see "
-                                 "docs/input_limits.md)" + (" -- use --engine libreoffice"
+                                 "docs/input_limits.md)" + (" -- use --engine gnumeric or --engine libreoffice"
                                                             if max_cells < MAX_CELLS else ""),
                                  file=path, where=part_place(zf, info.filename))
             if strings > MAX_SHARED_STRINGS:
@@ -210,7 +210,7 @@ def part_place(zf: zipfile.ZipFile | None, name: str) -> str:
     """Where a part is, for a message: ``sheet Data`` for a worksheet (its name in the workbook,
     through xl/workbook.xml and its relationships), else ``part NAME``."""
     if zf is not None and name.lower().startswith(("xl/worksheets/", "xl/chartsheets/")):
-        from .cache import sheet_parts
+        from .cached_values import sheet_parts
 
         try:
             for title, part in sheet_parts(zf).items():
@@ -347,7 +347,7 @@ def _only_sheets(path: Path, keep: set[str]) -> io.BytesIO:
     """An in-memory copy of the workbook in which the worksheets not in ``keep`` are empty (a
     LibreOffice-saved workbook holds every cached value of its 3m x 3m matrices: loading only
     the input sheets is many times faster)."""
-    from .cache import sheet_parts
+    from .cached_values import sheet_parts
 
     buf = io.BytesIO()
     with zipfile.ZipFile(path) as z, zipfile.ZipFile(buf, "w", zipfile.ZIP_DEFLATED, compresslevel=1) as out:

@@ -112,3 +112,12 @@ def check_name(name: str) -> str:
 def fn(name: str, *args: str) -> str:
     """A function call ``NAME(a, b, ...)`` (no leading ``=``)."""
     return f"{name}({','.join(args)})"
+
+
+def norm_s_dist(z: str, cumulative: bool = True) -> str:
+    """The standard normal distribution Φ(z) (``cumulative``) or density φ(z) of the formula
+    text ``z``, as every engine computes it: ``_xlfn.NORM.DIST(z,0,1,TRUE)``.  Excel 2010+ has
+    NORM.S.DIST too, but Gnumeric 1.12.55 does not (#NAME?); NORM.DIST with mean 0 and standard
+    deviation 1 gives the same numbers as NORM.S.DIST in `formulas` and LibreOffice
+    (docs/engines.md)."""
+    return f"_xlfn.NORM.DIST({z},0,1,{'TRUE' if cumulative else 'FALSE'})"

@@ -260,7 +260,7 @@ def _info(name: str) -> zipfile.ZipInfo:
 
 
 def _sheet_part(book: Path, title: str) -> str:
-    from cmmwb.generator.workbook.cache import sheet_parts
+    from cmmwb.generator.workbook.cached_values import sheet_parts
 
     with zipfile.ZipFile(book) as z:
         return sheet_parts(z)[title]

@@ -20,10 +20,9 @@ import tomli_w
 
 from cmmwb.generator.budget import book as budget_book
 from cmmwb.generator.build import build_task
-from cmmwb.generator.workbook.recalc import recalculate
 from cmmwb.xlfuncs import dof
 
-from tests.helpers import close
+from tests.helpers import ENGINES, close, recalc
 
 KNUCKLE = Path(budget_book.__file__).parents[1] / "examples" / "knuckle.toml"
 
@@ -155,25 +154,21 @@ def test_without_type_a_nu_eff_is_infinite(knuckle):
     assert ch["nu_eff"] is None and "type_a" not in ch
 
 
-# -- the workbook, three engines --------------------------------------------------------------------
+# -- the workbook, four engines ---------------------------------------------------------------------
 
-def test_formulas_engine_agrees_with_the_json(knuckle):
+@pytest.mark.parametrize("engine", ENGINES)
+def test_every_engine_agrees_with_the_json(knuckle, engine):
     results, book, layout = knuckle
-    n = assert_agrees(recalculate(book, "formulas"), results, layout)
+    n = assert_agrees(recalc(book, engine), results, layout)
     assert n > 500
 
 
-@pytest.mark.libreoffice
-def test_libreoffice_agrees_with_the_json(knuckle):
-    results, book, layout = knuckle
-    assert_agrees(recalculate(book, "libreoffice"), results, layout)
-
-
-def test_another_b_is_shown_live(tmp_path, monkeypatch):
+@pytest.mark.parametrize("engine", ENGINES)
+def test_another_b_is_shown_live(tmp_path, monkeypatch, engine):
     """b = 0.408 (1/√6): every MPE input reads "triangular" in the recalculated workbook."""
     def edit(doc):
         doc["mpe"]["b"] = 0.408
     results, book, layout = build(tmp_path, monkeypatch, edit)
-    assert_agrees(recalculate(book, "formulas"), results, layout)
+    assert_agrees(recalc(book, engine), results, layout)
     assert {r["distribution"] for c in results["characteristics"] if c["model"] != "position"
             for r in c["rows"]} == {"triangular"}

@@ -14,10 +14,9 @@ import pytest
 
 from cmmwb.generator import decision
 from cmmwb.generator.errors import InputError
-from cmmwb.generator.workbook.recalc import recalculate
 from cmmwb.xlfuncs import conformity as cf
 
-from tests.helpers import EXAMPLES
+from tests.helpers import ENGINES, EXAMPLES, recalc
 from tests.helpers.decision import assert_engine_agrees, at, build, cached
 
 PLATE = EXAMPLES / "characteristic_plate.toml"
@@ -107,12 +106,13 @@ def test_openpyxl_data_only_shows_the_decisions(plate):
         assert ws[at(r, "outcome")].value == d["outcome"]
 
 
-@pytest.mark.parametrize("engine", ["formulas", pytest.param("libreoffice", marks=pytest.mark.libreoffice)])
+@pytest.mark.parametrize("engine", ENGINES)
 def test_engines_agree_on_decision_and_summary(plate, engine):
     assert assert_engine_agrees(plate[1], engine) > 300
 
 
-def test_a_tolerance_typed_on_characteristics_changes_the_decision(plate, tmp_path):
+@pytest.mark.parametrize("engine", ENGINES)
+def test_a_tolerance_typed_on_characteristics_changes_the_decision(plate, tmp_path, engine):
     """cyl_H1_LS: its tolerance on 'Characteristics' from 0.009 to 0.010 mm: the Decision sheet's
     upper limit follows and the value (9.17 µm, U 0.64 µm) now conforms."""
     results, book = plate
@@ -122,7 +122,7 @@ def test_a_tolerance_typed_on_characteristics_changes_the_decision(plate, tmp_pa
     ws.cell(row, 11).value = 0.010
     edited = tmp_path / "edited.xlsx"
     wb.save(edited)
-    v = recalculate(edited, "formulas")["Decision"]
+    v = recalc(edited, engine)["Decision"]
     r = decision.FIRST_ROW + [d["characteristic"] for d in results["decisions"]].index("cyl_H1_LS")
     assert v[at(r, "usl_mm")] == 0.010
     assert v[at(r, "outcome")] == cf.CONFORMS

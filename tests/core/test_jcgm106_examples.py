@@ -32,7 +32,7 @@ from cmmwb.xlfuncs import conformity as cf
 from cmmwb.xlfuncs import global_risk as gr
 from cmmwb.xlfuncs.errors import ModelError
 
-from tests.helpers import ENGINES, close
+from tests.helpers import ENGINES, close, recalc
 
 
 def printed(value: float, published: float, decimals: int) -> bool:
@@ -205,7 +205,7 @@ def test_bad_priors_and_uncertainties_are_refused():
         gr.guard_band_for_global_risk(BEARINGS, 0.25, (None, 2.0), 0.0)
 
 
-# -- the bearing's acceptance limit in a built Decision sheet, three engines ----------------------
+# -- the bearing's acceptance limit in a built Decision sheet, four engines -----------------------
 
 @pytest.fixture(scope="module")
 def bearing_book(tmp_path_factory):
@@ -246,13 +246,12 @@ def test_bearing_acceptance_limit_in_the_json(bearing_book):
 
 @pytest.mark.parametrize("engine", ENGINES)
 def test_bearing_acceptance_limit_in_the_workbook(bearing_book, engine):
-    from cmmwb.generator.workbook.recalc import recalculate
 
     from tests.helpers.decision import assert_engine_agrees, at
 
     results, book, scale, w, etas = bearing_book
     assert assert_engine_agrees(book, engine) > 10
-    v = recalculate(book, engine)["Decision"]
+    v = recalc(book, engine)["Decision"]
     for i, d in enumerate(results["decisions"]):
         got = v[at(8 + i, "A_U_mm")]
         assert close(got, d["acceptance_limits_mm"][1], rel=1e-9)
@@ -333,13 +332,12 @@ def test_specific_risk_limits_in_the_json_are_exact(specific_risk_book):
 
 @pytest.mark.parametrize("engine", ENGINES)
 def test_specific_risk_limits_in_the_workbook_are_exact(specific_risk_book, engine):
-    from cmmwb.generator.workbook.recalc import recalculate
 
     from tests.helpers.decision import assert_engine_agrees, at
 
     results, book, _ = specific_risk_book
     assert assert_engine_agrees(book, engine) > 30
-    v = recalculate(book, engine)["Decision"]
+    v = recalc(book, engine)["Decision"]
     for i, d in enumerate(results["decisions"]):
         tol = cf.Tolerance(d["lsl_mm"], d["usl_mm"])
         a_l, a_u = v[at(8 + i, "A_L_mm")], v[at(8 + i, "A_U_mm")]
@@ -419,13 +417,12 @@ def test_global_risks_in_the_json(process_book):
 
 @pytest.mark.parametrize("engine", ENGINES)
 def test_global_risks_in_the_workbook(process_book, engine):
-    from cmmwb.generator.workbook.recalc import recalculate
 
     from tests.helpers.decision import assert_engine_agrees
 
     results, book = process_book
     assert assert_engine_agrees(book, engine) > 60
-    v = recalculate(book, engine)["Decision"]
+    v = recalc(book, engine)["Decision"]
     got = sorted(x for x in v.values() if isinstance(x, float) and 0 < x < 1)
     for d in results["decisions"]:
         for key in ("global_consumer_risk", "global_producer_risk", "process_nonconforming"):

@@ -1,4 +1,4 @@
-"""Three engines, one answer: the diagnosis workbook's native refit (GLS normal equations with
+"""Four engines, one answer: the diagnosis workbook's native refit (GLS normal equations with
 MMULT/MINVERSE over the chosen sensitivity columns, themselves formulas of the record cells)
 recomputed by `formulas` and by LibreOffice agrees with diagnosis.json to relative 1e-9."""
 

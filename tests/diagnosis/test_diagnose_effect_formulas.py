@@ -20,7 +20,7 @@ from cmmwb.xlfuncs.locator import effects as fx
 from cmmwb.xlfuncs.locator import simulate as sm
 from cmmwb.xlfuncs.model import MPE1  # Forbes 2025 Table 3
 
-from tests.helpers import close, recalc
+from tests.helpers import ENGINES, close, recalc
 from tests.helpers.clouds import PAIR
 
 #: the point (a0, b0) of a periodic error at which the workbook linearizes its period (Inputs)
@@ -89,9 +89,10 @@ def core_columns(D: fx.Design) -> dict[str, tuple[list[str], np.ndarray, float |
     return out
 
 
-def _sheet_with_every_effect(kind: str, tmp_path):
+def _sheet_with_every_effect(kind: str, tmp_path, engine: str):
     """Inputs and the record sheets of the diagnosis workbook with every exercised effect's
-    columns chosen; (core columns, recomputed values of the sheet, {label: column}, rows)."""
+    columns chosen; (core columns, the sheet's values as ``engine`` recomputes them,
+    {label: column}, rows)."""
     rec = sm.simulate(RECORDINGS[kind](), MPE1, {}, seed=5, temperature_C=(18.5, 23.0))
     prep = dg.prepare(rec, dg.Model(MPE1, PAIR, True), False)
     cols = core_columns(prep.design)
@@ -104,12 +105,12 @@ def _sheet_with_every_effect(kind: str, tmp_path):
     write = records.length_records if kind == "length" else records.point_records
     _, obs = write(book, diag, inputs)
     path = book.save(tmp_path / f"{kind}.xlsx")
-    return cols, recalc(path, "formulas")[obs["sheet"]], obs["ci"], obs["rows"]
+    return cols, recalc(path, engine)[obs["sheet"]], obs["ci"], obs["rows"]
 
 
-@pytest.fixture(scope="module")
-def sheets(tmp_path_factory):
-    return {kind: _sheet_with_every_effect(kind, tmp_path_factory.mktemp(kind)) for kind in RECORDINGS}
+@pytest.fixture(scope="module", params=ENGINES)
+def sheets(tmp_path_factory, request):
+    return {kind: _sheet_with_every_effect(kind, tmp_path_factory.mktemp(kind), request.param) for kind in RECORDINGS}
 
 
 def test_every_family_has_columns_and_formulas():

@@ -20,10 +20,10 @@ from cmmwb.generator.feature import book as feature_book
 from cmmwb.generator.feature import job as feature_job
 from cmmwb.generator.feature import va_sheets
 from cmmwb.generator.taskfile import read_toml
-from cmmwb.generator.workbook.recalc import recalculate, results_rows
+from cmmwb.generator.workbook.recalc import results_rows
 from cmmwb.xlfuncs.pointcloud import FACTORS
 
-from tests.helpers import ENGINES, EXAMPLES
+from tests.helpers import ENGINES, EXAMPLES, recalc
 from tests.helpers.tasks import SHIPPED, SMALL_TASKS, feature_task_path
 
 REL = 1e-9
@@ -49,7 +49,7 @@ _cache: dict = {}
 def values_of(book: Path, engine: str):
     key = (str(book), engine)
     if key not in _cache:
-        _cache[key] = recalculate(book, engine)
+        _cache[key] = recalc(book, engine)
     return _cache[key]
 
 
@@ -133,14 +133,14 @@ def check_planning(values, pl, engine):
                                      "feature_table2_sphere_cap.toml",
                                      "feature_table5_cylinder_patch.toml",
                                      "feature_table7_cone_arc.toml"])
-def test_table_planning_sheets_recalculate_to_the_json(tmp_path, example, monkeypatch):
-    """The remaining table patterns, formulas engine only (LibreOffice runs the same
-    formulas in test_workbook_agrees_with_the_json).  Built without the V_X sheets (the
+@pytest.mark.parametrize("engine", ENGINES)
+def test_table_planning_sheets_recalculate_to_the_json(tmp_path, example, monkeypatch, engine):
+    """The remaining table patterns, in every engine.  Built without the V_X sheets (the
     Planning sheet does not use them) to keep the test fast."""
     monkeypatch.setattr(feature_book, "FEATURE_NATIVE_MAX_POINTS", 0)
     res, files = build_task(EXAMPLES / example, tmp_path, plots=False)
-    values = recalculate(next(f for f in files if f.suffix == ".xlsx"), "formulas")
-    check_planning(values, res["planning"], "formulas")
+    values = recalc(next(f for f in files if f.suffix == ".xlsx"), engine)
+    check_planning(values, res["planning"], engine)
 
 
 @pytest.mark.parametrize("engine", ENGINES)
@@ -159,13 +159,14 @@ def test_above_the_native_limit_the_heavy_blocks_are_labelled_values(tmp_path, e
     assert "x 1e-12" in wb["V_A"].cell(row=L.row, column=L.column).comment.text
     L, _ = va_sheets.v_a_layout(3, 6)["R"]
     assert "sigma_R_um" in str(wb["V_A"].cell(row=L.row, column=L.column).value.text)
-    values = recalculate(book, engine)
+    values = recalc(book, engine)
     for r in results_rows(values):
         assert agree(r["u"], res["feature"]["u"][r["parameter"]])
 
 
-def test_the_workbook_is_live(tmp_path):
-    """Doubling sigma_R_um on 'Inputs' doubles u_R of every parameter (formulas engine)."""
+@pytest.mark.parametrize("engine", ENGINES)
+def test_the_workbook_is_live(tmp_path, engine):
+    """Doubling sigma_R_um on 'Inputs' doubles u_R of every parameter."""
     p = feature_task_path("line_space", tmp_path)
     res, files = build_task(p, tmp_path / "out", plots=False)
     book = next(f for f in files if f.suffix == ".xlsx")
@@ -175,7 +176,7 @@ def test_the_workbook_is_live(tmp_path):
     ws.cell(row=row, column=2).value = 0.6
     edited = tmp_path / "edited.xlsx"
     wb.save(edited)
-    cells = recalculate(edited, "formulas")["Budget"]
+    cells = recalc(edited, engine)["Budget"]
     for p_, n in enumerate(res["feature"]["parameter_names"]):
         ref = 2 * res["feature"]["components"]["R"][n] * feature_book.u_display(n)[0]
         assert agree(cells[f"F{2 + p_}"], ref)

@@ -130,7 +130,7 @@ def error_cells(values: dict) -> list:
 
 @pytest.mark.parametrize("engine", ENGINES)
 def test_every_result_is_visible_without_the_addin(bore, engine):
-    """LibreOffice and `formulas` (about 10 s for 120 points): Results = JSON, no error cell
+    """Every engine (`formulas` about 10 s for 120 points): Results = JSON, no error cell
     outside 'Live_addin'; there the add-in formulas are errors (#NAME? in LibreOffice)."""
     book, results = bore
     values = values_of(book, engine)
@@ -202,13 +202,14 @@ def test_above_the_dense_size_the_notes_name_the_blocked_propagation(tmp_path, m
 
 @pytest.mark.parametrize("case", ["line_space", "circle_space", "cone_small", "sphere_patch",
                                   "feature_plane_face.toml", "feature_table1_circle_arc.toml"])
-def test_every_element_type_has_live_formulas_that_reproduce_its_values(tmp_path, monkeypatch, case):
+@pytest.mark.parametrize("engine", ENGINES)
+def test_every_element_type_has_live_formulas_that_reproduce_its_values(tmp_path, monkeypatch, case, engine):
     """The paper-parameter blocks T^T V_A T rely on T having orthonormal columns; this holds for
-    every element (small tasks built as if above the native limit; `formulas` engine, ~2 s each)."""
+    every element (small tasks built as if above the native limit; every engine, ~2 s each)."""
     monkeypatch.setattr(feature_book, "FEATURE_NATIVE_MAX_POINTS", 0)
     results, files = build_task(feature_task_path(case, tmp_path), tmp_path / "out", plots=False)
     book = next(f for f in files if f.suffix == ".xlsx")
-    values = recalc(book, "formulas")
+    values = recalc(book, engine)
     assert_results_match_json(values, results)
     assert not error_cells(values), error_cells(values)[:5]
     assert_addin_formulas_reproduce_the_values(book, values, results)

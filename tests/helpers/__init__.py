@@ -1,6 +1,7 @@
 """What the tests share (one place, imported as ``tests.helpers``; test modules never import each
-other): the paths of the tree, the three-engine comparison (``ENGINES``, ``recalc``, ``close``)
-and the printed-precision check.  Themed helpers live beside this module:
+other): the paths of the tree, the four-engine comparison (the core against ``ENGINES``:
+``formulas``, LibreOffice, Gnumeric; ``recalc``, ``close``) and the printed-precision check.
+Themed helpers live beside this module:
 
 - ``tests.helpers.clouds``: the model parameters, probes and point clouds the core tests share;
 - ``tests.helpers.tasks``: task files written for tests (random clouds, large plates, the bore,
@@ -9,7 +10,8 @@ and the printed-precision check.  Themed helpers live beside this module:
 - ``tests.helpers.locator``: the locator's test layouts and the diagnosis workbook's expected rows;
 - ``tests.helpers.budget``: Wojtyła/Płowucha 2023, the steering knuckle and Tables 1-9 as printed;
 - ``tests.helpers.decision``: building a task and comparing its Decision/Summary cells per engine;
-- ``tests.helpers.files``: the one-clear-message check of bad input.
+- ``tests.helpers.files``: the one-clear-message check of bad input;
+- ``tests.helpers.openxml``: the Open XML validator and its documented false positives.
 """
 
 from __future__ import annotations
@@ -18,6 +20,7 @@ import math
 import os
 import subprocess
 import sys
+from collections import Counter
 from pathlib import Path
 
 import numpy as np
@@ -31,8 +34,13 @@ EXAMPLES = ROOT / "generator" / "examples"
 DATA = ROOT / "tests" / "data"
 #: the corpus of bad and hostile files (``make_bad_files.py``, ``hostile.py``)
 BAD_FILES = ROOT / "tests" / "bad_files"
-ENGINES = ["formulas", pytest.param("libreoffice", marks=pytest.mark.libreoffice)]
+#: the engines every workbook a test builds is recomputed in (the core gives the reference)
+ENGINES = ["formulas", pytest.param("libreoffice", marks=pytest.mark.libreoffice),
+           pytest.param("gnumeric", marks=pytest.mark.gnumeric)]
 REL = 1e-9
+#: the numbers the tests read from each engine's recalculated books (this process; the session
+#: summary of ``tests/conftest.py`` adds up the workers)
+ENGINE_CELLS: Counter = Counter()
 
 
 def close(a, b, rel: float = REL, floor: float = 1e-12) -> bool:
@@ -49,8 +57,30 @@ def printed(value: float, table_value: float, decimals: int = 2) -> bool:
     return abs(value - table_value) <= 0.5 * 10 ** -decimals + 1e-12
 
 
-def recalc(path: Path, engine: str):
-    return recalculate(path, engine)
+def recalc(path: Path, engine: str) -> dict[str, dict]:
+    """Every cell value of the workbook at ``path`` as ``engine`` recomputes it
+    (``cmmwb.generator.workbook.recalc.recalculate``); each number a test reads from it is
+    counted in :data:`ENGINE_CELLS`."""
+    return {sheet: _Counted(cells, engine) for sheet, cells in recalculate(path, engine).items()}
+
+
+class _Counted(dict):
+    """One sheet's values; reading a number (``[coordinate]`` or ``.get``) counts it for its engine."""
+
+    def __init__(self, cells: dict, engine: str):
+        super().__init__(cells)
+        self.engine = engine
+
+    def _count(self, v):
+        if isinstance(v, (int, float)) and not isinstance(v, bool):
+            ENGINE_CELLS[self.engine] += 1
+        return v
+
+    def __getitem__(self, key):
+        return self._count(super().__getitem__(key))
+
+    def get(self, key, default=None):
+        return self._count(super().get(key, default))
 
 
 def max_rel_diff(a, b) -> float:

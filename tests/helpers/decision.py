@@ -13,9 +13,8 @@ from openpyxl.utils import get_column_letter
 
 from cmmwb.generator import decision
 from cmmwb.generator.build import build_task
-from cmmwb.generator.workbook.recalc import recalculate
 
-from tests.helpers import close
+from tests.helpers import close, recalc
 
 
 def build(tmp: Path, source: Path, edit=None, name: str | None = None):
@@ -47,7 +46,7 @@ def cached(book: Path, sheets=("Decision", "Summary")) -> dict[str, dict[str, ob
 
 
 def assert_engine_agrees(book: Path, engine: str) -> int:
-    values = recalculate(book, engine)
+    values = recalc(book, engine)
     n = 0
     for sheet, cells in cached(book).items():
         assert cells, f"{sheet}: no cached formula values"

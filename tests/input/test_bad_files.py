@@ -81,6 +81,7 @@ def _write_zip(path: Path, parts: dict[str, bytes]) -> Path:
     return path
 
 
+@pytest.mark.foreign_books       # hostile files, written on purpose
 def test_a_zip_bomb_of_1_gb_is_refused_before_decompressing(tmp_path, capsys):
     """A 1 GiB part of zeros compresses to a few MB; its declared size gives it away."""
     book = _write_zip(tmp_path / "bomb.xlsx", _valid_parts())
@@ -97,6 +98,7 @@ def test_a_zip_bomb_of_1_gb_is_refused_before_decompressing(tmp_path, capsys):
     assert not (tmp_path / "o").exists()
 
 
+@pytest.mark.foreign_books       # hostile files, written on purpose
 def test_an_xml_entity_bomb_is_refused(tmp_path, capsys):
     """'Billion laughs': ten levels of ten entity references in the shared strings."""
     lol = ['<!ENTITY lol0 "lol">'] + [f'<!ENTITY lol{k} "{("&lol%d;" % (k - 1)) * 10}">' for k in range(1, 10)]
@@ -111,6 +113,7 @@ def test_an_xml_entity_bomb_is_refused(tmp_path, capsys):
     assert not (tmp_path / "o").exists()
 
 
+@pytest.mark.foreign_books       # hostile files, written on purpose
 def test_an_archive_with_too_many_parts_is_refused(tmp_path):
     parts = _valid_parts()
     parts.update({f"xl/media/pad{k}.bin": b"" for k in range(5000)})

@@ -42,6 +42,7 @@ def test_the_hostile_corpus_has_at_least_40_cases():
     assert len(CASES) >= 40
 
 
+@pytest.mark.foreign_books       # hostile files, written on purpose
 @pytest.mark.parametrize("name", sorted(CASES))
 def test_a_hostile_file_gives_one_clear_message_and_writes_nothing(tmp_path, capsys, name):
     argv, file_name, words = CASES[name](tmp_path)
@@ -313,6 +314,7 @@ def test_200000_point_records_fit_on_the_structured_path_but_not_dense():
         check_diagnose_fits("point", 200_000, available=4 * 2**30)
 
 
+@pytest.mark.foreign_books       # a relationship without its hyperlink element, on purpose
 def test_an_external_hyperlink_is_not_refused(tmp_path):
     """Hyperlinks open nothing by themselves: a workbook with one (to any address) passes."""
     from hostile import book, parts

@@ -95,7 +95,7 @@ def test_large_point_records_choose_the_structured_path_by_themselves():
 @pytest.mark.parametrize("engine", ENGINES)
 def test_the_workbook_of_a_structured_diagnosis_agrees_with_its_json(tmp_path, monkeypatch, engine):
     """The whitened GLS sheet holds the structured whitener's coordinates (fewer than n) and the
-    rank of C as a number; both engines reproduce chi-square, dof and estimates of the JSON."""
+    rank of C as a number; every engine reproduces chi-square, dof and estimates of the JSON."""
     from cmmwb.generator.diagnosis import book as diagnose_book
     from cmmwb.generator.diagnosis.run import run_diagnose
     from cmmwb.generator.workbook.recalc import results_rows

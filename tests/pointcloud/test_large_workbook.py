@@ -16,7 +16,7 @@ from cmmwb.generator.pointcloud import large_book
 from cmmwb.generator.pointcloud.vx_sheets import NATIVE_MAX_POINTS
 from cmmwb.generator.workbook.recalc import results_rows
 
-from tests.helpers import close, recalc
+from tests.helpers import ENGINES, close, recalc
 from tests.helpers.addin import evaluate_addin_formulas
 from tests.helpers.tasks import write_large_task
 
@@ -65,11 +65,11 @@ def book2000(tmp_path_factory):
     return tmp / "out" / "plate_m2000.xlsx", results
 
 
-@pytest.mark.libreoffice
-def test_m2000_workbook_shows_every_result_in_libreoffice(book2000):
+@pytest.mark.parametrize("engine", ENGINES[1:])      # `formulas` would take minutes
+def test_m2000_workbook_shows_every_result_in_libreoffice_and_gnumeric(book2000, engine):
     book, results = book2000
     assert len(results["distances"]) == 2000
-    values = recalc(book, "libreoffice")
+    values = recalc(book, engine)
     assert_results_match_json(values, results)
     # the add-in cells are #NAME? without the add-in; no other cell shows an error
     live = values[large_book.LIVE]
@@ -97,9 +97,10 @@ def book130(tmp_path_factory):
     return tmp / "out" / "plate_small.xlsx", results
 
 
-def test_smallest_large_workbook_with_the_formulas_engine(book130):
+@pytest.mark.parametrize("engine", ENGINES)
+def test_smallest_large_workbook_in_every_engine(book130, engine):
     book, results = book130
-    values = recalc(book, "formulas")
+    values = recalc(book, engine)
     assert_results_match_json(values, results)
     assert values[large_book.GP]["AI" + str(_snapshot_row(values))] is True
     assert_addin_formulas_reproduce_the_values(book, values, results)
@@ -133,8 +134,8 @@ def test_large_workbook_layout(book130):
     assert json.loads(book.with_suffix(".json").read_text())["distances"][0]["from"] == "=SUM(A1)"
 
 
-@pytest.mark.libreoffice
-def test_editing_an_input_of_the_gp_values_is_flagged(book130, tmp_path):
+@pytest.mark.parametrize("engine", ENGINES)
+def test_editing_an_input_of_the_gp_values_is_flagged(book130, tmp_path, engine):
     book, results = book130
     wb = openpyxl.load_workbook(book)
     ws = wb["Inputs"]
@@ -143,7 +144,7 @@ def test_editing_an_input_of_the_gp_values_is_flagged(book130, tmp_path):
     srow = next(r for r in range(2, 20) if ws.cell(row=r, column=1).value == "sigma_S_ppm")
     ws.cell(row=srow, column=2).value = 2 * ws.cell(row=srow, column=2).value
     wb.save(tmp_path / "edited.xlsx")
-    values = recalc(tmp_path / "edited.xlsx", "libreoffice")
+    values = recalc(tmp_path / "edited.xlsx", engine)
     assert values[large_book.GP]["AI" + str(_snapshot_row(values))] is False
     rows = results_rows(values)
     # the native scale/squareness column follows the edit at once

@@ -1,5 +1,5 @@
-"""Three engines, one answer: the point-cloud workbooks recomputed by `formulas` and by
-LibreOffice agree with the JSON of the Python core to relative 1e-9."""
+"""Four engines, one answer: the point-cloud workbooks recomputed by `formulas`, LibreOffice and
+Gnumeric agree with the JSON of the Python core to relative 1e-9."""
 
 import json
 import math
@@ -86,13 +86,15 @@ def test_workbook_layout_for_people(tmp_path):
     assert {f.suffix for f in files} == {".xlsx", ".json", ".png"}
 
 
-def test_point_labels_that_look_like_formulas_stay_text(tmp_path):
+@pytest.mark.parametrize("engine", ENGINES)
+def test_point_labels_that_look_like_formulas_stay_text(tmp_path, engine):
     labels = ["=SUM(A1)", "+1", "-2", "@x", "Q5", "Q6"]
     task = write_random_task(tmp_path, 7, m=6, probes=1, labels=labels, mpe=False)
     results, _ = build_task(task, tmp_path / "out", plots=False)
     wb = openpyxl.load_workbook(tmp_path / "out" / "random_7.xlsx")
     assert wb["Points"]["A2"].value == "=SUM(A1)" and wb["Points"]["A2"].data_type == "s"
     assert wb["Results"]["A2"].data_type == "s"
-    values = recalc(tmp_path / "out" / "random_7.xlsx", "formulas")
+    values = recalc(tmp_path / "out" / "random_7.xlsx", engine)
     assert values["Results"]["A2"] == "=SUM(A1)"
+    assert_workbook_matches_json(tmp_path / "out" / "random_7.xlsx", results, engine)
     assert json.loads((tmp_path / "out" / "random_7.json").read_text())["distances"][0]["from"] == "=SUM(A1)"

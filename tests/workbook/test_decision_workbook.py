@@ -1,5 +1,5 @@
 """Conformity decisions in the built outputs: the ``[decision]`` table, the ``decisions`` of the
-JSON and the ``Decision`` sheet (live formulas), in all three engines.
+JSON and the ``Decision`` sheet (live formulas), in all four engines.
 
 The numbers of JCGM 106:2012, 7.3 Table 1 (z for a one-sided tolerance interval: p_c = 0.80,
 0.90, 0.95, 0.99, 0.999 at z = 0.84, 1.28, 1.64, 2.33, 3.09) are reproduced in the workbook: a
@@ -17,11 +17,10 @@ import openpyxl
 import pytest
 
 from cmmwb.generator.errors import InputError
-from cmmwb.generator.workbook.recalc import recalculate
 from cmmwb.xlfuncs import conformity as cf
 from cmmwb.xlfuncs import dof
 
-from tests.helpers import EXAMPLES, close
+from tests.helpers import ENGINES, EXAMPLES, close, recalc
 from tests.helpers.decision import assert_engine_agrees, at, build
 
 KNUCKLE = EXAMPLES / "knuckle.toml"
@@ -97,16 +96,13 @@ def test_openpyxl_data_only_shows_the_decisions(knuckle):
     assert "does not conform" in summary
 
 
-def test_formulas_engine_agrees_on_decision_and_summary(knuckle):
-    assert assert_engine_agrees(knuckle[1], "formulas") > 40
+@pytest.mark.parametrize("engine", ENGINES)
+def test_every_engine_agrees_on_decision_and_summary(knuckle, engine):
+    assert assert_engine_agrees(knuckle[1], engine) > 40
 
 
-@pytest.mark.libreoffice
-def test_libreoffice_agrees_on_decision_and_summary(knuckle):
-    assert assert_engine_agrees(knuckle[1], "libreoffice") > 40
-
-
-def test_a_measured_value_typed_into_the_sheet_changes_the_decision(knuckle, tmp_path):
+@pytest.mark.parametrize("engine", ENGINES)
+def test_a_measured_value_typed_into_the_sheet_changes_the_decision(knuckle, tmp_path, engine):
     """The Decision sheet is live: S4_position measured 0.045 (beyond A_U = 0.0384) is undecided."""
     _, book = knuckle
     wb = openpyxl.load_workbook(book)
@@ -114,7 +110,7 @@ def test_a_measured_value_typed_into_the_sheet_changes_the_decision(knuckle, tmp
     wb[dest[0]][dest[1].replace("$", "")].value = 0.045
     edited = tmp_path / "edited.xlsx"
     wb.save(edited)
-    v = recalculate(edited, "formulas")["Decision"]
+    v = recalc(edited, engine)["Decision"]
     assert v[at(8, "outcome")] == "cannot be decided"
     want = cf.probability_of_conformance(0.045, v[at(8, "u_um")], cf.Tolerance(usl_mm=0.05))
     assert close(v[at(8, "p_c")], want, rel=1e-9)
@@ -148,10 +144,10 @@ def test_table1_probabilities_of_conformance_in_the_json(table1):
         assert abs(d["p_c"] - p_c) <= 0.5 * 10 ** -decimals, (d["characteristic"], d["p_c"], p_c)
 
 
-@pytest.mark.parametrize("engine", ["formulas", pytest.param("libreoffice", marks=pytest.mark.libreoffice)])
+@pytest.mark.parametrize("engine", ENGINES)
 def test_table1_probabilities_of_conformance_in_the_workbook(table1, engine):
     results, book = table1
-    v = recalculate(book, engine)["Decision"]
+    v = recalc(book, engine)["Decision"]
     for i, (d, (p_c, _)) in enumerate(zip(results["decisions"], TABLE1)):
         got = v[at(8 + i, "p_c")]
         assert close(got, d["p_c"], rel=1e-9)
@@ -194,15 +190,10 @@ def test_guard_bands_of_each_rule(rule_books):
     assert simple["w_um"] == 0 and simple["outcome"] == "conforms"
 
 
+@pytest.mark.parametrize("engine", ENGINES)
 @pytest.mark.parametrize("label", list(RULE_BOOKS))
-def test_formulas_engine_agrees_for_each_rule(rule_books, label):
-    assert assert_engine_agrees(rule_books[label][1], "formulas") > 10
-
-
-@pytest.mark.libreoffice
-@pytest.mark.parametrize("label", list(RULE_BOOKS))
-def test_libreoffice_agrees_for_each_rule(rule_books, label):
-    assert assert_engine_agrees(rule_books[label][1], "libreoffice") > 10
+def test_every_engine_agrees_for_each_rule(rule_books, label, engine):
+    assert assert_engine_agrees(rule_books[label][1], engine) > 10
 
 
 # -- bad input: one message naming the key ---------------------------------------------------

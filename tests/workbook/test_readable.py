@@ -22,10 +22,10 @@ from cmmwb.generator.feature.task import FIT_CURRENT, FIT_STALE
 from cmmwb.generator.taskfile import key_line
 from cmmwb.generator.workbook import plots
 from cmmwb.generator.workbook.pagesetup import CM_PER_CHAR
-from cmmwb.generator.workbook.recalc import recalculate, results_rows
+from cmmwb.generator.workbook.recalc import default_engine, results_rows
 from cmmwb.generator.workbook.styles import FMT_SCI
 
-from tests.helpers import EXAMPLES
+from tests.helpers import EXAMPLES, recalc
 
 CMMWB = [sys.executable, "-m", "cmmwb.generator"]
 
@@ -73,13 +73,19 @@ def test_the_planning_plot_prints_its_log_ticks_as_text(tmp_path, monkeypatch):
 
 def test_recalc_into_a_pipe_prints_the_table_and_no_progress_bar(sphere_book):
     _, book = sphere_book
-    proc = subprocess.run([*CMMWB, "recalc", str(book)], capture_output=True, text=True, timeout=300)
+    proc = subprocess.run([*CMMWB, "recalc", str(book), "--engine", "formulas"], capture_output=True, text=True,
+                          timeout=300)
     assert proc.returncode == 0, proc.stderr
     assert proc.stderr == ""                      # the engine's tqdm bar went to stderr before
     assert proc.stdout.splitlines()[0].startswith("parameter\tvalue\tu\tunit")
-    merged = subprocess.run([*CMMWB, "recalc", str(book)], stdout=subprocess.PIPE,
+    merged = subprocess.run([*CMMWB, "recalc", str(book), "--engine", "formulas"], stdout=subprocess.PIPE,
                             stderr=subprocess.STDOUT, text=True, timeout=300)
     assert merged.stdout.splitlines()[0].startswith("parameter\tvalue"), merged.stdout[:200]
+    # without --engine, the one line on stderr says which engine it chose
+    default = subprocess.run([*CMMWB, "recalc", str(book)], capture_output=True, text=True, timeout=300)
+    assert default.returncode == 0, default.stderr
+    assert default.stderr == f"cmmwb recalc: engine {default_engine()} (the fastest installed; --engine to choose another)\n"
+    assert default.stdout.splitlines()[0].startswith("parameter\tvalue\tu\tunit")
 
 
 def test_the_progress_bar_draws_only_on_a_terminal(monkeypatch):
@@ -198,14 +204,14 @@ def test_an_edited_point_flags_the_results_as_stale(sphere_book, tmp_path, engin
     results, book = sphere_book
     assert results["feature"]["fit"]["state"] == FIT_CURRENT
     assert results["feature"]["fit"]["gauss_newton_step_norm"] < 1e-12
-    before = results_rows(recalculate(book, engine))
+    before = results_rows(recalc(book, engine))
     assert {r["fit_state"] for r in before} == {FIT_CURRENT}
     wb = openpyxl.load_workbook(book)
     ws = wb["Points"]
     ws["B2"].value = ws["B2"].value + 0.001
     edited = tmp_path / f"edited_{engine}.xlsx"
     wb.save(edited)
-    after = results_rows(recalculate(edited, engine))
+    after = results_rows(recalc(edited, engine))
     assert {r["fit_state"] for r in after} == {FIT_STALE}
     rules = wb["Results"].conditional_formatting
     assert any(str(cf.sqref) == f"G2:G{1 + len(after)}" for cf in rules)
