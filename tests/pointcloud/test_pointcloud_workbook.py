@@ -64,6 +64,37 @@ def test_the_part_temperature_is_live_in_every_engine(tmp_path, engine):
     assert close(values["Inputs"][_named(tmp_path / "out" / "random_3.xlsx", "workpiece_u_eps_ppm")], u_eps)
 
 
+#: the issue's formula without the extra terms: the CMM corrects with the part's own alpha, no
+#: temperature difference, so u(eps) = sqrt((T - 20)^2 u^2(alpha) + alpha^2 u^2(T))
+WORKPIECE_ISSUE = """[workpiece]
+alpha_ppm_per_K = 23.0
+u_alpha_ppm_per_K = 1.0
+T_degC = 23.5
+u_T_K = 0.3
+fixture_mm = [40.0, -25.0, 10.0]
+"""
+
+
+@pytest.mark.parametrize("engine", ENGINES)
+def test_each_engines_u_W_is_L_times_the_issues_u_eps(tmp_path, engine):
+    """Read from the recalculated Results sheet itself, not through the JSON: every distance's
+    u_W_um is d_mm x sqrt((T - 20)^2 u^2(alpha) + alpha^2 u^2(T)) (3.5 K, 1e-6/K, 23e-6/K, 0.3 K:
+    7.7466 ppm), to rounding (rel 1e-12), in the engine's own d_mm; W off, the column is 0."""
+    u_eps_ppm = math.sqrt(3.5**2 * 1.0**2 + 23.0**2 * 0.3**2)
+    task = write_random_task(tmp_path, 4, m=6, probes=2, workpiece=WORKPIECE_ISSUE)
+    build_task(task, tmp_path / "on", plots=False)
+    rows = results_rows(recalc(tmp_path / "on" / "random_4.xlsx", engine))
+    assert len(rows) == 15
+    for row in rows:
+        assert row["d_mm"] > 50.0
+        assert close(row["u_W_um"], row["d_mm"] * u_eps_ppm * 1e-3, rel=1e-12, floor=0.0), row
+        assert row["u_W_um"] < row["u_um"]
+    plain = write_random_task(tmp_path, 4, m=6, probes=2, name="random_4_off")
+    build_task(plain, tmp_path / "off", plots=False)
+    for row in results_rows(recalc(tmp_path / "off" / "random_4_off.xlsx", engine)):
+        assert row["u_W_um"] == 0.0, row
+
+
 def _named(book, name: str) -> str:
     """The cell (A1 form, no $) a defined name points at."""
     wb = openpyxl.load_workbook(book)
