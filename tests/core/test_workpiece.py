@@ -134,8 +134,8 @@ def test_distances_agree_with_a_monte_carlo_that_perturbs_alpha_and_T():
     r = mc.distances(cloud, params, pairs, rng=np.random.default_rng(11), batch=20_000)
     assert r.converged
     for q in range(len(pairs)):
-        assert abs(r.u[q] - direct["u_um"][q]) <= 2 * r.tolerance[q], (q, r.u[q], direct["u_um"][q])
-        assert abs(r.components["W"][q] - direct["u_W_um"][q]) <= 2 * mc.numerical_tolerance(
+        assert abs(r.u[q] - direct["u_um"][q]) <= r.tolerance[q], (q, r.u[q], direct["u_um"][q])
+        assert abs(r.components["W"][q] - direct["u_W_um"][q]) <= mc.numerical_tolerance(
             r.components["W"][q:q + 1], 2)[0]
 
 
@@ -159,15 +159,16 @@ def plate_with_W():
 
 def test_every_characteristic_with_W_agrees_with_a_monte_carlo_that_perturbs_alpha_and_T(plate_with_W):
     """The plate's positions, flatness, distances, sizes, form and orientation with the part's
-    temperature: every linearised u within the Monte Carlo's two significant digits (JCGM 101 7.9),
-    W drawn as the physical model (alpha and T drawn, the part expanded and corrected)."""
+    temperature: every linearised u within the Monte Carlo's two significant digits (JCGM 101 7.9:
+    |u - u_MC| <= delta; 46,000 draws with this seed), W drawn as the physical model (alpha and T
+    drawn, the part expanded and corrected)."""
     p = plate_with_W
     res = p["res"]
     r = ch.monte_carlo(p["jf"], p["frames"], p["chars"], res, p["cloud"], PARAMS, rng=np.random.default_rng(5),
                        batch=2000)
     assert r.converged and np.all(2 * r.s_u <= r.tolerance)
     lin = np.array([x.u for x in res] + [x.u_margin_um for x in res if x.u_margin_um is not None])
-    bad = [(n, a, b) for n, a, b, t in zip(r.names, lin, r.u, r.tolerance) if abs(a - b) > 2 * t]
+    bad = [(n, a, b) for n, a, b, t in zip(r.names, lin, r.u, r.tolerance) if abs(a - b) > t]
     assert not bad
     by = {x.name: x for x in res}
     # W is visible where lengths are: the distance of the holes (40 mm: d u(eps), to the 1e-4 by which
@@ -187,3 +188,25 @@ def test_form_characteristics_show_the_small_W_share_they_should(plate_with_W):
         zone_um = x.value * 1e3
         assert x.u_factors["W"] == pytest.approx(u_eps * 1e-6 * zone_um, rel=0.02, abs=1e-9), x.name
         assert (x.u_factors["W"] / x.u) ** 2 < 1e-6, x.name
+
+
+def test_W_alone_in_a_monte_carlo_gives_each_characteristics_u_W(plate_with_W):
+    """Only alpha and T drawn (the sampler's factor W alone; 28,000 draws with this seed), every
+    feature refitted and every characteristic evaluated anew (minimum zones solved again): each
+    characteristic's linearised u_W within the Monte Carlo's two significant digits, the form,
+    orientation and parallelism ones (about 1e-4 µm: u(eps) x zone) as well as the sizes, the
+    distance, the width and the positions (0.13 to 1.8 µm).  The angle (0: a scale keeps angles)
+    and perp_H1_A (below 1e-8 µm) are left out: their Monte Carlo u is round-off."""
+    p = plate_with_W
+    keep = [i for i, x in enumerate(p["res"]) if x.u_factors["W"] > 1e-6]
+    chars = [p["chars"][i] for i in keep]
+    res = [p["res"][i] for i in keep]
+    assert {c.type for c in chars} >= {"flatness", "straightness", "roundness", "cylindricity", "position",
+                                       "distance", "diameter", "width", "perpendicularity", "parallelism"}
+    r = ch.monte_carlo(p["jf"], p["frames"], chars, res, p["cloud"], PARAMS, rng=np.random.default_rng(7),
+                       batch=2000, sampler=mc.PointCloudSampler(p["cloud"], PARAMS, factors=("W",)))
+    assert r.converged
+    for x, u_mc, t in zip(res, r.u, r.tolerance):
+        assert abs(x.u_factors["W"] - u_mc) <= t, (x.name, x.u_factors["W"], u_mc, t)
+        if x.spec.type in ("flatness", "straightness", "roundness", "cylindricity"):
+            assert u_mc < 2e-4 and (u_mc / x.u) ** 2 < 1e-6, (x.name, u_mc, x.u)
