@@ -61,6 +61,9 @@ def read_workpiece(path: Path, doc: dict) -> Part | None:
     enabled = _flag(path, tbl, "enabled", True)
     corrected = _flag(path, tbl, "corrected", True)
     material = None
+    if "alpha_ppm_per_K" in tbl and "material" in tbl:
+        raise InputError("give the part's expansion coefficient once: alpha_ppm_per_K or material (not both)",
+                         file=path, where=f"[{SECTION}] material")
     if "alpha_ppm_per_K" in tbl:
         alpha = number(path, tbl, SECTION, "alpha_ppm_per_K")
     elif "material" in tbl:

@@ -36,6 +36,8 @@ def run(tmp_path, capsys, toml: str) -> tuple[int, str]:
     (('material = "aluminium"', 'material = "unobtainium"'), "[workpiece] material (line", "unknown material"),
     (('material = "aluminium"', ""), "[workpiece]", "alpha_ppm_per_K (1e-6/K) or material"),
     (("T_degC = 23.5", "T_degC = 23.5\nT_readings_degC = [23.4, 23.6]"), "[workpiece]", "not both"),
+    (('material = "aluminium"', 'material = "aluminium"\nalpha_ppm_per_K = 22.0'), "[workpiece] material (line",
+     "alpha_ppm_per_K or material (not both)"),
     (("T_degC = 23.5", 'T_degC = "warm"'), "[workpiece] T_degC (line", "must be a number"),
     (("u_T_K = 0.3", "u_T_K = -0.3"), "[workpiece] u_T_K (line", "must be >= 0"),
     (("T_degC = 23.5", "T_readings_degC = []"), "[workpiece] T_readings_degC", "one or more finite temperatures"),
