@@ -366,6 +366,25 @@ def test_the_gum_modules_do_not_import_the_locator():
     assert not bad, bad
 
 
+def test_build_and_the_core_it_uses_do_not_import_the_locator():
+    """`cmmwb build` (every kind: the model records, V_X, budgets, features, characteristics,
+    decisions, the workpiece's W) reaches no module of the mismatch locator, directly or through
+    others: the locator is for diagnose and calibrate (issue 35)."""
+    graph = _graph()
+    reach = _reachable(graph, "generator.build")
+    core = {m for m in reach if m.startswith("xlfuncs.")}
+    assert {"xlfuncs.model.hyperparameters", "xlfuncs.model.workpiece", "xlfuncs.pointcloud", "xlfuncs.budget",
+            "xlfuncs.conformity", "xlfuncs.dof", "xlfuncs.distributions"} <= core
+    bad = []
+    for m in sorted(reach):
+        if m == "xlfuncs.locator" or m.startswith("xlfuncs.locator."):
+            chain = [m]
+            while reach[chain[-1]]:
+                chain.append(reach[chain[-1]])
+            bad.append(" <- ".join(chain))
+    assert not bad, bad
+
+
 def test_scipy_is_declared_where_the_core_imports_it():
     """A module of xlfuncs or generator that imports scipy needs scipy in [project] dependencies
     (issue 35: five core modules imported it, only the test extra had it)."""
