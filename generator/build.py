@@ -17,9 +17,9 @@ from . import report
 from .errors import InputError, model_errors_named
 from .jobs import job
 from .taskfile import collecting_notes, naming_lines, read_toml, task_kind_and_name
-from .workbook import cache as cached_values
 from .workbook.atomic import Staging
 from .workbook.book import BookAdditions
+from .workbook.provenance import provenance
 
 
 def non_finite(obj, where: str = "results"):
@@ -51,24 +51,21 @@ def load_task(task_path: Path):
     return kind, mod, doc, task
 
 
-def sheet_writers(kind: str, spec, results: dict, cache: dict) -> list:
-    """The sheets every book of the task gets besides its kind's: ``Decision`` (when the task has a
-    ``[decision]`` table) and ``Summary``; the values they cache go into ``cache``."""
+def sheet_writers(spec, quantities: list, verdicts: list, results: dict, keys) -> list:
+    """The sheets every book of the task gets besides its kind's: ``Decision`` (when the task has
+    decisions) and ``Summary``, the report page (:mod:`generator.report`), both from the task's
+    records; the values they cache are given with their formulas."""
     rows: dict[str, int] = {}
+    decided = spec is not None and bool(spec.tolerances)
 
     def decision_sheet(book):
-        got = decisions.write_sheet(book, kind, spec, results, results["decisions"])
-        rows.update({t.label: decisions.FIRST_ROW + i for i, t in enumerate(spec.tolerances)})
-        for sheet, vals in got.items():
-            cache.setdefault(sheet, {}).update(vals)
+        rows.update(decisions.write_sheet(book, spec, quantities, results["decisions"]))
 
     def summary_sheet(book):
-        got = report.write_sheet(book, kind, results, decision_rows=rows or None,
-                                 k_feature=spec.k if spec is not None and spec.k is not None else 2.0)
-        for sheet, vals in got.items():
-            cache.setdefault(sheet, {}).update(vals)
+        report.write_sheet(book, results, quantities, verdicts, keys=keys, decision_rows=rows or None,
+                           k_cell="decision_k" if decided and spec.k is not None else None)
 
-    return ([decision_sheet] if spec is not None and spec.tolerances else []) + [summary_sheet]
+    return ([decision_sheet] if decided else []) + [summary_sheet]
 
 
 def build_task(task_path: Path, out_dir: Path, *, plots: bool = True, force: bool = False,
@@ -77,7 +74,8 @@ def build_task(task_path: Path, out_dir: Path, *, plots: bool = True, force: boo
     """Build one task into ``out_dir``: workbook, JSON and plots, all or nothing.
 
     ``force``: replace outputs someone edited (keeping backups); ``cache``: which formula cells
-    get cached values for programs that do not calculate (see :mod:`generator.workbook.cache`);
+    get cached values for programs that do not calculate (see :mod:`generator.workbook.cache`;
+    the writers give the values with their formulas);
     ``exact``: no approximation even for large tasks (the job's ``force_exact``: a feature task's
     V_A; the other kinds are always exact); ``pdf``: the workbook printed to PDF by
     LibreOffice, inside the same all-or-nothing commit (so the manifest lists it, and a later build
@@ -85,18 +83,26 @@ def build_task(task_path: Path, out_dir: Path, *, plots: bool = True, force: boo
     task_path = Path(task_path)
     with collecting_notes() as notes:
         kind, mod, doc, task = load_task(task_path)
-        spec = decisions.read_spec(task_path, doc, kind)
+        keys = mod.TOLERANCE_KEYS
+        spec = decisions.read_spec(task_path, doc, keys)
         rep = report.read_report(task_path, doc)
     if exact:
         mod.force_exact(task)
     with model_errors_named(task_path), warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)   # numpy's; a non-finite result is caught below
         results = mod.compute(task)
+        quantities = mod.quantities(task, results, spec.k if spec is not None and spec.k is not None else 2.0)
+        verdicts = mod.verdicts(task, results)
+    if spec is None:
+        spec = decisions.default_spec(keys, quantities)     # a drawing's own tolerances, the default rule
     if spec is not None:
         results["decision_rule"] = decisions.rule_json(spec)
-        results["decisions"] = decisions.decide_all(task_path, kind, spec, results)
+        results["decisions"], skipped = decisions.decide_all(task_path, keys, spec, quantities)
+        if skipped:
+            results["not_decided"] = skipped
         mod.add_type_a(results)                 # a kind's budgets show the type A inputs (budget)
-    results["provenance"] = report.provenance(task_path, doc, built_utc)
+    results["statements"] = report.statements(quantities, results.get("decisions", []))
+    results["provenance"] = provenance(task_path, doc, built_utc)
     if rep is not None:
         results["report"] = rep
 
@@ -109,15 +115,13 @@ def build_task(task_path: Path, out_dir: Path, *, plots: bool = True, force: boo
     with staging as tmp:
         name = results["name"]
         book = tmp / f"{name}.xlsx"
-        extra_cache: dict = {}
         try:
             mod.write_book(task, results, book, BookAdditions(
                 info={"kind": kind, "name": name, "doc": doc, "task_file": task_path.name},
-                sheets=tuple(sheet_writers(kind, spec, results, extra_cache))))
+                sheets=tuple(sheet_writers(spec, quantities, verdicts, results, keys)), cache=cache))
         except IllegalCharacterError:
             raise InputError("a text (a point, probe or characteristic name, or a note) contains a control "
                              "character that a workbook cannot store", file=task_path) from None
-        cached_values.store(book, kind, results, cache, extra=extra_cache)
         (tmp / f"{name}.json").write_text(json.dumps(results, indent=1, ensure_ascii=False) + "\n",
                                           encoding="utf-8")
         made = [tmp / f"{name}.xlsx", tmp / f"{name}.json"]

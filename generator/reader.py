@@ -97,22 +97,7 @@ def read_workbook(path: Path, points_file: str = "points.csv") -> ReadTask:
     cells.snapshot = info["inputs"]
     kind = info["kind"]
     rt = ReadTask(kind, info["name"], copy.deepcopy(info["doc"]))
-    if kind == "pointcloud":
-        from .pointcloud.reader import read_pointcloud
-
-        read_pointcloud(cells, rt, points_file)
-    elif kind == "budget":
-        from .budget.reader import read_budget
-
-        read_budget(cells, rt)
-    elif kind == "characteristic":
-        from .characteristic.reader import read_characteristic
-
-        read_characteristic(cells, rt, points_file)
-    else:
-        from .feature.reader import read_feature
-
-        read_feature(cells, rt, points_file)
+    job(kind).read_book(cells, rt, points_file)
     read_decision(cells, rt)
     return rt
 

@@ -268,6 +268,18 @@ def read_points_rows(path: Path, rows, probes: tuple[Probe, ...]) -> PointTable:
     return points.table()
 
 
+def points_source(doc: dict) -> str:
+    """Where a task's points come from, in words for a report: ``the points table ([points]
+    file)`` (its name and SHA-256 are in the report's header) or ``the points given in the task
+    file ([points] rows)``.  The file is not named here, so that the words do not change when
+    ``cmmwb read`` names the table after the task file."""
+    pts = doc.get("points")
+    name = pts.get("file") if isinstance(pts, dict) else None
+    if isinstance(name, str):
+        return "the points table ([points] file)"
+    return "the points given in the task file ([points] rows)"
+
+
 def read_point_cloud(path: Path, doc: dict) -> tuple[PointCloud, Parameters, PointTable]:
     """The point-cloud model of a task: points (``[points] file`` or ``rows``), probes, parameters,
     and the part's temperature (``[workpiece]``, the factor W: :mod:`generator.taskworkpiece`)."""

@@ -3,8 +3,13 @@ that ``build``, ``new``, ``read``, ``demo`` and the templates handle every kind 
 registry of the kinds is :data:`generator.jobs.JOBS`; ``tests/layout/test_jobs.py`` checks that every
 registered module satisfies :class:`TaskKind`.
 
-The hooks only some kinds need (:meth:`TaskKind.force_exact`, :meth:`TaskKind.add_type_a`) are part
-of the contract too: a kind without a use for one binds the default given here, so that the
+What the code every kind shares needs of a kind's results it takes from the kind's records
+(:meth:`TaskKind.quantities`, :class:`generator.quantities.Quantity`: label, value, u, U, the
+value's source, the cells that hold them) and from :attr:`TaskKind.TOLERANCE_KEYS` (how a
+``[[decision.tolerances]]`` entry names a result), never by asking which kind it is.
+
+The hooks only some kinds need (:meth:`TaskKind.force_exact`, :meth:`TaskKind.add_type_a`,
+:meth:`TaskKind.verdicts`) are part of the contract too: a kind without a use for one binds the default given here, so that the
 caller never asks whether a kind has it.
 """
 
@@ -13,6 +18,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any, Mapping, Protocol, Sequence, runtime_checkable
 
+from .quantities import Quantity, ToleranceKeys, Verdict
 from .workbook.book import BookAdditions
 
 
@@ -26,6 +32,8 @@ class TaskKind(Protocol):
     NEW_TASK: str
     #: the tables that task names (file name -> text), written beside it as ``<stem>_<name>``
     NEW_TASK_FILES: Mapping[str, str]
+    #: how ``[[decision.tolerances]]`` name the kind's results (none: its own tolerances)
+    TOLERANCE_KEYS: ToleranceKeys
 
     def load(self, path: Path, doc: dict) -> Any:
         """The task of the TOML document ``doc`` read from ``path``, validated (every problem an
@@ -44,6 +52,21 @@ class TaskKind(Protocol):
     def summary(self, results: dict) -> list[str]:
         """The headline results, a few lines for the terminal."""
 
+    def quantities(self, task: Any, results: dict, k: float = 2.0) -> list[Quantity]:
+        """One record per result a person reads and a tolerance may name
+        (:class:`generator.quantities.Quantity`), in the order of the results, with the cells of
+        the kind's workbook that hold it.  ``k``: the coverage factor of results that give u only
+        (the ``[decision] k``)."""
+
+    def verdicts(self, task: Any, results: dict) -> list[Verdict]:
+        """Verdicts besides the decisions of the characteristics (the MPE check of a point cloud;
+        default :func:`no_verdicts`)."""
+
+    def read_book(self, cells: Any, rt: Any, points_file: str) -> None:
+        """``cmmwb read``: the kind's inputs of a workbook (``cells``, a
+        :class:`generator.workbook.readback.Cells`) into the task ``rt``
+        (:class:`generator.workbook.readback.ReadTask`); ``points_file`` names its points table."""
+
     def force_exact(self, task: Any) -> None:
         """``cmmwb build --exact``: no approximation whatever the task says (default
         :func:`always_exact`)."""
@@ -59,3 +82,8 @@ def always_exact(task: Any) -> None:
 
 def no_type_a(results: dict) -> None:
     """The default ``add_type_a``: the kind's results show no type A inputs."""
+
+
+def no_verdicts(task: Any, results: dict) -> list[Verdict]:
+    """The default ``verdicts``: none besides the decisions."""
+    return []

@@ -40,7 +40,7 @@ NUMERIC_MODULES = {
     "test_characteristics", "test_reference_fits", "test_characteristics_workbook",
     "test_qif_characteristics",
     "test_diagnose_structured_lengths", "test_rank_refusal", "test_all_pairs_stream",
-    "test_calibrate_core", "test_calibrate_loop",
+    "test_calibrate_core", "test_calibrate_loop", "test_calibrate_verdicts",
     "test_reml_structured",
     "test_conformity_core", "test_statement_core", "test_dof_core", "test_decision_workbook", "test_provenance",
     "test_readable",
@@ -49,6 +49,7 @@ NUMERIC_MODULES = {
     "test_budget_dof",
     "test_model_paths",
     "test_diagnose_effect_formulas",
+    "test_validate_core", "test_validate_cli", "test_validate_book", "test_validate_loop",
     "test_workpiece", "test_hyperparameters",
 }
 

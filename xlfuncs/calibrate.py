@@ -22,7 +22,7 @@ numpy only.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -50,6 +50,16 @@ NO_SENSITIVITY = 1e-6
 #: one-sided 95 % limit for a parameter on the boundary (Self & Liang 1987: the likelihood-ratio
 #: statistic is 1/2 chi2_0 + 1/2 chi2_1, its 95 % point chi2_1(0.90) = 2.706, half of it)
 UPPER_DROP = 1.353
+#: two local maxima of the REML likelihood are distinct when some log hyper-parameter differs by
+#: more than this between them (a factor e^0.1 ~ 1.1)
+PEAK_SEPARATION = 0.1
+#: a start, or a profile point, that reaches this much more log-likelihood than the fit is higher
+#: (the fit's own convergence is within 1e-6)
+PEAK_GAIN = 0.01
+#: the other starts of the fit: every estimated length scale at these multiples of its estimate,
+#: the others at their estimates (a short correlation with a small sigma and a long one with a
+#: larger sigma are the classic pair of peaks of a Gaussian process likelihood)
+OTHER_STARTS = (0.25, 4.0)
 
 #: what measurement identifies each hyper-parameter (reported with a non-identifiable one): its record's
 ADVICE = {h.name: h.advice for h in HYPERPARAMETERS}
@@ -74,6 +84,19 @@ class Estimate:
 
 
 @dataclass
+class Peak:
+    """One local maximum of the REML likelihood found by the fit: the estimated hyper-parameters
+    there, its log-likelihood and the start that led to it."""
+
+    values: dict[str, float]
+    loglik: float
+    found_by: str
+
+    def to_json(self) -> dict:
+        return {"values": dict(self.values), "loglik": self.loglik, "found_by": self.found_by}
+
+
+@dataclass
 class Calibration:
     estimates: dict[str, Estimate]
     params: pc.Parameters          # fitted (non-identified ones at their start)
@@ -86,11 +109,25 @@ class Calibration:
     dof: int
     iterations: int
     sets: list[RecordSet]
+    #: the distinct local maxima found (the fit's first), with the free set of ``free``
+    peaks: list[Peak] = field(default_factory=list)
+    fixed: tuple[str, ...] = ()
+    u_log_max: float = U_LOG_MAX
+    #: whether the fit was started again from other length scales (step 5 of :func:`calibrate`)
+    peaks_searched: bool = True
+
+    @property
+    def multimodal(self) -> str | None:
+        """The sentence that says the likelihood has several peaks and what separates them, or None."""
+        return peaks_text(self.peaks) if len(self.peaks) > 1 else None
 
     def to_json(self) -> dict:
         return {
             "loglik": self.loglik, "loglik_start": self.loglik_start, "reml_chi2": self.chi2, "reml_dof": self.dof,
             "iterations": self.iterations,
+            "peaks": [p.to_json() for p in self.peaks],
+            "multimodal": self.multimodal,
+            "peaks_searched": self.peaks_searched,
             "estimated": list(self.free),
             "hyper_parameters": [
                 {"name": e.name, "unit": e.unit, "start": e.start, "estimate": e.value, "u": e.u,
@@ -168,7 +205,8 @@ def _why_weak(name: str, sets: list[RecordSet], corr_row: np.ndarray | None, fre
 
 
 def calibrate(sets: list[RecordSet], start: pc.Parameters, *, fixed: tuple[str, ...] = (),
-              u_log_max: float = U_LOG_MAX) -> Calibration:
+              u_log_max: float = U_LOG_MAX, warm: dict[str, float] | None = None, found_by: str = "",
+              known: list[Peak] | None = None, other_starts: bool | None = None) -> Calibration:
     """REML estimates of the hyper-parameters, starting from ``start`` (the task's values).
 
     1. A parameter that is zero in ``start`` (or whose standard deviation is) is off: held at
@@ -180,9 +218,23 @@ def calibrate(sets: list[RecordSet], start: pc.Parameters, *, fixed: tuple[str, 
        largest at zero is reported ``zero`` and the rest refitted.
     4. The covariance of the log estimates is the inverse observed information; a parameter whose
        u(log) there exceeds twice ``u_log_max`` (these records, not the design, leave it open) is
-       held at its start too and the rest refitted."""
+       held at its start too and the rest refitted.
+    5. The likelihood of Gaussian-process hyper-parameters can have more than one peak (a short
+       correlation with a small sigma, a long one with a larger sigma): once the free set is
+       settled, the fit is started again with every estimated length scale at
+       :data:`OTHER_STARTS` times its estimate; a start that climbs higher (by :data:`PEAK_GAIN`)
+       moves the fit there.  The distinct local maxima found are ``peaks`` (the fit's first),
+       and :attr:`Calibration.multimodal` says what separates them.
+
+    ``warm``: values the fit of the free parameters starts from instead of ``start`` (a point a
+    likelihood profile found higher, :func:`xlfuncs.calibration_checks.profiles_at_maximum`;
+    ``found_by`` says so), ``known``: peaks found before, kept in ``peaks``; ``other_starts``
+    False skips step 5, None (default) runs it when every record set has the dense covariance
+    (on the structured one each start is a large fit of its own: ``peaks_searched`` says so)."""
     if not sets:
         raise ModelError("no records to calibrate from")
+    if other_starts is None:
+        other_starts = not any(getattr(s, "structured", False) for s in sets)
     sv = {n: float(getattr(start, n)) for n in NAMES}
     if sv["sigma_R_um"] <= 0:
         raise ModelError("calibrate needs sigma_R_um > 0 in the task (the starting value of the repeatability)")
@@ -242,16 +294,35 @@ def calibrate(sets: list[RecordSet], start: pc.Parameters, *, fixed: tuple[str, 
              f"u(log) = {u_log[j]:.2f} expected from these records at the task's values (above {u_log_max:g}): "
              + _why_weak(name, sets, row, free, sv))
 
-    # -- 3./4. the fit -------------------------------------------------------------------------
+    # -- 3./4./5. the fit ----------------------------------------------------------------------
     iterations = 0
+    if warm:
+        for n in free:
+            if warm.get(n, 0.0) > 0:
+                sv[n] = float(warm[n])
     values = dict(sv)
     cov = np.zeros((0, 0))
+    peaks: list[Peak] = []
+    origin = found_by or ("the task's values" if not warm else "the values given")
+    tried: list[str] | None = None
     while free:
         box = bounds(sets, sv, free)
         phi, t, it = maximize(sets, sv, free, box)
         iterations += it
         values = values_from_log(sv, free, phi)
         zero = [n for n, x, lo in zip(free, phi, box.lo) if HYPER[n].role != "lambda" and x <= lo + 1e-6]
+        if not zero and other_starts and tried != free:
+            # 5. the other starts, once per free set
+            tried = list(free)
+            peaks = [Peak({n: values[n] for n in free}, t.loglik, origin)]
+            found = _other_starts(sets, values, free, box, peaks, origin)
+            iterations += found[1]
+            best = peaks[0]
+            if best.loglik > t.loglik + PEAK_GAIN:
+                origin = best.found_by
+                for n in free:
+                    sv[n] = best.values[n]
+                continue          # the fit from the higher peak (zero, information, holds as before)
         if zero:
             for n in zero:
                 hold(n, "zero", f"the likelihood is largest at {n} -> 0: these records show none of this factor "
@@ -300,13 +371,80 @@ def calibrate(sets: list[RecordSet], start: pc.Parameters, *, fixed: tuple[str, 
             fitted[n] = e.value = e.start
     params = pc.Parameters(**fitted)
     tf = reml_terms(sets, fitted, [], fisher=False)
+    peaks = _distinct([p for p in (known or []) + peaks if set(p.values) == set(free)],
+                      first=Peak({n: values[n] for n in free}, tf.loglik, origin))
     for n, e in est.items():
         if e.status == "zero":
             e.upper = upper_limit(sets, fitted, list(free), n, e.start, tf.loglik,
                                   {lm: est[lm].start for lm, s_ in PARTNER.items() if s_ == n})
             e.reason += f"; upper 95 % limit {e.upper:.3g} {e.unit} (REML profile)"
     return Calibration(est, params, start, list(free), cov if free else np.zeros((0, 0)), tf.loglik,
-                       loglik_start, tf.chi2, tf.dof, iterations, sets)
+                       loglik_start, tf.chi2, tf.dof, iterations, sets, peaks if free else [], tuple(fixed),
+                       u_log_max, bool(other_starts))
+
+
+def _other_starts(sets: list[RecordSet], values: dict[str, float], free: list[str], box,
+                  peaks: list[Peak], origin: str) -> tuple[list[Peak], int]:
+    """Step 5 of :func:`calibrate`: Fisher scoring from every estimated length scale at
+    :data:`OTHER_STARTS` times its estimate (the others at theirs); the distinct maxima reached
+    are added to ``peaks``.  Returns (peaks, iterations)."""
+    its = 0
+    for lm in [n for n in free if n.startswith("lambda")]:
+        for f in OTHER_STARTS:
+            s0 = dict(values)
+            s0[lm] = values[lm] * f
+            phi, t, it = maximize(sets, s0, free, box, max_iter=60)
+            its += it
+            peaks.append(Peak(dict(zip(free, np.exp(phi).tolist())), t.loglik,
+                              f"a start at {lm} = {s0[lm]:.4g} {UNIT[lm]} ({f:g} x its value at the peak "
+                              f"reached from {origin})"))
+    peaks[:] = _distinct(peaks)
+    return peaks, its
+
+
+def _distinct(peaks: list[Peak], first: Peak | None = None) -> list[Peak]:
+    """The peaks, highest first (``first``, the fit, before all), without repeats: a peak within
+    PEAK_SEPARATION in every log hyper-parameter of one found before it (in the order given) is
+    that one, and the first start that reached it names it."""
+    def far(p: Peak, q: Peak) -> bool:
+        return max(abs(math.log(p.values[n]) - math.log(q.values[n])) for n in p.values) > PEAK_SEPARATION
+
+    kept: list[Peak] = []
+    for p in peaks:                  # the first start that reached a peak stands for it
+        if (first is None or far(p, first)) and all(far(p, q) for q in kept):
+            kept.append(p)
+    kept.sort(key=lambda p: -p.loglik)
+    return ([first] if first is not None else []) + kept
+
+
+def _separating(a: Peak, b: Peak) -> list[str]:
+    """The hyper-parameters in which two peaks differ by more than PEAK_SEPARATION in log, the
+    largest difference first."""
+    gap = {n: abs(math.log(a.values[n]) - math.log(b.values[n])) for n in a.values}
+    return [n for n in sorted(gap, key=lambda n: -gap[n]) if gap[n] > PEAK_SEPARATION]
+
+
+def peaks_text(peaks: list[Peak]) -> str:
+    """What a lab reads when the REML likelihood has several peaks: which one the fit reports,
+    the others with their log-likelihood below it, the hyper-parameters that separate them
+    and how strongly the records prefer the fit (likelihood ratio; 2 x the difference against
+    chi2_1(0.95) = 3.84)."""
+    top = peaks[0]
+    parts = [f"The REML likelihood has {len(peaks)} peaks; the fit is the highest (log-likelihood "
+             f"{top.loglik:.3f}, found from {top.found_by})."]
+    for p in peaks[1:]:
+        d = top.loglik - p.loglik
+        sep = _separating(top, p)[:3]
+        what = ", ".join(f"{n} {top.values[n]:.3g} vs {p.values[n]:.3g} {UNIT[n]}" for n in sep)
+        firm = ("the records rule it out" if 2 * d > 3.84 else
+                "the records do not rule it out (2 x the difference is below 3.84, chi2_1 at 95 %)")
+        parts.append(f"Another peak {d:.3f} lower (likelihood ratio {math.exp(d):.3g}, found from {p.found_by}) "
+                     f"differs in {what}: {firm}.")
+    if len(peaks) > 1:
+        sep = _separating(top, peaks[1])
+        if sep:
+            parts.append("What would separate them: " + "; ".join(ADVICE[n] for n in sep[:2]) + ".")
+    return " ".join(parts)
 
 
 def upper_limit(sets: list[RecordSet], values: dict[str, float], free: list[str], name: str, start: float,

@@ -13,8 +13,14 @@ measured value and u its standard uncertainty (JCGM 106:2012, 7.2-7.3).  A toler
   limit has p_c = 1 - α exactly: w = z·u with z = Φ⁻¹(1 - α) for a one-sided interval, the root
   of eq. (12) for a two-sided one (:func:`specific_risk_guard_band_um`, Newton steps that the
   Decision sheet repeats cell by cell).
-* :func:`decide`: the outcome for one characteristic: ``conforms``, ``does not conform`` or
-  ``cannot be decided``, and the zone the measured value falls in.
+* :func:`decide`: for one characteristic, two separate things (ISO 14253-1:2017, ILAC-G8:09/2019):
+  the outcome of the decision rule (``accepted`` or ``rejected`` under the named rule, and the
+  rule's zone: acceptance or rejection zone; the ISO 14253-1 rule: ``conforms``, ``does not
+  conform`` or ``cannot be decided``), and the conformity statement the value and its U prove
+  whatever the rule (``conformity proven`` in [T_L + U, T_U - U], ``non-conformity proven``
+  outside [T_L - U, T_U + U], else ``neither proven``: the uncertainty range).  A value outside
+  its tolerance interval can be *accepted* by guarded rejection, never said to conform; one
+  inside it can be *rejected*, never said not to conform.
 * :func:`acceptance_limits_for_p_c`: the exact acceptance limits for a required p_c (one- and
   two-sided), :func:`specific_consumer_risk` = 1 - p_c (JCGM 106:2012, 9.3).
 * the global risks of a production process (JCGM 106:2012, 9.5) are in :mod:`xlfuncs.global_risk`.
@@ -54,6 +60,22 @@ RULE_TEXT = {
 CONFORMS = "conforms"
 DOES_NOT_CONFORM = "does not conform"
 UNDECIDED = "cannot be decided"
+#: the outcome of a binary rule (simple, guarded acceptance/rejection, specific risk)
+ACCEPTED = "accepted"
+REJECTED = "rejected"
+#: the ISO 14253-1 conformity statement, whatever the rule: what the value and U prove
+CONFORMITY_PROVEN = "conformity proven"
+NONCONFORMITY_PROVEN = "non-conformity proven"
+NEITHER_PROVEN = "neither proven"
+#: the zones of ISO 14253-1:2017 (5.2, 5.3): by conformity statement
+CONFORMITY_ZONES = {CONFORMITY_PROVEN: "conformance zone", NONCONFORMITY_PROVEN: "non-conformance zone",
+                    NEITHER_PROVEN: "uncertainty range"}
+#: the rule's outcome in two words, by the ``outcome`` of each rule
+RULE_OUTCOME = {CONFORMS: ACCEPTED, DOES_NOT_CONFORM: REJECTED, UNDECIDED: UNDECIDED, ACCEPTED: ACCEPTED,
+                REJECTED: REJECTED}
+#: a rule's short name, for "accepted (guarded rejection)"
+RULE_NAME = {"simple": "simple acceptance", "iso14253": "ISO 14253-1", "guarded_acceptance": "guarded acceptance",
+             "guarded_rejection": "guarded rejection", "specific_risk": "specific risk"}
 
 
 @dataclass(frozen=True)
@@ -133,10 +155,26 @@ class Decision:
     rule: DecisionRule
     w_um: float                      #: guard band (> 0 inside the tolerance interval, < 0 outside)
     acceptance_mm: tuple[float | None, float | None]   #: [A_L, A_U]
-    rejection_mm: tuple[float | None, float | None]    #: beyond these: does not conform (iso14253)
+    #: the non-conformance limits [T_L - U, T_U + U]: beyond them non-conformity is proven
+    #: (ISO 14253-1:2017, 5.3), whatever the rule
+    rejection_mm: tuple[float | None, float | None]
     p_c: float                       #: probability of conformance
-    outcome: str                     #: conforms / does not conform / cannot be decided
-    zone: str
+    #: the rule's outcome: conforms / does not conform / cannot be decided (ISO 14253-1 rule),
+    #: accepted / rejected (the binary rules)
+    outcome: str
+    zone: str                        #: the rule's zone of the value
+    #: the conformance limits [T_L + U, T_U - U]: inside them conformity is proven (5.2)
+    conformance_mm: tuple[float | None, float | None] = (None, None)
+    conformity: str = NEITHER_PROVEN   #: conformity proven / non-conformity proven / neither proven
+
+    @property
+    def rule_outcome(self) -> str:
+        """accepted / rejected / cannot be decided (the ISO 14253-1 rule's uncertainty range)."""
+        return RULE_OUTCOME[self.outcome]
+
+    @property
+    def conformity_zone(self) -> str:
+        return CONFORMITY_ZONES[self.conformity]
 
     def as_dict(self) -> dict:
         return {"value_mm": self.value_mm, "u_um": self.u_um, "U_um": self.U_um, "k": self.k,
@@ -144,7 +182,11 @@ class Decision:
                 "rule": self.rule.kind, "r": self.rule.r, "max_pfa": self.rule.max_pfa,
                 "w_um": self.w_um, "acceptance_limits_mm": list(self.acceptance_mm),
                 "acceptance_interval_empty": empty(self.acceptance_mm),
-                "p_c": self.p_c, "outcome": self.outcome, "zone": self.zone}
+                "p_c": self.p_c, "outcome": self.outcome, "zone": self.zone,
+                "rule_outcome": self.rule_outcome, "rule_name": RULE_NAME[self.rule.kind],
+                "conformity": self.conformity, "conformity_zone": self.conformity_zone,
+                "conformance_limits_mm": list(self.conformance_mm),
+                "non_conformance_limits_mm": list(self.rejection_mm)}
 
 
 def probability_of_conformance(value_mm, u_um, tolerance: Tolerance):
@@ -255,10 +297,13 @@ def decide(value_mm: float, u_um: float, tolerance: Tolerance, rule: DecisionRul
     """The decision for one characteristic measured as ``value_mm`` with standard uncertainty
     ``u_um`` and expanded uncertainty U = k·u.
 
-    Binary rules (simple, guarded acceptance/rejection, specific risk) accept (``conforms``,
-    acceptance zone) or reject (``does not conform``, rejection zone).  The ISO 14253-1 rule has
-    three outcomes: conformance zone, non-conformance zone, and the uncertainty range between
-    them (``cannot be decided``)."""
+    Binary rules (simple, guarded acceptance/rejection, specific risk) accept (``accepted``,
+    acceptance zone) or reject (``rejected``, rejection zone).  The ISO 14253-1 rule has three
+    outcomes: conformance zone (``conforms``), non-conformance zone (``does not conform``), and
+    the uncertainty range between them (``cannot be decided``).  Whatever the rule, the
+    conformity statement says what the value and U prove (ISO 14253-1:2017, 5.2, 5.3):
+    ``conformity proven`` in [T_L + U, T_U - U], ``non-conformity proven`` outside
+    [T_L - U, T_U + U], else ``neither proven``."""
     y = float(value_mm)
     u = float(u_um)
     if not (math.isfinite(y) and math.isfinite(u) and u > 0 and math.isfinite(k) and k > 0):
@@ -268,23 +313,24 @@ def decide(value_mm: float, u_um: float, tolerance: Tolerance, rule: DecisionRul
     w = (specific_risk_guard_band_um(tolerance, u, rule.max_pfa) if rule.kind == "specific_risk"
          else guard_band_um(rule, U, k))
     acc = acceptance_limits(tolerance, w)
-    rej: tuple[float | None, float | None] = (None, None)
-    if rule.kind == "iso14253":
-        rej = acceptance_limits(tolerance, -U)
-        if _inside(y, *acc):
-            outcome, zone = CONFORMS, "conformance zone"
-        elif not _inside(y, *rej):
-            outcome, zone = DOES_NOT_CONFORM, "non-conformance zone"
-        else:
-            outcome, zone = UNDECIDED, "uncertainty range"
-    elif rule.kind == "specific_risk":
-        ok = p_c >= 1.0 - rule.max_pfa
-        outcome, zone = (CONFORMS, "acceptance zone") if ok else (DOES_NOT_CONFORM, "rejection zone")
+    conf = acceptance_limits(tolerance, U)
+    rej = acceptance_limits(tolerance, -U)
+    if _inside(y, *conf) and not empty(conf):
+        conformity = CONFORMITY_PROVEN
+    elif not _inside(y, *rej):
+        conformity = NONCONFORMITY_PROVEN
     else:
-        ok = _inside(y, *acc)
-        outcome, zone = (CONFORMS, "acceptance zone") if ok else (DOES_NOT_CONFORM, "rejection zone")
+        conformity = NEITHER_PROVEN
+    if rule.kind == "iso14253":
+        outcome, zone = {CONFORMITY_PROVEN: (CONFORMS, "conformance zone"),
+                         NONCONFORMITY_PROVEN: (DOES_NOT_CONFORM, "non-conformance zone"),
+                         NEITHER_PROVEN: (UNDECIDED, "uncertainty range")}[conformity]
+    else:
+        ok = p_c >= 1.0 - rule.max_pfa if rule.kind == "specific_risk" else _inside(y, *acc)
+        outcome, zone = (ACCEPTED, "acceptance zone") if ok else (REJECTED, "rejection zone")
     return Decision(value_mm=y, u_um=u, U_um=U, k=float(k), tolerance=tolerance, rule=rule, w_um=w,
-                    acceptance_mm=acc, rejection_mm=rej, p_c=p_c, outcome=outcome, zone=zone)
+                    acceptance_mm=acc, rejection_mm=rej, p_c=p_c, outcome=outcome, zone=zone,
+                    conformance_mm=conf, conformity=conformity)
 
 
 def measurement_capability_index(tolerance: Tolerance, u_um: float) -> float:

@@ -6,6 +6,9 @@
 * :func:`t_cdf`, :func:`t_quantile`: Student's t (:mod:`xlfuncs.distributions`, re-exported).
 * :func:`coverage_factor`: k_p = t_p(ν_eff) with ν_eff truncated to the next lower integer
   (GUM G.6.4), p = 0.9545 by default (k = 2 for ν = ∞, GUM G.1.3, G.6.6).
+* :func:`coverage_probability`: the other way, the coverage probability of a coverage factor k:
+  2Φ(k) - 1 for ν_eff = ∞ (GUM G.1.3: k = 2 gives 95.45 %, k = 3 99.73 %), 2 t_cdf(k, ⌊ν_eff⌋) - 1
+  for a finite ν_eff (GUM G.3.2, G.6.4).
 """
 
 from __future__ import annotations
@@ -44,6 +47,22 @@ def coverage_factor(nu: float, p: float = P_K2) -> float:
     if n < 1:
         raise ModelError(f"an effective degrees of freedom below 1 ({nu!r}) gives no coverage factor")
     return t_quantile(0.5 + p / 2.0, n)
+
+
+def coverage_probability(k: float, nu: float = math.inf) -> float:
+    """The coverage probability p of the interval y ± k·u (GUM G.1.3, G.3.2): 2Φ(k) - 1 for
+    ν = ∞ (normal), else 2·F_t(k; ⌊ν⌋) - 1 with ν truncated to the next lower integer as for the
+    coverage factor (GUM G.6.4), so that ``coverage_probability(coverage_factor(nu), nu)`` is
+    0.9545."""
+    k = float(k)
+    if not (math.isfinite(k) and k > 0):
+        raise ModelError(f"a coverage factor must be a positive number, got {k!r}")
+    if math.isinf(nu):
+        return math.erf(k / math.sqrt(2.0))
+    n = math.floor(nu)
+    if n < 1:
+        raise ModelError(f"an effective degrees of freedom below 1 ({nu!r}) gives no coverage probability")
+    return 2.0 * t_cdf(k, n) - 1.0
 
 
 #: b of u = b·E_L,MPE that names a distribution: 1/√3 (rectangular, GUM 4.3.7) and 1/√6

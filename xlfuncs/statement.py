@@ -2,8 +2,10 @@
 
 The expanded uncertainty U is quoted to two significant digits (7.2.6: "it usually suffices to
 quote u_c(y) and U to at most two significant digits"), the value to the same decimal place, and
-the statement names the coverage factor and the coverage probability (7.2.2, 7.2.4):
-``d = 100.0123 mm, U = 3.4 µm (k = 2, coverage probability ≈ 95 %)``.
+the statement names the coverage factor and the coverage probability (7.2.2, 7.2.4) that k
+gives with the effective degrees of freedom (GUM G.1.3, G.3.2: 2Φ(k) - 1, or Student's t for a
+finite ν_eff; :func:`xlfuncs.dof.coverage_probability`), in percent to two decimals:
+``d = 100.0123 mm, U = 3.4 µm (k = 2, coverage probability ≈ 95.45 %)``; k = 3 gives 99.73 %.
 
 Rounding is to the nearest, halves away from zero, on the decimal representation of the number
 (``repr``), so that 0.125 rounds to 0.13 as a person would do it.  ``mode="up"`` rounds U up
@@ -16,6 +18,7 @@ from __future__ import annotations
 import math
 from decimal import ROUND_CEILING, ROUND_HALF_UP, Decimal
 
+from .dof import coverage_probability
 from .errors import ModelError
 
 
@@ -52,20 +55,27 @@ def fmt(x: float, decimals: int) -> str:
     return f"{round_to(x, decimals) + 0.0:.{max(decimals, 0)}f}"     # + 0.0: no "-0.000"
 
 
-def coverage_text(k: float, p_percent: float | None = 95.0) -> str:
-    """"k = 2, coverage probability ≈ 95 %" (the probability omitted when unknown); a k that is
-    not a whole number (a t-distribution's, GUM G.6.4) with two decimals: "k = 2.28"."""
+def coverage_text(k: float, nu: float = math.inf) -> str:
+    """"k = 2, coverage probability ≈ 95.45 %": the probability of k with ν_eff (GUM G.1.3,
+    G.3.2) in percent to two decimals; a k that is not a whole number (a t-distribution's, GUM
+    G.6.4) with two decimals: "k = 2.28"."""
     ks = f"{round(k):d}" if abs(k - round(k)) < 1e-9 else f"{k:.2f}"
-    return f"k = {ks}" + (f", coverage probability ≈ {p_percent:g} %" if p_percent is not None else "")
+    return f"k = {ks}, coverage probability ≈ {percent(coverage_probability(k, nu))} %"
+
+
+def percent(p: float) -> str:
+    """A probability in percent with two decimals, halves away from zero (0.9545 -> "95.45")."""
+    return fmt(100.0 * p, 2)
 
 
 def statement(symbol: str, value: float, value_unit: str, U: float, U_unit: str, k: float, *,
-              unit_ratio: float = 1000.0, p_percent: float | None = 95.0, digits: int = 2,
-              mode: str = "nearest") -> str:
+              nu: float = math.inf, unit_ratio: float = 1000.0, digits: int = 2, mode: str = "nearest") -> str:
     """The result statement: ``symbol = value value_unit, U = U U_unit (k = .., coverage
     probability ≈ .. %)``.  ``unit_ratio`` = U_unit per value_unit (1000 for µm per mm, 1 when
-    both are the same); the value is rounded to the decimal place of the rounded U."""
+    both are the same); the value is rounded to the decimal place of the rounded U; ``nu`` the
+    effective degrees of freedom of U (∞: type B only)."""
     U_r, dec_U = round_uncertainty(U, digits, mode)
     dec_value = dec_U + round(math.log10(unit_ratio)) if unit_ratio > 0 else dec_U
-    return (f"{symbol} = {fmt(value, dec_value)} {value_unit}, U = {fmt(U_r, dec_U)} {U_unit} "
-            f"({coverage_text(k, p_percent)})")
+    # a dimensionless quantity (unit ""): no space before the comma
+    vu, Uu = (f" {value_unit}" if value_unit else ""), (f" {U_unit}" if U_unit else "")
+    return f"{symbol} = {fmt(value, dec_value)}{vu}, U = {fmt(U_r, dec_U)}{Uu} ({coverage_text(k, nu)})"

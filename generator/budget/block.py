@@ -306,10 +306,6 @@ def write_variant(book: Book, ws, r0: int, title: str, vb: bd.VariantBudget, *,
     last_input = r - 1
     nu_rows = list(range(r0 + 2, r))
     a_cells = None
-    if type_a is not None:
-        a_cells = _type_a_row(book, ws, r, type_a)
-        nu_rows.append(r)
-        r += 1
     value_cell = (r, C_C)
     book.text(ws, r, C_U, "l_mm")
     book.formula(ws, r, C_C, f"={value}", fmt="0.0000",
@@ -322,17 +318,22 @@ def write_variant(book: Book, ws, r0: int, title: str, vb: bd.VariantBudget, *,
     book.text(ws, r + 2, C_U, "U_um")
     book.formula(ws, r + 2, C_C, f"=k*{cell(r + 1, C_C)}", fmt=FMT_U,
                  note="U = k u_c" if notes else None)
-    if a_cells is None:
-        book.text(ws, r + 1, C_DIST, "nu_eff")
-        book.formula(ws, r + 1, C_NU, nu_eff_formula(cell(r + 1, C_C), nu_rows, C_C, C_NU), fmt="0.00",
-                     note=NU_EFF_NOTE).alignment = Alignment(horizontal="right")
-        nu_eff = coord(cell(r + 1, C_NU))
-        bottom = max(r + 3, w.qrow)
-    else:
-        got, nu_eff = type_a_cells(book, ws, r, C_DIST, C_NU, cell(r + 1, C_C), a_cells["contribution"],
-                                    type_a, nu_rows, C_C, C_NU)
+    book.text(ws, r + 1, C_DIST, "nu_eff")
+    book.formula(ws, r + 1, C_NU, nu_eff_formula(cell(r + 1, C_C), nu_rows, C_C, C_NU), fmt="0.00",
+                 note=NU_EFF_NOTE).alignment = Alignment(horizontal="right")
+    nu_eff = coord(cell(r + 1, C_NU))
+    bottom = max(r + 3, w.qrow)
+    if type_a is not None:
+        # the measured result below the budget, which stays whole (every row above is in u_c):
+        # u_c with the repeatability of the measured value, what the Decision sheet and the
+        # Summary state (the Results sheet reports the budget's u_c and U)
+        book.text(ws, r + 3, C_INPUT, "The measured result (Decision and Summary): u_c of the budget above and "
+                  "the repeatability of the measured value", font=HEADER_FONT)
+        a_cells = _type_a_row(book, ws, r + 4, type_a)
+        got, nu_eff = type_a_cells(book, ws, r + 5, C_U, C_C, cell(r + 1, C_C), a_cells["contribution"],
+                                    type_a, nu_rows + [r + 4], C_C, C_NU)
         a_cells.update(got)
-        bottom = max(r + 4, w.qrow)
+        bottom = max(r + 9, w.qrow)
     cells = BudgetCells(ws.title, spec.label, rows, coord(cell(*value_cell)),
                         coord(cell(r + 1, C_C)), coord(cell(r + 2, C_C)), nu_eff,
                         {k: coord(v) for k, v in a_cells.items()} if a_cells else None, thermal)
@@ -382,8 +383,8 @@ def _thermal_rows(book: Book, ws, r: int, l_cell: str, notes: bool) -> list[dict
 def _type_a_row(book: Book, ws, r: int, a: dict) -> dict:
     """The type A repeatability of ``[[decision.tolerances]]`` #n as a budget row: u_A = s/√n
     (the Decision sheet's named inputs tol<n>_s_um, tol<n>_n_repeats), sensitivity 1, normal,
-    ν = n - 1 (GUM 4.2.3, G.3.3).  Not in u_c (eq. (6), the MPE inputs, as the Results sheet
-    reports it); combined in u_with_A."""
+    ν = n - 1 (GUM 4.2.3, G.3.3), below the budget: not in u_c (eq. (6), the MPE inputs, as the
+    Results sheet reports it); combined in u_with_A, the U of the measured result."""
     n = a["tolerance"]
     book.text(ws, r, C_INPUT, TYPE_A_INPUT)
     book.text(ws, r, C_X, "—").alignment = Alignment(horizontal="right")
@@ -391,7 +392,7 @@ def _type_a_row(book: Book, ws, r: int, a: dict) -> dict:
     book.formula(ws, r, C_U, f"=tol{n}_s_um/SQRT(tol{n}_n_repeats)", fmt=FMT_U,
                  note=f"u_A = s/sqrt(n): the repeatability of [[decision.tolerances]] #{n} (its s_um, "
                       "n_repeats are input cells on the Decision sheet), GUM 4.2.3. Not part of u_c "
-                      "(eq. (6)); combined in u_with_A_um")
+                      "(eq. (6), the budget above); combined in u_with_A_um, the U of the measured result")
     book.formula(ws, r, C_C, f"={cell(r, C_S)}*{cell(r, C_U)}", fmt=FMT_U)
     book.text(ws, r, C_DIST, "normal")
     book.formula(ws, r, C_NU, f"=tol{n}_n_repeats-1", fmt="0", note="nu = n - 1 (GUM G.3.3)")

@@ -486,9 +486,11 @@ def write(task, evaluated: list, path: Path, type_a: dict[str, dict] | None = No
         cc = layout[c.name]
         cc.results_row = k + 2
         variant = r.variant if c.model == "position" else r.chosen.label
+        v = r if c.model == "position" else r.chosen
+        u, U = (r.u_um, r.U_um) if c.model == "position" else (r.chosen.u_c_um, r.chosen.U_um)
         sheet = cc.sheet
-        rows.append([c.name, variant, Formula(f"={_ref(sheet, cc.value, '')}"),
-                     Formula(f"={_ref(sheet, cc.u, '')}"), Formula(f"={_ref(sheet, cc.U, '')}")])
+        rows.append([c.name, variant, Formula(f"={_ref(sheet, cc.value, '')}", v.value_mm),
+                     Formula(f"={_ref(sheet, cc.u, '')}", u), Formula(f"={_ref(sheet, cc.U, '')}", U)])
     book.results(["name", "variant", "value_mm", "u_um", "U_um"], rows,
                  ["characteristic (task file)", "formula variant used (x cross, . dot product)",
                   "value of the characteristic, mm", "standard uncertainty u_c (u_POS), µm",

@@ -23,11 +23,12 @@ from cmmwb.xlfuncs.limits import coordinate_problem
 
 from .. import __version__
 from ..errors import InputError, model_errors_named
+from ..quantities import Cells, Quantity, ToleranceKeys
 from ..taskfile import COMMON_TABLES, check_keys, number, table, task_kind_and_name, text_list
-from ..taskkind import always_exact
+from ..taskkind import always_exact, no_verdicts
 from ..taskworkpiece import read_workpiece
-from ..workbook.book import BookAdditions
-from ..workbook.xlref import check_name
+from ..workbook.book import RESULTS, BookAdditions
+from ..workbook.xlref import cell, check_name
 from .task import MODEL_KEYS, TYPE_A_INPUT, Characteristic, Task, distance_name
 
 KIND = "budget"
@@ -38,8 +39,10 @@ EXAMPLES_DIR = Path(__file__).resolve().parents[1] / "examples"
 NEW_TASK: str = (EXAMPLES_DIR / "knuckle.toml").read_text(encoding="utf-8")
 #: the task names no table beside it (its points are in the TOML)
 NEW_TASK_FILES: dict[str, str] = {}
-#: the task-kind contract's hook (generator.taskkind): a budget is exact at every size
+#: the task-kind contract's hooks (generator.taskkind): a budget is exact at every size and has no
+#: verdict besides its characteristics' decisions
 force_exact = always_exact
+verdicts = no_verdicts
 
 RESULT_COLUMNS = ["name", "variant", "value_mm", "u_um", "U_um"]
 
@@ -405,6 +408,38 @@ def write_plots(task: Task, results: dict, out_dir: Path) -> list[Path]:
     fig.savefig(path)
     plt.close(fig)
     return [path]
+
+
+# -- the records of the results (generator.quantities) -----------------------------------------
+
+#: a [[decision.tolerances]] entry names a characteristic by its name
+TOLERANCE_KEYS = ToleranceKeys(("characteristic",), help="characteristic = the name of a [[characteristics]] entry")
+VALUE_SOURCE = ("evaluated at the essential points of the task file ([points]: the nominal geometry, "
+                "not a measurement)")
+U_SOURCE = "the budget of the MPE statement E = A + L/B (Wojtyła/Płowucha 2023), type B only"
+
+
+def quantities(task: Task, results: dict, k: float = 2.0) -> list[Quantity]:
+    """One record per characteristic (its Results row): the value the task's points give and u, U
+    of its chosen budget with the task's k (the named input ``k``); ``k`` is not used."""
+    k_task = float(results["mpe"]["k"])
+    out = []
+    for i, c in enumerate(results["characteristics"]):
+        r = i + 2
+        out.append(Quantity(label=c["name"], value=c["value_mm"], unit="mm", u=c["u_um"], u_unit="µm", k=k_task,
+                            U_unit="µm", ident={"characteristic": c["name"]}, value_source=VALUE_SOURCE,
+                            u_source=U_SOURCE,
+                            cells=Cells(RESULTS, r, cell(r, 3, RESULTS), cell(r, 4, RESULTS), cell(r, 5, RESULTS),
+                                        k="k")))
+    return out
+
+
+def read_book(cells, rt, points_file: str) -> None:
+    """The way back (``cmmwb read``): :func:`generator.budget.reader.read_budget` (the essential
+    points are in the task file, ``points_file`` is not used)."""
+    from .reader import read_budget
+
+    read_budget(cells, rt)
 
 
 def summary(results: dict) -> list[str]:

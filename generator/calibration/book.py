@@ -6,6 +6,7 @@ on the fitted parameters)."""
 
 from __future__ import annotations
 
+import textwrap
 from pathlib import Path
 
 from cmmwb.xlfuncs import pointcloud as pc
@@ -13,23 +14,27 @@ from cmmwb.xlfuncs.model.hyperparameters import UNITS, in_use
 
 from ..pointcloud.book import MPE_GRID_POINTS, write_mpe
 from ..workbook.book import Book, ChartSeries, Formula
+from ..workbook.pagesetup import LINE_PT, wrapped_lines
 from ..workbook.xlref import cell
+from .page import decision_block, write_page
 
 NOTE_U = "standard uncertainty from the inverse observed information of the REML log-likelihood (delta method from log)"
 
 
 def write_book(result: dict, path: Path, final: pc.Parameters, mpe: dict | None) -> Path:
     book = Book("calibrate", "calibration", "Calibration — the six factors' hyper-parameters from the machine's recordings")
+    book.footer_pt = 11      # the sheets print at 73 % and more: footers of 8 pt and more
     _instructions(book, result)
     _fit(book, result)
-    _model(book, result, final, mpe)
+    decided = _model(book, result, final, mpe)
     if mpe:
         assert MPE_GRID_POINTS == len(result["u_d"]["d_mm"])
         write_mpe(book, None)
-    _loop(book, result, mpe is not None)
+    loop_rows = _loop(book, result, mpe is not None)
     _records(book, result)
     _profiles(book, result)
-    cached = _results(book, result, mpe is not None)
+    cached, results_rows = _results(book, result, mpe is not None, decided)
+    write_page(book, result, results_rows, loop_rows, decided)
     out = book.save(path)
     from ..workbook import cache
 
@@ -62,6 +67,9 @@ def _instructions(book: Book, result: dict) -> None:
     book.para(result["summary"])
 
 
+#: Fit's column widths (characters): the reason and the advice wrap in theirs, so that the sheet
+#: prints on one landscape page width at about 75 % (text of 8 pt and more)
+FIT_WIDTHS = (15, 6, 9, 10, 9, 7, 15, 34, 34)
 def _fit(book: Book, result: dict) -> None:
     ws = book.sheet("Fit")
     cols = ["hyper_parameter", "unit", "start", "estimate", "u", "u_log", "status", "reason", "what would identify it"]
@@ -78,22 +86,28 @@ def _fit(book: Book, result: dict) -> None:
         book.text(ws, r, 7, h["status"])
         book.text(ws, r, 8, h["reason"], wrap=True)
         book.text(ws, r, 9, h["advice"], wrap=True)
-        lines = max(len(h["reason"]), len(h["advice"])) // 45 + 1
-        ws.row_dimensions[r].height = 12.5 * lines
+        # the row as high as its longest wrapped text, every cell at the top: a parameter's
+        # name stands level with the first line of its reason, not under the previous one's
+        lines = max(wrapped_lines(h["reason"], FIT_WIDTHS[7]), wrapped_lines(h["advice"], FIT_WIDTHS[8]))
+        ws.row_dimensions[r].height = LINE_PT * lines + 2
+        book.align_top(ws, r, len(cols))
     r = len(result["hyper_parameters"]) + 3
-    for label, value in (("REML log-likelihood at the start", result["loglik_start"]),
-                         ("REML log-likelihood at the fit", result["loglik"]),
-                         ("chi2 r'Pr at the fit (1)", result["reml_chi2"]), ("dof (1)", result["reml_dof"])):
+    for label, value, fmt in (("REML log-likelihood at the start", result["loglik_start"], "0.000"),
+                              ("REML log-likelihood at the fit", result["loglik"], "0.000"),
+                              ("chi2 r'Pr at the fit (1)", result["reml_chi2"], "0.000"),
+                              ("dof (1)", result["reml_dof"], "0")):
         book.text(ws, r, 1, label)
-        book.number(ws, r, 4, value, fmt="0.000", computed=True)
+        book.number(ws, r, 4, value, fmt=fmt, computed=True)
         r += 1
     ws.freeze_panes = "A2"
     book.print_setup(ws, landscape=True, fit_widths=False)
-    for c, w in zip("ABCDEFGHI", (15, 6, 9, 10, 9, 7, 15, 50, 50)):
+    for c, w in zip("ABCDEFGHI", FIT_WIDTHS):
         ws.column_dimensions[c].width = w
 
 
-def _model(book: Book, result: dict, final: pc.Parameters, mpe: dict | None) -> None:
+def _model(book: Book, result: dict, final: pc.Parameters, mpe: dict | None) -> bool:
+    """The fitted task's parameters, the MPE statement and the MPE decision (when C_max has a u);
+    returns whether the decision is there."""
     ws = book.sheet("Model")
     book.header(ws, 1, 1, ["parameter", "value", "unit"])
     r = 2
@@ -111,18 +125,34 @@ def _model(book: Book, result: dict, final: pc.Parameters, mpe: dict | None) -> 
                        note="MPE statement E = A + L/B (Forbes 2025 eq. 36; the task's [mpe] or --mpe)")
             book.text(ws, r, 3, unit)
             r += 1
+    decided = False
+    if mpe and result["mpe_check"] and result["mpe_check"]["fitted"]["decision"]["U"] is not None:
+        fitted = result["mpe_check"]["fitted"]
+        r = decision_block(book, ws, r + 1, fitted["decision"], fitted["u_C_max_from"])
+        decided = True
     book.print_setup(ws)
+    return decided
 
 
-def _loop(book: Book, result: dict, native: bool) -> None:
+#: characters per line of a note on the Loop sheet (it prints landscape at full width)
+NOTE_WIDTH = 110
+
+
+def _loop(book: Book, result: dict, native: bool) -> dict[str, int]:
+    """Effects, changes, notes, chi-square and the u(d) table on the landscape page width; the
+    chart of u(d) on a page of its own after them.  Returns the row of each effect parameter
+    ("file name label")."""
     from openpyxl.chart import Reference
 
     ws = book.sheet("Loop")
     book.text(ws, 1, 1, f"Effects fed back: {result['feedback']}")
-    book.header(ws, 2, 1, ["effect", "file", "parameter", "estimate", "u", "unit"])
+    book.header(ws, 2, 1, ["effect", "file", "parameter", "estimate", "u", "unit"],
+                [None, None, None, "GLS estimate at the fitted model, in the unit", "its standard uncertainty", None])
     r = 3
+    rows = {}
     for e in result["effects"]:
         for lb, b, u in zip(e["labels"], e["estimate"], e["u"]):
+            rows[f"{e['file']} {e['name']} {lb}"] = r
             book.text(ws, r, 1, e["name"])
             book.text(ws, r, 2, e["file"])
             book.text(ws, r, 3, lb)
@@ -131,22 +161,28 @@ def _loop(book: Book, result: dict, native: bool) -> None:
             book.text(ws, r, 6, e["unit"].replace("um", "µm").replace("urad", "µrad"))
             r += 1
     r += 1
-    book.header(ws, r, 1, ["hyper_parameter", "before", "after", "effects", "how"])
+    book.header(ws, r, 1, ["hyper_parameter", "before", "after", "effects", "how"],
+                [None, "in the parameter's unit", "in the parameter's unit", None, None])
     r += 1
     for c in result["changes"]:
         book.text(ws, r, 1, c["parameter"])
         book.number(ws, r, 2, c["before"], fmt="0.0000", computed=True)
         book.number(ws, r, 3, c["after"], fmt="0.0000", computed=True)
-        book.text(ws, r, 4, ", ".join(c["effects"]))
-        book.text(ws, r, 5, c["how"])
+        book.text(ws, r, 4, ", ".join(c["effects"]), wrap=True)
+        book.text(ws, r, 5, c["how"], wrap=True)
+        lines = max(wrapped_lines(", ".join(c["effects"]), LOOP_WIDTHS[3]), wrapped_lines(c["how"], LOOP_WIDTHS[4]))
+        ws.row_dimensions[r].height = LINE_PT * lines + 2
+        book.align_top(ws, r, 5)
         r += 1
     for n in result["notes"]:
-        book.text(ws, r, 1, n)
-        r += 1
+        for line in textwrap.wrap(n, NOTE_WIDTH, subsequent_indent="   "):
+            book.text(ws, r, 1, line)
+            r += 1
     r += 1
     ch = result["chi2"]
-    book.header(ws, r, 1, ["chi2 (1)", "task, records as measured", "fitted task" + (
-        ", compensated records" if result["feedback"] == "compensate" else "")])
+    book.header(ws, r, 1, ["chi2 (1)", "before", "after"],
+                [None, "the task, records as measured", "the fitted task" + (
+                    ", compensated records" if result["feedback"] == "compensate" else ", records as measured")])
     book.text(ws, r + 1, 1, "chi2")
     book.number(ws, r + 1, 2, ch["before"], fmt="0.00", computed=True)
     book.number(ws, r + 1, 3, ch["after"], fmt="0.00", computed=True)
@@ -173,12 +209,20 @@ def _loop(book: Book, result: dict, native: bool) -> None:
             book.number(ws, rr, 4, unc[k], fmt="0.0000", computed=True)
     n = len(ud["d_mm"])
     x = Reference(ws, min_col=1, min_row=first, max_row=first + n - 1)
-    book.scatter(ws, f"F{first}", "u(d) before (task) and after (fitted task)", "d / mm", "u / µm",
+    anchor_row = first + n + 1
+    book.scatter(ws, f"A{anchor_row}", "u(d) before (task) and after (fitted task)", "d / mm", "u / µm",
                  [ChartSeries(None, x, Reference(ws, min_col=c, min_row=first - 1, max_row=first + n - 1),
                               markers=False, title_from_data=True, bold=c == 3) for c in ((2, 3, 4) if unc else (2, 3))],
-                 width=18, height=10, x_min=0, y_min=0)
+                 width=18, height=10, x_min=0, y_min=0, page=book)
     ws.freeze_panes = "A3"
-    book.print_setup(ws, landscape=True, title_rows=None)
+    book.print_setup(ws, landscape=True, title_rows=None, fit_widths=False, row_breaks=[first - 1, anchor_row - 1])
+    for c, w in zip("ABCDEF", LOOP_WIDTHS):
+        ws.column_dimensions[c].width = w
+    return rows
+
+
+#: Loop's column widths (characters): landscape A4 at 100 %
+LOOP_WIDTHS = (16, 14, 16, 22, 40, 8)
 
 
 def _records(book: Book, result: dict) -> None:
@@ -198,25 +242,32 @@ def _records(book: Book, result: dict) -> None:
             book.number(ws, r, 4, u, fmt="0.0000", computed=True)
             book.number(ws, r, 5, z, fmt="0.00", computed=True)
             r += 1
+    breaks = []
     if r > 2:
+        # below the table, on a page of its own
         x = Reference(ws, min_col=2, min_row=2, max_row=r - 1)
-        book.scatter(ws, "G2", "Standardized residuals under the fitted model", "observation", "z",
-                     [ChartSeries("z", x, Reference(ws, min_col=5, min_row=2, max_row=r - 1))], width=18, height=9)
+        anchor_row = r + 2
+        book.scatter(ws, f"A{anchor_row}", "Standardized residuals under the fitted model", "observation", "z",
+                     [ChartSeries("z", x, Reference(ws, min_col=5, min_row=2, max_row=r - 1))], width=18, height=9,
+                     page=book)
+        breaks.append(anchor_row - 1)
     ws.freeze_panes = "A2"
-    book.print_setup(ws)
+    book.print_setup(ws, row_breaks=breaks)
 
 
 def _profiles(book: Book, result: dict) -> None:
-    """One block per estimated hyper-parameter, stacked: the profile's values and its chart beside."""
+    """One block per estimated hyper-parameter, stacked: the profile's values and its chart beside
+    (portrait, two blocks a page)."""
     from openpyxl.chart import Reference
 
     if not result["profiles"]:
         return
     ws = book.sheet("Profiles")
-    block_rows = 20
+    block_rows = 22
     for k, p in enumerate(result["profiles"]):
         top = 1 + block_rows * k
-        book.header(ws, top, 1, [f"{p['name']}_{p['unit'].replace('µ', 'u')}", "delta_loglik", "minus_2"],
+        # the name carries its unit (sigma_R_um, lambda_ET_mm; lambda_P has none)
+        book.header(ws, top, 1, [p["name"], "delta_loglik", "minus_2"],
                     [f"{p['name']} in {p['unit']}", "REML log-likelihood minus its maximum, the others re-optimized",
                      "the drop of 2: about the 95 % interval"])
         for r, (v, dl) in enumerate(zip(p["value"], p["delta_loglik"]), start=top + 1):
@@ -225,18 +276,22 @@ def _profiles(book: Book, result: dict) -> None:
             book.number(ws, r, 3, -2.0, fmt="0", computed=True)
         n = len(p["value"])
         x = Reference(ws, min_col=1, min_row=top + 1, max_row=top + n)
+        # the drop of 2 in red and bold: a grey line lay on the grid line at -2, invisible
         book.scatter(ws, f"E{top}", f"REML profile of {p['name']}", f"{p['name']} / {p['unit']}",
                      "log-likelihood - max",
                      [ChartSeries("profile", x, Reference(ws, min_col=2, min_row=top + 1, max_row=top + n),
                                   markers=True),
                       ChartSeries("-2 (about 95 %)", x, Reference(ws, min_col=3, min_row=top + 1, max_row=top + n),
-                                  markers=False, colour="7F7F7F")], width=15, height=8.5)
-    per_page = 3
-    book.print_setup(ws, landscape=False, title_rows=None,
-                     row_breaks=[block_rows * k for k in range(per_page, len(result["profiles"]), per_page)])
+                                  markers=False, colour="C00000", dash="solid", bold=True)], width=9.5, height=8.5)
+    per_page = 2
+    book.print_setup(ws, landscape=False, title_rows=None, fit_widths=False,
+                     row_breaks=[1 + block_rows * k for k in range(per_page, len(result["profiles"]), per_page)])
+    for c, w in zip("ABCD", (12, 12, 8, 1)):
+        ws.column_dimensions[c].width = w
 
 
-def _results(book: Book, result: dict, native: bool) -> list[dict]:
+def _results(book: Book, result: dict, native: bool, decided: bool) -> tuple[list[dict], dict[str, int]]:
+    """The Results sheet; returns its rows' values (cached) and the row of each quantity."""
     rows, cached = [], []
     for h in result["hyper_parameters"]:
         if h["status"] != "estimated":
@@ -245,16 +300,38 @@ def _results(book: Book, result: dict, native: bool) -> list[dict]:
         cached.append({"value": h["estimate"], "u": h["u"]})
     if native:
         m = result["mpe_check"]["fitted"]
-        rows.append(["C_max", Formula("=C_max"), "", "1"])
-        cached.append({"value": m["C_max"]})
-        rows.append(["d_at_max_mm", Formula("=d_at_max_mm"), "", "mm"])
+        # u(C_max) of the MPE decision (Model sheet), the core's number
+        rows.append(["C_max", Formula("=C_max", m["C_max"]),
+                     Formula("=u_C_max", m["u_C_max"]) if decided else "", "1"])
+        cached.append({"value": m["C_max"], **({"u": m["u_C_max"]} if decided else {})})
+        rows.append(["d_at_max_mm", Formula("=d_at_max_mm", m["d_at_max_mm"]), "", "mm"])
         cached.append({"value": m["d_at_max_mm"]})
-        rows.append(["margin", Formula("=1-C_max"), "", "1"])
+        rows.append(["margin", Formula("=1-C_max", m["margin"]), "", "1"])
         cached.append({"value": m["margin"]})
         last = 2 + len(result["u_d"]["d_mm"]) - 1
-        rows.append(["u_after_at_L_max_um", Formula(f"={cell(last, 3, 'MPE')}/K"), "", "µm"])
+        rows.append(["u_after_at_L_max_um", Formula(f"={cell(last, 3, 'MPE')}/K", result["u_d"]["after_um"][-1]),
+                     "", "µm"])
         cached.append({"value": result["u_d"]["after_um"][-1]})
-    book.results(["quantity", "value", "u", "unit"], rows,
-                 ["estimated hyper-parameters (calibration.json), then the MPE check of the fitted model",
-                  "in the row's unit", "standard uncertainty", "unit"])
-    return cached
+    ws = book.results(["quantity", "value", "u", "unit"], rows,
+                      ["estimated hyper-parameters (calibration.json), then the MPE check of the fitted model",
+                       "in the row's unit", "standard uncertainty", "unit"])
+    # as a person reads them (GUM 7.2.6): u to two significant digits, the value to the same
+    # decimal place; the cells keep full precision
+    fixed = {"C_max": "0.000", "d_at_max_mm": "0.0", "margin": "0.000", "u_after_at_L_max_um": "0.000"}
+    for r, (row, c) in enumerate(zip(rows, cached), start=2):
+        u = c.get("u")
+        if isinstance(u, float) and u > 0:
+            fmt = decimals_format(u)
+            ws.cell(row=r, column=2).number_format = fmt
+            ws.cell(row=r, column=3).number_format = fmt
+        else:
+            ws.cell(row=r, column=2).number_format = fixed.get(str(row[0]), "0.0000")
+    return cached, {str(row[0]): r for r, row in enumerate(rows, start=2)}
+
+
+def decimals_format(u: float) -> str:
+    """The display format of a value and its u: u to two significant digits (GUM 7.2.6)."""
+    import math
+
+    decimals = max(0, 1 - math.floor(math.log10(u)))
+    return "0." + "0" * decimals if decimals else "0"

@@ -60,8 +60,9 @@ def write_characteristic_book(task, results: dict, path, jf, res, V, additions: 
     _write_chart(book, res, crows)
     # the contract's Results: one complete row per characteristic (tolerance, bonus, zone and
     # margin, which not every characteristic has, are on 'Characteristics' and in the JSON)
-    rows = [[r.name, r.spec.type, Formula(f"={cell(row, 4, 'Characteristics')}"), r.unit,
-             Formula(f"={cell(row, 6, 'Characteristics')}"), r.u_unit] for r, row in zip(res, crows)]
+    rows = [[r.name, r.spec.type, Formula(f"={cell(row, 4, 'Characteristics')}", c["value"]), r.unit,
+             Formula(f"={cell(row, 6, 'Characteristics')}", c["u"]), r.u_unit]
+            for r, row, c in zip(res, crows, results["characteristics"])]
     book.results(["name", "type", "value", "unit", "u", "u_unit"], rows,
                  notes=[None, None, "measured value in 'unit'", "mm or deg",
                         "standard uncertainty in u_unit", "um or urad"])

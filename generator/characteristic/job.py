@@ -34,16 +34,19 @@ from cmmwb.xlfuncs import pointcloud as pc
 
 from .. import __version__
 from ..errors import InputError, model_errors_named
+from ..quantities import Cells, Quantity, ToleranceKeys
 from ..taskcloud import read_point_cloud
 from ..taskfile import COMMON_TABLES, check_keys, number, string, table, task_kind_and_name, text_list, vector3
-from ..taskkind import always_exact, no_type_a
-from ..workbook.book import BookAdditions
+from ..taskkind import always_exact, no_type_a, no_verdicts
+from ..workbook.book import RESULTS, BookAdditions
+from ..workbook.xlref import cell
 
 KIND = "characteristic"
 EXAMPLES = ["characteristic_plate.toml", "housing_W.toml"]
 #: the task-kind contract's hooks (generator.taskkind): exact at every size, no type A inputs
 force_exact = always_exact
 add_type_a = no_type_a
+verdicts = no_verdicts
 
 FEATURE_KEYS = {"name", "type", "ids", "id_prefix", "circle_plane", "axis_hint"}
 FRAME_KEYS = {"name", "primary", "secondary", "tertiary"}
@@ -238,6 +241,116 @@ def summary(results: dict) -> list[str]:
         extra = f", zone {r['zone_mm'] * 1e3:.1f} µm" if r["zone_mm"] is not None else ""
         lines.append(f"{r['name']}: {v:.4f} {unit}, u = {r['u']:.3f} {u_unit}{extra}")
     return lines
+
+
+# -- the records of the results (generator.quantities) -----------------------------------------
+
+#: the drawing's tolerances are fields of the characteristics (no [[decision.tolerances]]); the
+#: results give u only: U = k·u with the [decision] k (default 2)
+TOLERANCE_KEYS = ToleranceKeys((), k_from_decision=True, note=(
+    "the drawing's, on 'Characteristics': size and distance two-sided (lsl, usl, or nominal ± tolerance_mm); "
+    "form, orientation, position one-sided (value <= tolerance_mm); a position at MMC/LMC on its margin = "
+    "tolerance + bonus - value >= 0 (u with the size's); angles not decided yet"))
+#: material conditions with a bonus tolerance: decided on the margin (zone - value >= 0)
+BONUS_CONDITIONS = ("MMC", "LMC")
+#: characteristic types with a two-sided tolerance interval (lsl/usl or nominal ± tolerance_mm)
+TWO_SIDED_TYPES = ("diameter", "width", "distance", "cone_angle", "angle")
+U_SOURCE = ("the point-cloud model V_X of six influence factors propagated to the characteristic through the "
+            "joint fit of its features (Forbes 2022, 2025)")
+#: columns of 'Characteristics' (generator.characteristic.book.CHAR_COLUMNS): value, u, nominal,
+#: lsl, usl, tolerance_mm, margin_mm, u_margin_um
+CHAR_SHEET = "Characteristics"
+COL = {"value": 4, "u": 6, "nominal": 8, "lsl": 9, "usl": 10, "tolerance_mm": 11, "margin_mm": 15, "u_margin_um": 16}
+
+
+def margin_label(name: str) -> str:
+    """The decided quantity of a position at MMC/LMC: its margin (Characteristics, 'margin_mm')."""
+    return f"{name} margin"
+
+
+def tolerance(c: dict, row: int = 2) -> tuple[dict, str | None]:
+    """The tolerance interval of one characteristic (a ``characteristics`` entry of the JSON) as
+    the drawing gives it, and why it is not decided (None when it is).
+
+    * size, distance (two-sided): ``lsl``/``usl`` (one of them: a one-sided interval), or
+      ``nominal`` ± ``tolerance_mm``;
+    * form, orientation, position RFS (a zone whose value is >= 0): one-sided, value <= USL =
+      ``tolerance_mm`` (ISO 1101: the feature lies in a zone of that width);
+    * position at MMC/LMC: decided on its margin (:func:`margin_label`);
+    * angles (deg): not decided yet (the decision's fields are mm and µm).
+
+    Returns ({"lsl": .., "usl": .., "cells": {"lsl_mm": formula, ...}}, reason); ``cells``: the
+    limits as formulas of the row ``row`` of 'Characteristics', so that a tolerance typed there
+    changes the decision."""
+    typ = c["type"]
+    lsl, usl, tol, nominal = c["lsl"], c["usl"], c["tolerance_mm"], c["nominal"]
+
+    def at(name: str) -> str:
+        return cell(row, COL[name], CHAR_SHEET)
+
+    if lsl is None and usl is None and tol is None:
+        return {}, None
+    if c["unit"] != "mm":
+        return {}, f"an angle tolerance ({c['unit']}) is not decided yet: the decision works in mm and µm"
+    if typ in TWO_SIDED_TYPES:
+        if lsl is not None or usl is not None:
+            cells = {f"{k}_mm": at(k) for k, v in (("lsl", lsl), ("usl", usl)) if v is not None}
+            if nominal is not None:
+                cells["nominal"] = at("nominal")
+            return {"lsl": lsl, "usl": usl, "cells": cells}, None
+        if nominal is not None:
+            return {"lsl": nominal - tol, "usl": nominal + tol,
+                    "cells": {"lsl_mm": f"{at('nominal')}-{at('tolerance_mm')}",
+                              "usl_mm": f"{at('nominal')}+{at('tolerance_mm')}", "nominal": at("nominal")}}, None
+        return {}, "tolerance_mm of a size or distance needs its nominal (nominal ± tolerance_mm), or give lsl/usl"
+    if tol is None:
+        return {}, f"a {typ} takes tolerance_mm (a zone width), not lsl/usl"
+    if typ == "position" and c["material_condition"] in BONUS_CONDITIONS:
+        return {"margin": True}, None
+    return {"lsl": None, "usl": tol, "cells": {"usl_mm": at("tolerance_mm")}}, None
+
+
+def quantities(task: Task, results: dict, k: float = 2.0) -> list[Quantity]:
+    """One record per characteristic (its Results row; a position at MMC/LMC also its margin,
+    on 'Characteristics', right after it), with the drawing's tolerance, U = k·u with ``k`` (the
+    ``[decision] k``, default 2).  Lengths: value mm, u µm; angles: value deg, u µrad, U in deg."""
+    where = "the points table ([points] file)" if task.points_file else "the points given in the task file ([points] rows)"
+    fitted = f"from the features fitted to {where}"
+    out = []
+    for i, c in enumerate(results["characteristics"]):
+        r = i + 2
+        deg = c["unit"] == "deg"
+        tol, reason = tolerance(c, r)
+        margin = tol.get("margin", False)
+        lsl = tol.get("lsl")
+        usl = tol.get("usl")
+        q = Quantity(label=c["name"], value=c["value"], unit=c["unit"], u=c["u"], u_unit="µrad" if deg else "µm",
+                     k=float(k), U_unit="deg" if deg else "µm", U_per_u=180 / math.pi * 1e-6 if deg else 1.0,
+                     ident={"characteristic": c["name"]},
+                     nominal=c["nominal"] if c["type"] in TWO_SIDED_TYPES else None, lsl=lsl, usl=usl,
+                     value_source=fitted + (" (least squares)" if c["method"] != "MZ" else " (minimum zone)"),
+                     u_source=U_SOURCE, own_U=False, not_decided=reason,
+                     decided_as=margin_label(c["name"]) if margin else None,
+                     cells=Cells(RESULTS, r, cell(r, 3, RESULTS), cell(r, 5, RESULTS), limits=tol.get("cells", {})))
+        out.append(q)
+        if margin and c["margin_mm"] is not None:
+            label = margin_label(c["name"])
+            out.append(Quantity(label=label, value=c["margin_mm"], unit="mm", u=c["u_margin_um"], u_unit="µm",
+                                k=float(k), U_unit="µm", ident={"characteristic": label}, lsl=0.0,
+                                value_source=(f"tolerance + bonus − position value of {c['name']} (ASME Y14.5-2018 "
+                                              "5.8.1; the bonus from the measured size)"),
+                                u_source=U_SOURCE + ", the size's uncertainty and its correlation with the position "
+                                "included", own_U=False, quantity="margin_mm",
+                                cells=Cells(CHAR_SHEET, r, cell(r, COL["margin_mm"], CHAR_SHEET),
+                                            cell(r, COL["u_margin_um"], CHAR_SHEET), limits={"lsl_mm": "0"})))
+    return out
+
+
+def read_book(cells, rt, points_file: str) -> None:
+    """The way back (``cmmwb read``): :func:`generator.characteristic.reader.read_characteristic`."""
+    from .reader import read_characteristic
+
+    read_characteristic(cells, rt, points_file)
 
 
 NEW_TASK = '''# cmmwb characteristic task: characteristics of a drawing from least-squares features fitted

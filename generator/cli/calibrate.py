@@ -42,6 +42,9 @@ def register(sub) -> None:
     s.add_argument("--mpe", default=None, metavar="A,B[,K]",
                    help="MPE statement E = A + L/B (A in µm, B in mm) and coverage factor K (default 2) for the "
                         "check; default: the task's [mpe]")
+    s.add_argument("--rule", default=None, metavar="RULE[:VALUE]",
+                   help="decision rule of the MPE verdict on C_max with U = 2 u(C_max): iso14253 (default), simple, "
+                        "guarded_acceptance:R, guarded_rejection:R, specific_risk:MAX_PFA (docs/conformity.md)")
     s.add_argument("--start", default="task", choices=("task", "mpe1"),
                    help="starting values: the task's [parameters] (a zero there leaves the factor out), or "
                         "Forbes 2025 Table 3 MPE1 for every factor (default: task)")
@@ -60,7 +63,7 @@ def register(sub) -> None:
 
 
 def run(args) -> int:
-    from ..calibration.run import parse_mpe, run_calibrate  # the REML fit (scipy): only when run
+    from ..calibration.run import parse_mpe, parse_rule, run_calibrate  # the REML fit (scipy): only when run
     from ..diagnosis.run import load_model
 
     model, label = load_model(args.task, args.sigma_um)
@@ -72,10 +75,11 @@ def run(args) -> int:
     if task_path is not None:
         doc = read_toml(task_path)
     mpe = parse_mpe(args.mpe, doc, model.probes)
+    rule = parse_rule(args.rule)
     result, files = run_calibrate([Path(p) for p in args.recordings], model, Path(args.out), task_path=task_path,
                                   task_label=label, effects=args.effects, feedback=args.feedback, mpe=mpe,
                                   alpha=args.alpha, workbook=not args.no_workbook, force=args.force,
-                                  covariance=args.covariance, profiles=args.profiles)
+                                  covariance=args.covariance, profiles=args.profiles, rule=rule)
     print(result["summary"])
     for f in files:
         print(f"  -> {f}")

@@ -17,8 +17,9 @@ EXAMPLES_DIR = Path(__file__).resolve().parents[1] / "examples"
 
 def register(sub) -> None:
     s = add_command(sub, "demo", "build every worked example of the three papers",
-                    "Builds the worked examples of the three papers (workbooks, JSON, PNG plots) and the "
-                    "mismatch-locator demonstrations into one folder, and prints the headline results.",
+                    "Builds the worked examples of the three papers (workbooks, JSON, PNG plots), the "
+                    "mismatch-locator demonstrations and the validation loop (recordings -> calibrate -> "
+                    "validate) into one folder, and prints the headline results.",
                     ("cmmwb demo", "cmmwb demo --out /tmp/demo --pdf"))
     s.add_argument("--out", default="cmmwb-demo", metavar="DIR", help="output folder (default: cmmwb-demo)")
     s.add_argument("--pdf", action="store_true",
@@ -28,6 +29,7 @@ def register(sub) -> None:
 
 def run(args) -> int:
     from ..diagnosis.run import demo as diagnosis_demo  # the locator (scipy): only when run
+    from ..validation.loop import demo as validation_demo
 
     out = Path(args.out)
     if args.pdf:
@@ -42,6 +44,7 @@ def run(args) -> int:
             results, files = build_task(EXAMPLES_DIR / example, out / kind, pdf=args.pdf)
             print_built(results, files, f"\n[{kind}] {results['name']}  ({time.perf_counter() - t:.1f} s)")
     diagnosis_demo(out / "diagnose")
+    validation_demo(out / "validate")
     if args.pdf:
         from ..workbook.pdf import print_books
 

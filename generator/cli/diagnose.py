@@ -54,7 +54,7 @@ def run(args) -> int:
     result, files = run_diagnose(Path(args.recordings), model, Path(args.out), alpha=args.alpha,
                                  plots=not args.no_plots, workbook=not args.no_workbook, task_label=label,
                                  force=args.force, exact=args.exact, alpha_name=args.alpha_name,
-                                 warnings=notes)
+                                 warnings=notes, task_path=Path(args.task) if args.task else None)
     for w in result["warnings"]:
         print(f"cmmwb: warning: {w}", file=sys.stderr)
     print(result["summary"])

@@ -17,12 +17,12 @@ from cmmwb.xlfuncs.errors import ModelError
 
 from .. import __version__
 from ..errors import InputError, os_error_reason
-from . import addin, build, calibrate, demo, diagnose, import_, new, read, recalc, simulate
+from . import addin, build, calibrate, demo, diagnose, import_, new, read, recalc, simulate, validate
 from .common import examples_epilog
 
 #: the subcommands, in the order ``cmmwb --help`` lists them; each module's ``register(sub)`` adds its
 #: parser, whose ``func`` runs it
-COMMANDS = (demo, new, build, recalc, read, diagnose, simulate, addin, import_, calibrate)
+COMMANDS = (demo, new, build, recalc, read, diagnose, simulate, addin, import_, calibrate, validate)
 
 
 def parser() -> argparse.ArgumentParser:

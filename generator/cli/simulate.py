@@ -7,6 +7,7 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
+from cmmwb.xlfuncs import validation_sets as vsm
 from cmmwb.xlfuncs.locator import simulate as sm
 from cmmwb.xlfuncs.locator.recordings import write_recordings
 
@@ -23,9 +24,17 @@ def register(sub) -> None:
                     ("cmmwb simulate --layout iso10360 --out rec.csv",
                      "cmmwb simulate --layout stepgauge --effect squareness_xy=4.1 --seed 7 --out rec.csv",
                      "cmmwb simulate --layout ballplate --effect thermal_expansion=1.5 "
-                     "--temperature-C 20,23 --out rec.csv"))
-    s.add_argument("--layout", required=True, choices=sm.LAYOUTS,
-                   help="what is measured: " + ", ".join(sm.LAYOUTS))
+                     "--temperature-C 20,23 --out rec.csv",
+                     "cmmwb simulate --validation ballplate,stepgauge --effect squareness_xy=20 --out valset"))
+    s.add_argument("--layout", choices=sm.LAYOUTS,
+                   help="what is measured: " + ", ".join(sm.LAYOUTS) + " (or --validation)")
+    s.add_argument("--validation", metavar="WORKPIECE[,WORKPIECE]",
+                   help="instead of --layout: a validation set of calibrated workpieces (" + ", ".join(vsm.WORKPIECES)
+                        + ") into the folder --out: the tasks, results.csv for cmmwb validate and truth.json "
+                          "(docs/validate.md)")
+    s.add_argument("--runs", type=int, default=2, help="--validation: measurement runs of every workpiece (default: 2)")
+    s.add_argument("--force", action="store_true",
+                   help="--validation: replace files in --out edited since cmmwb wrote them, keeping a backup")
     s.add_argument("--task", metavar="TASK.toml",
                    help="task file: [parameters] and [[probes]] of the simulated CMM (default: Forbes 2025 "
                         "Table 3 MPE1)")
@@ -50,6 +59,8 @@ def register(sub) -> None:
 def run(args) -> int:
     from ..diagnosis.run import load_model  # the locator (scipy): only when run
 
+    if (args.layout is None) == (args.validation is None):
+        raise InputError("give one of --layout (recordings) or --validation (a validation set)")
     model, label = load_model(args.task, args.sigma_um, default_mpe1=True)
     probes = model.probes
     planted: dict = {}
@@ -59,6 +70,8 @@ def run(args) -> int:
             planted[name].update(value)
         else:
             planted[name] = value
+    if args.validation is not None:
+        return _validation_set(args, model, label, planted)
     kw = {}
     if args.hours is not None:
         if not (args.hours > 0):
@@ -78,6 +91,33 @@ def run(args) -> int:
     write_text(out, write_recordings(rec, comments=comments))
     print(f"{rec.n} {rec.kind} records ({args.layout}), planted "
           + (", ".join(f"{k} = {v}" for k, v in planted.items()) or "nothing") + f" -> {out}")
+    return 0
+
+
+def _validation_set(args, model, label: str, planted: dict) -> int:
+    """``--validation``: the workpieces measured by the task's machine into the folder --out."""
+    from ..validation.sets import write_set
+
+    names = [w.strip() for w in args.validation.split(",") if w.strip()]
+    for w in names:
+        if w not in vsm.WORKPIECES:
+            raise InputError(f"unknown workpiece {w!r}; choose from {', '.join(vsm.WORKPIECES)}", where="--validation")
+    if not names:
+        raise InputError("name at least one workpiece", where="--validation")
+    if args.runs < 1:
+        raise InputError("--runs must be at least 1")
+    if args.temperature_C is not None or args.hours is not None or args.repeats is not None:
+        raise InputError("--temperature-C, --hours and --repeats belong to --layout")
+    probes = model.probes if model.probes_given else vsm.DEFAULT_PROBES
+    if not model.probes_given:
+        label += f"; probes {', '.join(f'{p.id} {p.offset_mm}' for p in probes)}"
+    with model_errors_named(where="--validation"):
+        vs, meas, files = write_set(Path(args.out), names, model.params, probes, planted, args.seed, args.runs,
+                                    label, force=args.force)
+    print(f"{len(vs.labels)} characteristics x {args.runs} runs ({', '.join(names)}), planted "
+          + (", ".join(f"{k} = {v}" for k, v in planted.items()) or "nothing") + ":")
+    for f in files:
+        print(f"  -> {f}")
     return 0
 
 

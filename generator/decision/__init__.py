@@ -8,9 +8,9 @@
 The names the rest of the project uses are re-exported here.
 """
 
-from .decide import BONUS_CONDITIONS, characteristic_tolerances, decide_all, margin_label, read_spec, rule_json, symbol
+from .decide import DecisionSpec, decide_all, default_spec, own_tolerances, read_spec, rule_json
 from .readback import read_back
-from .sheet import FIRST_ROW, column, write_sheet
+from .sheet import FIRST_ROW, SHEET, chart_scale_values, column, write_sheet
 
-__all__ = ["BONUS_CONDITIONS", "FIRST_ROW", "characteristic_tolerances", "column", "decide_all", "margin_label",
-           "read_back", "read_spec", "rule_json", "symbol", "write_sheet"]
+__all__ = ["FIRST_ROW", "SHEET", "DecisionSpec", "chart_scale_values", "column", "decide_all", "default_spec",
+           "own_tolerances", "read_back", "read_spec", "rule_json", "write_sheet"]

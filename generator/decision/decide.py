@@ -1,13 +1,14 @@
 """The conformity decisions of a task as data: the ``[decision]`` table and its tolerances read
 and validated, and the decisions of the results JSON.
 
-Every task kind has characteristics with a value and an uncertainty in its ``Results`` sheet:
-budget characteristics (``value_mm``, ``u_um``, ``U_um``), point-cloud distances (``d_mm``,
-``u_um``, ``U_um``) and feature parameters in mm (``value``, ``u``; U = k·u with the
-``[decision] k``).  A ``[[decision.tolerances]]`` entry names one of them and gives its
-specification limits; the decision rule of ``[decision]`` turns value, U and limits into a
-decision (:mod:`xlfuncs.conformity`, JCGM 106:2012 and ISO 14253-1:2017).  The ``Decision``
-sheet that computes the same with live formulas is :mod:`generator.decision.sheet`.
+Every task kind hands its results over as records (:class:`generator.quantities.Quantity`: value,
+u, U, where they sit in the workbook); a ``[[decision.tolerances]]`` entry names one of them by
+the kind's keys (:class:`generator.quantities.ToleranceKeys`: a budget characteristic's name, a
+distance's two point ids, a feature parameter) and gives its specification limits; a kind whose
+results carry their own tolerances (a drawing's characteristics) has them decided without such
+entries.  The decision rule of ``[decision]`` turns value, U and limits into a decision
+(:mod:`xlfuncs.conformity`, JCGM 106:2012 and ISO 14253-1:2017).  The ``Decision`` sheet that
+computes the same with live formulas is :mod:`generator.decision.sheet`.
 """
 
 from __future__ import annotations
@@ -23,18 +24,12 @@ from cmmwb.xlfuncs.errors import ModelError
 from cmmwb.xlfuncs.statement import statement
 
 from ..errors import InputError
+from ..quantities import Quantity, ToleranceKeys
 from ..taskfile import check_keys
 
 SECTION = "decision"
 TOL_SECTION = "[[decision.tolerances]]"
 RULE_KEYS = {"rule", "r", "max_pfa", "k", "k_from_dof", "tolerances"}
-#: the key(s) that name the characteristic of a tolerance, per task kind
-IDENT_KEYS = {"budget": ("characteristic",), "pointcloud": ("from", "to"), "feature": ("parameter",),
-              "characteristic": ("characteristic",)}
-#: kinds whose results have u but no U: U = k·u with the ``[decision] k`` (default 2)
-K_KINDS = ("feature", "characteristic")
-#: kinds whose tolerances are fields of their own characteristics, not ``[[decision.tolerances]]``
-OWN_TOLERANCES = ("characteristic",)
 LIMIT_KEYS = {"nominal_mm", "tol_mm", "lsl_mm", "usl_mm", "measured_mm", "s_um", "n_repeats",
               "process_mean_mm", "process_sd_um"}
 
@@ -57,6 +52,8 @@ class ToleranceSpec:
     process_sd_um: float | None = None
     #: limits that are cells of the kind's own sheets ({"lsl_mm": formula text}), not inputs here
     limit_cells: dict[str, str] = field(default_factory=dict)
+    #: the nominal value the task gives (None: the limits only)
+    nominal_given: float | None = None
 
     @property
     def type_a(self) -> bool:
@@ -94,12 +91,12 @@ def _num(path: Path, tbl: dict, key: str, where: str) -> float | None:
     return float(v)
 
 
-def read_spec(path: Path, doc: dict, kind: str) -> DecisionSpec | None:
-    """The task's ``[decision]`` table, validated (None when the task has none).  Every problem is
-    an :class:`InputError` naming the key."""
+def read_spec(path: Path, doc: dict, keys: ToleranceKeys) -> DecisionSpec | None:
+    """The task's ``[decision]`` table, validated (None when the task has none); ``keys``: how the
+    kind's ``[[decision.tolerances]]`` name its results (its ``TOLERANCE_KEYS``).  Every problem is
+    an :class:`InputError` naming the key.  A kind whose results carry their own tolerances is
+    decided without the table (:func:`default_spec`, after its results are known)."""
     tbl = doc.get(SECTION)
-    if tbl is None and kind in OWN_TOLERANCES and _has_own_tolerances(doc):
-        tbl = {}            # tolerances on the characteristics, no [decision]: the default rule
     if tbl is None:
         return None
     if not isinstance(tbl, dict):
@@ -118,9 +115,9 @@ def read_spec(path: Path, doc: dict, kind: str) -> DecisionSpec | None:
     if pfa is not None and rule_kind != "specific_risk":
         raise InputError(f"max_pfa applies to rule 'specific_risk' only, not to {rule_kind!r}",
                          file=path, where=f"[{SECTION}] max_pfa")
-    if k is not None and kind not in K_KINDS:
-        raise InputError("k is for feature tasks and characteristic tasks (whose results have no U); a "
-                         f"{kind} task's U uses its own coverage factor", file=path, where=f"[{SECTION}] k")
+    if k is not None and not keys.k_from_decision:
+        raise InputError("k is for tasks whose results give u only (U = k·u); this task's results give U "
+                         "with their own coverage factor", file=path, where=f"[{SECTION}] k")
     if k is not None and not (0 < k <= 10):
         raise InputError(f"must be a coverage factor in (0, 10], got {k!r}", file=path, where=f"[{SECTION}] k")
     try:
@@ -131,22 +128,22 @@ def read_spec(path: Path, doc: dict, kind: str) -> DecisionSpec | None:
     kfd = tbl.get("k_from_dof", False)
     if not isinstance(kfd, bool):
         raise InputError(f"must be true or false, got {kfd!r}", file=path, where=f"[{SECTION}] k_from_dof")
-    spec = DecisionSpec(rule, (2.0 if k is None else k) if kind in K_KINDS else None, kfd)
-    if kind in OWN_TOLERANCES:
+    spec = DecisionSpec(rule, (2.0 if k is None else k) if keys.k_from_decision else None, kfd)
+    if keys.own:
         if "tolerances" in tbl:
-            raise InputError(f"a {kind} task's tolerances are the lsl/usl/nominal/tolerance_mm of its "
+            raise InputError("this task's tolerances are the lsl/usl/nominal/tolerance_mm of its "
                              "[[characteristics]]: leave [[decision.tolerances]] out", file=path,
                              where=f"[{SECTION}] tolerances")
         if kfd:
-            raise InputError(f"k_from_dof needs type A repeatabilities, which a {kind} task does not take",
+            raise InputError("k_from_dof needs type A repeatabilities, which this task does not take",
                              file=path, where=f"[{SECTION}] k_from_dof")
-        return spec         # the tolerances: characteristic_tolerances() from the results
+        return spec         # the tolerances: own_tolerances() of the records
     raw = tbl.get("tolerances")
     if not isinstance(raw, list) or not raw:
         raise InputError("no tolerances: add [[decision.tolerances]] tables (the characteristic and its "
                          "limits lsl_mm/usl_mm, or tol_mm around nominal_mm)", file=path,
                          where=f"[{SECTION}] tolerances")
-    ident_keys = IDENT_KEYS[kind]
+    ident_keys = keys.keys
     seen: dict[str, int] = {}
     for n, entry in enumerate(raw, start=1):
         if not isinstance(entry, dict):
@@ -157,9 +154,9 @@ def read_spec(path: Path, doc: dict, kind: str) -> DecisionSpec | None:
             v = entry.get(key)
             if not isinstance(v, str) or not v:
                 raise InputError(f"missing: the {' and '.join(ident_keys)} of the characteristic "
-                                 f"({_IDENT_HELP[kind]})", file=path, where=tolerance_where(n, key))
+                                 f"({keys.help})", file=path, where=tolerance_where(n, key))
             ident[key] = v
-        label = "→".join(ident[k_] for k_ in ident_keys) if kind == "pointcloud" else ident[ident_keys[0]]
+        label = keys.label(ident)
         if label in seen:
             raise InputError(f"{label!r} has a tolerance already (entry #{seen[label]})", file=path,
                              where=tolerance_where(n, ident_keys[0]))
@@ -199,198 +196,115 @@ def read_spec(path: Path, doc: dict, kind: str) -> DecisionSpec | None:
     return spec
 
 
-def _has_own_tolerances(doc: dict) -> bool:
-    chars = doc.get("characteristics")
-    return isinstance(chars, list) and any(isinstance(c, dict) and any(
-        k_ in c for k_ in ("lsl", "usl", "tolerance_mm")) for c in chars)
+def default_spec(keys: ToleranceKeys, quantities: list[Quantity]) -> DecisionSpec | None:
+    """A task without ``[decision]`` whose results carry their own tolerances (a drawing's
+    characteristics) is still decided, by the default rule: ISO 14253-1 with k = 2
+    (docs/conformity.md); None when it has none."""
+    if not keys.own or not any(q.has_tolerance or q.decided_as or q.not_decided for q in quantities):
+        return None
+    return DecisionSpec(cf.DecisionRule("iso14253"), 2.0 if keys.k_from_decision else None)
 
 
-_IDENT_HELP = {"budget": "characteristic = the name of a [[characteristics]] entry",
-               "pointcloud": "from and to = the point ids of a distance",
-               "feature": "parameter = a length parameter of the fit, e.g. \"r0_mm\""}
-
-
-# -- the characteristics of each kind's results -----------------------------------------------
-
-@dataclass(frozen=True)
-class Row:
-    """A characteristic as the Results sheet holds it."""
-
-    label: str
-    index: int               #: 0-based row of the Results sheet below its header
-    value_mm: float
-    u_um: float
-    U_um: float | None       #: None: U = k·u computed on the Decision sheet (feature)
-    value_col: str           #: Results column names
-    u_col: str
-    U_col: str | None
-    u_scale: float           #: µm per unit of the u column (1, or 1000 for a feature's mm)
-    k: float
-    sheet: str = "Results"   #: the sheet of the value and u columns (header in row 1, same rows)
-
-
-def rows_of(kind: str, results: dict, spec: DecisionSpec) -> dict[str, Row]:
-    out: dict[str, Row] = {}
-    if kind == "budget":
-        k = float(results["mpe"]["k"])
-        for i, c in enumerate(results["characteristics"]):
-            out[c["name"]] = Row(c["name"], i, c["value_mm"], c["u_um"], c["U_um"], "value_mm", "u_um", "U_um", 1.0, k)
-    elif kind == "pointcloud":
-        k = float(results.get("K", 2.0))
-        for i, d in enumerate(results["distances"]):
-            label = f"{d['from']}→{d['to']}"
-            out.setdefault(label, Row(label, i, d["d_mm"], d["u_um"], d["U_um"], "d_mm", "u_um", "U_um", 1.0, k))
-    elif kind == "feature":
-        fe = results["feature"]
-        for i, n in enumerate(fe["parameter_names"]):
-            if n.endswith("_mm"):
-                out[n] = Row(n, i, fe["parameters"][n], fe["u"][n] * 1000.0, None, "value", "u", None, 1000.0,
-                             float(spec.k))
-    elif kind == "characteristic":
-        for i, c in enumerate(results["characteristics"]):
-            if c["unit"] != "mm":
-                continue          # angles (deg): not decided (docs/conformity.md)
-            out[c["name"]] = Row(c["name"], i, c["value"], c["u"], None, "value", "u", None, 1.0, float(spec.k))
-            if c["margin_mm"] is not None and c["material_condition"] in BONUS_CONDITIONS:
-                label = margin_label(c["name"])
-                out[label] = Row(label, i, c["margin_mm"], c["u_margin_um"], None, "margin_mm", "u_margin_um",
-                                 None, 1.0, float(spec.k), sheet="Characteristics")
-    return out
-
-
-# -- the characteristic kind: tolerances from the characteristics' own fields -------------------------
-
-#: material conditions with a bonus tolerance: decided on the margin (zone - value >= 0)
-BONUS_CONDITIONS = ("MMC", "LMC")
-#: characteristic types with a two-sided tolerance interval (lsl/usl or nominal ± tolerance_mm)
-TWO_SIDED_TYPES = ("diameter", "width", "distance", "cone_angle", "angle")
-
-
-def margin_label(name: str) -> str:
-    """The decided quantity of a position at MMC/LMC: its margin (Characteristics, 'margin_mm')."""
-    return f"{name} margin"
-
-
-def characteristic_tolerances(results: dict) -> tuple[list[ToleranceSpec], list[dict]]:
-    """The tolerances of a ``characteristic`` task, from the fields of its characteristics, and
-    the characteristics with a tolerance that are not decided (name, reason).
-
-    * size, distance (two-sided): ``lsl``/``usl`` (one of them: a one-sided interval), or
-      ``nominal`` ± ``tolerance_mm``;
-    * form, orientation, position RFS (a zone whose value is >= 0): one-sided, value <= USL =
-      ``tolerance_mm`` (ISO 1101: the feature lies in a zone of that width);
-    * position at MMC/LMC: the margin m = tolerance + bonus - value >= 0, a one-sided lower
-      limit 0 on m, whose u (``u_margin_um``) includes the bonus's uncertainty through the
-      measured size and its correlation with the position (both from one V_X);
-    * angles (deg): not decided yet (the decision's fields are mm and µm).
-
-    ``limit_cells``: the limits as formulas of the 'Characteristics' cells (column names of its
-    header), so that a tolerance typed there changes the decision."""
+def own_tolerances(quantities: list[Quantity]) -> tuple[list[ToleranceSpec], list[dict]]:
+    """The tolerances that the records carry themselves (a drawing's characteristics: lsl, usl,
+    the cells they are typed in), in their order, and the records with a tolerance that is not
+    decided (name, reason: an angle)."""
     out: list[ToleranceSpec] = []
     skipped: list[dict] = []
-    for c in results["characteristics"]:
-        name, typ = c["name"], c["type"]
-        lsl, usl, tol, nominal = c["lsl"], c["usl"], c["tolerance_mm"], c["nominal"]
-        if lsl is None and usl is None and tol is None:
-            continue
-        n = len(out) + 1
-        ident = {"characteristic": name}
-        if c["unit"] != "mm":
-            skipped.append({"characteristic": name, "reason": f"an angle tolerance ({c['unit']}) is not decided "
-                            "yet: the decision works in mm and µm"})
-            continue
-        if typ in TWO_SIDED_TYPES:
-            if lsl is not None or usl is not None:
-                cells = {k_: f"{{{k_[:3]}}}" for k_, v in (("lsl_mm", lsl), ("usl_mm", usl)) if v is not None}
-                out.append(ToleranceSpec(n, ident, name, lsl_mm=lsl, usl_mm=usl, limit_cells=cells))
-            elif nominal is not None:
-                out.append(ToleranceSpec(n, ident, name, lsl_mm=nominal - tol, usl_mm=nominal + tol,
-                                         limit_cells={"lsl_mm": "{nominal}-{tolerance_mm}",
-                                                      "usl_mm": "{nominal}+{tolerance_mm}"}))
-            else:
-                skipped.append({"characteristic": name, "reason": "tolerance_mm of a size or distance needs "
-                                "its nominal (nominal ± tolerance_mm), or give lsl/usl"})
-            continue
-        if tol is None:
-            skipped.append({"characteristic": name, "reason": f"a {typ} takes tolerance_mm (a zone width), "
-                            "not lsl/usl"})
-            continue
-        if typ == "position" and c["material_condition"] in BONUS_CONDITIONS:
-            out.append(ToleranceSpec(n, {"characteristic": margin_label(name)}, margin_label(name), lsl_mm=0.0,
-                                     limit_cells={"lsl_mm": "0"}))
-        else:
-            out.append(ToleranceSpec(n, ident, name, usl_mm=tol, limit_cells={"usl_mm": "{tolerance_mm}"}))
+    for q in quantities:
+        if q.not_decided:
+            skipped.append({"characteristic": q.label, "reason": q.not_decided})
+        elif q.has_tolerance:
+            out.append(ToleranceSpec(len(out) + 1, dict(q.ident), q.label, lsl_mm=q.lsl, usl_mm=q.usl,
+                                     limit_cells=dict(q.cells.limits) if q.cells is not None else {},
+                                     nominal_given=q.nominal))
     return out, skipped
 
 
-def decide_all(path: Path, kind: str, spec: DecisionSpec, results: dict) -> list[dict]:
-    """The decisions (JSON entries) of every tolerance, in the order of the task file (for the
-    characteristic kind: of every characteristic with a tolerance, :func:`characteristic_tolerances`,
-    which fills ``spec.tolerances``)."""
-    if kind in OWN_TOLERANCES:
-        spec.tolerances, skipped = characteristic_tolerances(results)
-        if skipped:
-            results["not_decided"] = skipped
-    rows = rows_of(kind, results, spec)
+def decide_all(path: Path, keys: ToleranceKeys, spec: DecisionSpec, quantities: list[Quantity]
+               ) -> tuple[list[dict], list[dict]]:
+    """The decisions (JSON entries) of every tolerance, in the order of the task file, and the
+    tolerances that are not decided (for a kind with its own tolerances, :func:`own_tolerances`,
+    which fill ``spec.tolerances``)."""
+    skipped: list[dict] = []
+    if keys.own:
+        spec.tolerances, skipped = own_tolerances(quantities)
+    by_label = {q.label: q for q in quantities}
     out = []
     for t in spec.tolerances:
-        row = rows.get(t.label)
-        if row is None:
-            key = IDENT_KEYS[kind][0]
-            have = ", ".join(list(rows)[:8]) + (" ..." if len(rows) > 8 else "")
-            raise InputError(f"no characteristic {t.label!r} in the results (there are: {have})"
-                             + (" ; only length parameters (_mm) take a tolerance" if kind == "feature" else ""),
-                             file=path, where=tolerance_where(t.n, key))
+        q = by_label.get(t.label)
+        if q is None or not q.decidable:
+            have = [lab for lab, x in by_label.items() if x.decidable]
+            listed = ", ".join(have[:8]) + (" ..." if len(have) > 8 else "")
+            raise InputError(f"no characteristic {t.label!r} in the results (there are: {listed})" + keys.hint,
+                             file=path, where=tolerance_where(t.n, keys.keys[0] if keys.keys else None))
+        where = f"[[characteristics]] {t.label}" if keys.own else tolerance_where(t.n)
         try:
-            tol = t.tolerance(row.value_mm)
+            tol = t.tolerance(q.value)
         except ModelError as e:          # lsl >= usl on a characteristic (the others: read_spec)
-            raise InputError(str(e), file=path, where=f"[[characteristics]] {t.label}") from None
-        value = row.value_mm if t.measured_mm is None else t.measured_mm
-        unc = combined(row, t, spec)
+            raise InputError(str(e), file=path, where=where) from None
+        value = q.value if t.measured_mm is None else t.measured_mm
+        unc = combined(q, t, spec)
         try:
             d = cf.decide(value, unc["u_um"], tol, spec.rule, unc["k"])
         except ModelError as e:
-            where = (f"[[characteristics]] {t.ident['characteristic']}" if kind in OWN_TOLERANCES
-                     else tolerance_where(t.n))
             raise InputError(str(e), file=path, where=where) from None
+        nu = math.inf if unc["nu_eff"] is None else unc["nu_eff"]
         entry = {"characteristic": t.label, **{k_: v for k_, v in t.ident.items()},
-                 **({"quantity": "margin_mm" if row.value_col == "margin_mm" else "value"}
-                    if kind in OWN_TOLERANCES else {}),
+                 **({"quantity": q.quantity} if keys.own else {}),
                  "value_source": "measured_mm" if t.measured_mm is not None else "task", **d.as_dict(),
                  **{k_: v for k_, v in unc.items() if k_ not in ("u_um", "k")},
-                 "statement": statement(symbol(kind, t.label), value, "mm", d.U_um, "µm", d.k)}
+                 "coverage_probability": dof.coverage_probability(d.k, nu),
+                 "nominal_mm": nominal_of(t, q),
+                 "value_source_text": value_source_text(t, q),
+                 "statement": statement(q.symbol, value, "mm", d.U_um, "µm", d.k, nu=nu)}
         if t.process_sd_um is not None:
             g = gr.global_risks_normal(t.process_mean_mm, t.process_sd_um, d.u_um, tol, d.acceptance_mm)
             entry.update(process_mean_mm=t.process_mean_mm, process_sd_um=t.process_sd_um,
                          process_nonconforming=g.nonconforming, global_consumer_risk=g.consumer,
                          global_producer_risk=g.producer)
         out.append(entry)
-    return out
+    return out, skipped
 
 
-def combined(row: Row, t: ToleranceSpec, spec: DecisionSpec) -> dict:
+def nominal_of(t: ToleranceSpec, q: Quantity) -> float | None:
+    """The nominal value of a tolerance: ``nominal_mm`` (or the task's value, the centre of
+    ``tol_mm`` without it), a drawing's nominal; None when the task gives limits only."""
+    if t.tol_mm is not None:
+        return t.nominal_mm if t.nominal_mm is not None else q.value
+    return t.nominal_given
+
+
+def value_source_text(t: ToleranceSpec, q: Quantity) -> str:
+    """Where the decided value comes from, in words: typed (``measured_mm``, with its repeated
+    measurements) or the task's (the record's source)."""
+    if t.measured_mm is None:
+        return q.value_source
+    text = f"typed measured value ({tolerance_where(t.n, 'measured_mm')})"
+    if t.type_a:
+        text += ", the mean of the repeated measurements (s_um, n_repeats)"
+    return text + f"; not the task's own value (on Results), which is {q.value_source}"
+
+
+def combined(q: Quantity, t: ToleranceSpec, spec: DecisionSpec) -> dict:
     """u, ν_eff and k of one characteristic: the task's u (type B, ν = ∞) and, when the tolerance
     gives a repeatability s_um of n repeated measurements, u_A = s/√n with ν_A = n - 1 (GUM 4.2),
     combined in quadrature; ν_eff by Welch–Satterthwaite (GUM G.4.1); k = t_95.45(⌊ν_eff⌋) when
     ``[decision] k_from_dof`` (GUM G.6.4), else the task's k."""
-    out = {"u_task_um": row.u_um, "distribution": "normal", "u_A_um": None, "nu_A": None, "nu_eff": None}
-    u, k = row.u_um, row.k
+    out = {"u_task_um": q.u, "distribution": "normal", "u_A_um": None, "nu_A": None, "nu_eff": None}
+    u = q.u
+    k = q.k if q.own_U or spec.k is None else spec.k
     if t.type_a:
         u_a = t.s_um / math.sqrt(t.n_repeats)
         nu_a = t.n_repeats - 1
-        u = math.hypot(row.u_um, u_a)
-        nu = dof.nu_eff([row.u_um, u_a], [math.inf, nu_a])
+        u = math.hypot(q.u, u_a)
+        nu = dof.nu_eff([q.u, u_a], [math.inf, nu_a])
         out.update(u_A_um=u_a, nu_A=nu_a, nu_eff=nu)
         if spec.k_from_dof:
             k = dof.coverage_factor(nu)
             out["distribution"] = "t"
     out.update(u_um=u, k=k)
     return out
-
-
-def symbol(kind: str, label: str) -> str:
-    """The quantity's symbol in a result statement: the characteristic's name, or d(FROM→TO)."""
-    return f"d({label})" if kind == "pointcloud" else label
 
 
 def rule_json(spec: DecisionSpec) -> dict:

@@ -1,9 +1,13 @@
 """The ``Decision`` sheet of a workbook: the conformity decisions of
 :mod:`generator.decision.decide` as live formulas.
 
-The sheet computes everything from the Results cells and its own inputs (limits, measured
-values, r, max_pfa, k) with formulas all four engines accept (``_xlfn.NORM.DIST`` through
-``xlref.norm_s_dist``, ``_xlfn.NORM.S.INV``, measured in ``docs/engines.md``); JCGM 106:2012, 7.3-7.4.
+The sheet computes everything from the cells of the task's records
+(:class:`generator.quantities.Quantity`: the kind's Results, or another sheet of its own) and its
+own inputs (limits, measured values, r, max_pfa, k) with formulas all four engines accept
+(``_xlfn.NORM.DIST`` through ``xlref.norm_s_dist``, ``_xlfn.NORM.S.INV``, ``TDIST``, measured in
+``docs/engines.md``); JCGM 106:2012, 7.3-7.4.  Each row gives the rule's outcome (``outcome``,
+``zone``) and, separately, what the value and its U prove whatever the rule (``conformity``,
+``conformity_zone``: ISO 14253-1:2017, 5.2, 5.3), and the coverage probability of its k.
 """
 
 from __future__ import annotations
@@ -18,11 +22,12 @@ from cmmwb.xlfuncs import dof
 from cmmwb.xlfuncs.errors import ModelError
 from cmmwb.xlfuncs.statement import decimals_for
 
+from ..quantities import Quantity
 from ..workbook.book import Book, ChartSeries
 from ..workbook.styles import FMT_MM, FMT_UM, HEADER_FONT, TITLE_FONT
-from ..workbook.xlref import cell, col, norm_s_dist, quote_sheet
+from ..workbook.xlref import cell, col, norm_s_dist
 from . import risks
-from .decide import DecisionSpec, rows_of
+from .decide import DecisionSpec
 
 SHEET = "Decision"
 FMT_P = "0.000000"
@@ -31,12 +36,12 @@ FIRST_ROW = HEADER_ROW + 1     #: the first characteristic's row
 #: columns of the decision table (first row of the table: headers with units)
 COLUMNS = ["item", "characteristic", "value_mm", "u_task_um", "s_um", "n_repeats", "u_A_um", "nu_A", "u_um", "nu_eff",
            "k", "U_um", "lsl_mm", "usl_mm", "w_um", "A_L_mm", "A_U_mm", "R_L_mm", "R_U_mm", "p_c", "outcome",
-           "zone"]
+           "zone", "conformity", "conformity_zone", "coverage_probability"]
 
 
 def column(name: str) -> int:
-    """1-based column of the Decision table (``COLUMNS``)."""
-    return COLUMNS.index(name) + 1
+    """1-based column of the Decision table (``COLUMNS``, then the chart data ``CHART_COLUMNS``)."""
+    return (COLUMNS + CHART_COLUMNS).index(name) + 1
 #: chart data, each row on the scale of its own tolerance (``chart_scale``): two-sided
 #: (x - midpoint)/(half the tolerance), limits at ±1; one-sided ±1 + (x - T)/max(4U, |value - T|)
 CHART_COLUMNS = ["y_rel", "y_plus_U_rel", "y_minus_U_rel", "lsl_rel", "usl_rel", "A_L_rel", "A_U_rel"]
@@ -49,27 +54,47 @@ CHART_NOTE = ("chart: {name}, on the row's own scale: two-sided tolerance (x −
 NEWTON_COLUMNS = ["h_half_tol_per_u"] + [f"newton_s{j}" for j in range(cf.NEWTON_STEPS + 1)]
 
 
-def _results_cols(book: Book, sheet: str = "Results") -> dict[str, int]:
-    """Column (1-based) of each header name in row 1 of ``sheet``."""
-    ws = book.wb[sheet]
-    return {str(c.value): c.column for c in ws[1] if c.value is not None}
+COLUMN_NOTES = [
+    None, "the characteristic (a result of the task)",
+    "measured value (input) or the task's value (from its Results)",
+    "the task's standard uncertainty (type B, ν = ∞)",
+    "repeatability: standard deviation of the n repeated measurements whose mean is the value (input)",
+    "number of repeated measurements (input)", "type A: u_A = s/√n (GUM 4.2.3)", "ν_A = n - 1 (GUM G.3.3)",
+    "combined standard uncertainty u = √(u_task² + u_A²)",
+    "effective degrees of freedom, Welch–Satterthwaite (GUM G.4.1, eq. (G.2b))",
+    "coverage factor: t_95.45(⌊ν_eff⌋) with [decision] k_from_dof (GUM G.6.4), else the task's k",
+    "expanded uncertainty U = k·u", "lower specification limit", "upper specification limit",
+    "guard band; > 0: acceptance interval inside the tolerance",
+    "lower acceptance limit A_L = T_L + w (JCGM 106:2012, 8.3)", "upper acceptance limit A_U = T_U - w",
+    "lower non-conformance limit R_L = T_L - U: below it non-conformity is proven (ISO 14253-1:2017, 5.3), "
+    "whatever the rule",
+    "upper non-conformance limit R_U = T_U + U: above it non-conformity is proven (ISO 14253-1:2017, 5.3)",
+    "probability of conformance p_c = Φ((T_U-y)/u) - Φ((T_L-y)/u) (JCGM 106:2012, eq. (12))",
+    "the decision rule's outcome: accepted / rejected (binary rules), conforms / does not conform / cannot be "
+    "decided (the ISO 14253-1 rule)", "the rule's zone of the value",
+    "what the value and U prove, whatever the rule (ISO 14253-1:2017, 5.2, 5.3): conformity proven in "
+    "[T_L + U, T_U - U], non-conformity proven outside [T_L - U, T_U + U], else neither",
+    "ISO 14253-1 zone of the value: conformance zone, uncertainty range, non-conformance zone",
+    "coverage probability of k: 2Φ(k) - 1 for ν_eff = ∞, 1 - TDIST(k, ⌊ν_eff⌋, 2) for a finite ν_eff "
+    "(GUM G.1.3, G.3.2, G.6.4)"]
 
 
-def write_sheet(book: Book, kind: str, spec: DecisionSpec, results: dict, decisions: list[dict]
-                ) -> dict[str, dict[str, Any]]:
-    """The ``Decision`` sheet; returns the values to cache in its formula cells
-    ({sheet: {coordinate: value}}, from the core's ``decisions``)."""
-    rows = rows_of(kind, results, spec)
-    sheet_cols = {name: _results_cols(book, name) for name in {row.sheet for row in rows.values()}}
+def write_sheet(book: Book, spec: DecisionSpec, quantities: list[Quantity], decisions: list[dict]) -> dict[str, int]:
+    """The ``Decision`` sheet; the values the core computed (``decisions``) are cached in its
+    formula cells.  Returns the row of each decided record (label -> row)."""
+    by_label = {q.label: q for q in quantities}
     ws = book.sheet(SHEET)
     cache: dict[str, Any] = {}
     rule = spec.rule
-    book.text(ws, 1, 1, "Conformity decisions", font=TITLE_FONT)
+    # the title fits the columns item and characteristic, which print on every page across; the
+    # rule in words right of them (on the first page only)
+    book.text(ws, 1, 1, "Decisions", font=TITLE_FONT)
     intro = textwrap.wrap(f"Decision rule: {rule.text}. p_c = probability of conformance, normal PDF "
-                          "(JCGM 106:2012, 7.3-7.4); A = acceptance limits, R = limits beyond which the value "
-                          "does not conform; w = guard band (µm).", 150)
-    for j, line in enumerate(intro[:HEADER_ROW - 3]):
-        book.text(ws, 2 + j, 1, line)
+                          "(JCGM 106:2012, 7.3-7.4); A = acceptance limits of the rule; R = non-conformance "
+                          "limits T ∓ U (ISO 14253-1); w = guard band (µm). 'outcome' is the rule's, "
+                          "'conformity' what value and U prove.", 115)
+    for j, line in enumerate(intro[:HEADER_ROW - 2]):
+        book.text(ws, 1 + j, 3, line)
     # rule parameters (named inputs)
     r0 = HEADER_ROW - 1
     book.text(ws, r0, 1, "rule", font=HEADER_FONT)
@@ -88,31 +113,20 @@ def write_sheet(book: Book, kind: str, spec: DecisionSpec, results: dict, decisi
     h = HEADER_ROW
     newton = rule.kind == "specific_risk"
     extra = NEWTON_COLUMNS if newton else []
-    book.header(ws, h, 1, COLUMNS + CHART_COLUMNS + extra, notes=[
-        None, "the characteristic (Results row)", "measured value (input) or the task's value (from Results)",
-        "the task's standard uncertainty (type B, ν = ∞)",
-        "repeatability: standard deviation of the n repeated measurements whose mean is the value (input)",
-        "number of repeated measurements (input)", "type A: u_A = s/√n (GUM 4.2.3)", "ν_A = n - 1 (GUM G.3.3)",
-        "combined standard uncertainty u = √(u_task² + u_A²)",
-        "effective degrees of freedom, Welch–Satterthwaite (GUM G.4.1, eq. (G.2b))",
-        "coverage factor: t_95.45(⌊ν_eff⌋) with [decision] k_from_dof (GUM G.6.4), else the task's k",
-        "expanded uncertainty U = k·u", "lower specification limit (input)",
-        "upper specification limit (input)", "guard band; > 0: acceptance interval inside the tolerance",
-        "lower acceptance limit A_L = T_L + w (JCGM 106:2012, 8.3)", "upper acceptance limit A_U = T_U - w",
-        "below R_L: does not conform", "above R_U: does not conform",
-        "probability of conformance p_c = Φ((T_U-y)/u) - Φ((T_L-y)/u) (JCGM 106:2012, eq. (12))",
-        "the decision", "the zone of the measured value"] + [CHART_NOTE.format(name=c) for c in CHART_COLUMNS]
-        + (["two-sided tolerance: h = (T_U - T_L)/(2u), half the tolerance in units of u"]
-           + [NEWTON_NOTE + (" Start: s_0 = max(0, h - z)², z = Φ⁻¹(1 - max_pfa), the one-sided limit." if j == 0
-                             else f" Step {j}.") for j in range(cf.NEWTON_STEPS + 1)] if newton else []))
+    book.header(ws, h, 1, COLUMNS + CHART_COLUMNS + extra, notes=COLUMN_NOTES
+                + [CHART_NOTE.format(name=c) for c in CHART_COLUMNS]
+                + (["two-sided tolerance: h = (T_U - T_L)/(2u), half the tolerance in units of u"]
+                   + [NEWTON_NOTE + (" Start: s_0 = max(0, h - z)², z = Φ⁻¹(1 - max_pfa), the one-sided limit."
+                                     if j == 0 else f" Step {j}.") for j in range(cf.NEWTON_STEPS + 1)]
+                   if newton else []))
     c = {name: j + 1 for j, name in enumerate(COLUMNS + CHART_COLUMNS + extra)}
     prior_rows: list[dict] = []
+    rows: dict[str, int] = {}
     for i, (t, d) in enumerate(zip(spec.tolerances, decisions)):
         r = h + 1 + i
-        row = rows[t.label]
-        rr = row.index + 2
-        results_sheet = quote_sheet(row.sheet)
-        rcols = sheet_cols[row.sheet]
+        rows[t.label] = r
+        q = by_label[t.label]
+        assert q.cells is not None, t.label
         fmt_mm = mm_format(d["U_um"])
         at = lambda name: cell(r, c[name], absolute=False)  # noqa: E731
         ws.cell(r, c["item"]).value = i + 1
@@ -121,16 +135,16 @@ def write_sheet(book: Book, kind: str, spec: DecisionSpec, results: dict, decisi
             book.input(ws, r, c["value_mm"], f"{t.name_prefix}_measured_mm", t.measured_mm, fmt=fmt_mm,
                        note="measured value (input)")
         else:
-            book.formula(ws, r, c["value_mm"], f"={results_sheet}!{cell(rr, rcols[row.value_col])}", fmt=fmt_mm,
-                         note="the task's value (Results); give [[decision.tolerances]] measured_mm for a measured one")
+            book.formula(ws, r, c["value_mm"], f"={q.cells.value}", fmt=fmt_mm,
+                         note="the task's value; give [[decision.tolerances]] measured_mm for a measured one")
             cache[at("value_mm")] = d["value_mm"]
-        u_ref = f"{results_sheet}!{cell(rr, rcols[row.u_col])}"
-        book.formula(ws, r, c["u_task_um"], f"={u_ref}" if row.u_scale == 1 else f"={u_ref}*{row.u_scale:g}",
+        u_ref = q.cells.u
+        book.formula(ws, r, c["u_task_um"], f"={u_ref}" if q.cells.u_scale == 1 else f"={u_ref}*{q.cells.u_scale:g}",
                      fmt=FMT_UM)
         cache[at("u_task_um")] = d["u_task_um"]
-        # the task's own coverage factor: U/u of its Results (budget, pointcloud) or [decision] k
-        k_task = (f"{results_sheet}!{cell(rr, rcols[row.U_col])}/{u_ref}" if row.U_col is not None
-                  else "decision_k")
+        # the task's own coverage factor: U/u of its cells, or the [decision] k
+        k_task = (f"{q.cells.U}/{u_ref}" if q.own_U and q.cells.U is not None
+                  else q.cells.k if q.own_U and q.cells.k else "decision_k")
         if t.type_a:
             book.input(ws, r, c["s_um"], f"{t.name_prefix}_s_um", t.s_um, lo=0.0, fmt=FMT_UM,
                        note="standard deviation of the repeated measurements (µm)")
@@ -153,8 +167,8 @@ def write_sheet(book: Book, kind: str, spec: DecisionSpec, results: dict, decisi
             book.text(ws, r, c["nu_eff"], "∞")
             book.formula(ws, r, c["u_um"], f"={at('u_task_um')}", fmt=FMT_UM)
             book.formula(ws, r, c["k"], f"={k_task}", fmt="0.000")
-            if row.U_col is not None:
-                book.formula(ws, r, c["U_um"], f"={results_sheet}!{cell(rr, rcols[row.U_col])}", fmt=FMT_UM)
+            if q.own_U and q.cells.U is not None:
+                book.formula(ws, r, c["U_um"], f"={q.cells.U}", fmt=FMT_UM)
             else:
                 book.formula(ws, r, c["U_um"], f"={at('k')}*{at('u_um')}", fmt=FMT_UM)
         cache[at("u_um")] = d["u_um"]
@@ -164,12 +178,10 @@ def write_sheet(book: Book, kind: str, spec: DecisionSpec, results: dict, decisi
         for key in ("lsl_mm", "usl_mm"):
             if tol[key] is None:
                 book.text(ws, r, c[key], "—")
-            elif key in t.limit_cells:      # the kind's own tolerance cell (Characteristics)
-                ccols = sheet_cols.get("Characteristics") or _results_cols(book, "Characteristics")
-                expr = t.limit_cells[key].format(**{name: f"{quote_sheet('Characteristics')}!{cell(rr, j)}"
-                                                    for name, j in ccols.items() if name.isidentifier()})
+            elif key in t.limit_cells:      # the kind's own tolerance cell (a drawing's characteristic)
+                expr = t.limit_cells[key]
                 book.formula(ws, r, c[key], f"={expr}", fmt=fmt_mm,
-                             note=("the tolerance typed on 'Characteristics'" if expr != "0" else
+                             note=("the tolerance typed on its own sheet" if expr != "0" else
                                    "a margin (zone - value) conforms when >= 0"))
                 cache[at(key)] = tol[key]
             else:
@@ -202,12 +214,8 @@ def write_sheet(book: Book, kind: str, spec: DecisionSpec, results: dict, decisi
             cache[at(a_name)] = d["acceptance_limits_mm"][j]
             acc[j] = at(a_name)
             other = "-" if sign == "+" else "+"
-            if rule.kind == "iso14253":
-                book.formula(ws, r, c[r_name], f"={lim}{other}{U}/1000", fmt=fmt_mm)
-                cache[at(r_name)] = (d["lsl_mm"] - d["U_um"] / 1000) if j == 0 else (d["usl_mm"] + d["U_um"] / 1000)
-            else:
-                book.formula(ws, r, c[r_name], f"={at(a_name)}", fmt=fmt_mm)
-                cache[at(r_name)] = d["acceptance_limits_mm"][j]
+            book.formula(ws, r, c[r_name], f"={lim}{other}{U}/1000", fmt=fmt_mm)
+            cache[at(r_name)] = d["non_conformance_limits_mm"][j]
         terms = []
         if usl is not None:
             terms.append(norm_s_dist(f"({usl}-{y})*1000/{u}"))
@@ -219,26 +227,36 @@ def write_sheet(book: Book, kind: str, spec: DecisionSpec, results: dict, decisi
         book.formula(ws, r, c["p_c"], "=" + pc, fmt=FMT_P,
                      note="JCGM 106:2012, 7.3 eq. (9)-(10) and 7.4 eq. (12); u in µm, limits in mm")
         cache[at("p_c")] = d["p_c"]
+        # what value and U prove (ISO 14253-1:2017, 5.2, 5.3), whatever the rule
+        proven = _inside(y, f"{lsl}+{U}/1000" if lsl else None, f"{usl}-{U}/1000" if usl else None)
+        disproven = _outside(y, at("R_L_mm") if lsl else None, at("R_U_mm") if usl else None)
+        book.formula(ws, r, c["conformity"], f'=IF({proven},"{cf.CONFORMITY_PROVEN}",IF({disproven},'
+                     f'"{cf.NONCONFORMITY_PROVEN}","{cf.NEITHER_PROVEN}"))', fmt=None)
+        book.formula(ws, r, c["conformity_zone"], f'=IF({proven},"{cf.CONFORMITY_ZONES[cf.CONFORMITY_PROVEN]}",'
+                     f'IF({disproven},"{cf.CONFORMITY_ZONES[cf.NONCONFORMITY_PROVEN]}",'
+                     f'"{cf.CONFORMITY_ZONES[cf.NEITHER_PROVEN]}"))', fmt=None)
+        cache[at("conformity")] = d["conformity"]
+        cache[at("conformity_zone")] = d["conformity_zone"]
         inside_acc = _inside(y, acc[0], acc[1])
-        rl = at("R_L_mm") if lsl is not None else None
-        ru = at("R_U_mm") if usl is not None else None
         if rule.kind == "iso14253":
-            outside_rej = _outside(y, rl, ru)
-            outcome = (f'=IF({inside_acc},"{cf.CONFORMS}",IF({outside_rej},"{cf.DOES_NOT_CONFORM}",'
+            outcome = (f'=IF({proven},"{cf.CONFORMS}",IF({disproven},"{cf.DOES_NOT_CONFORM}",'
                        f'"{cf.UNDECIDED}"))')
-            zone = (f'=IF({inside_acc},"conformance zone",IF({outside_rej},"non-conformance zone",'
+            zone = (f'=IF({proven},"conformance zone",IF({disproven},"non-conformance zone",'
                     f'"uncertainty range"))')
-        elif rule.kind == "specific_risk":
-            ok = f"{at('p_c')}>=1-decision_max_pfa"
-            outcome = f'=IF({ok},"{cf.CONFORMS}","{cf.DOES_NOT_CONFORM}")'
-            zone = f'=IF({ok},"acceptance zone","rejection zone")'
         else:
-            outcome = f'=IF({inside_acc},"{cf.CONFORMS}","{cf.DOES_NOT_CONFORM}")'
-            zone = f'=IF({inside_acc},"acceptance zone","rejection zone")'
+            ok = f"{at('p_c')}>=1-decision_max_pfa" if rule.kind == "specific_risk" else inside_acc
+            outcome = f'=IF({ok},"{cf.ACCEPTED}","{cf.REJECTED}")'
+            zone = f'=IF({ok},"acceptance zone","rejection zone")'
         book.formula(ws, r, c["outcome"], outcome, fmt=None)
         book.formula(ws, r, c["zone"], zone, fmt=None)
         cache[at("outcome")] = d["outcome"]
         cache[at("zone")] = d["zone"]
+        nu_eff, k = at("nu_eff"), at("k")
+        book.formula(ws, r, c["coverage_probability"],
+                     f"=IF(ISNUMBER({nu_eff}),1-TDIST({k},INT({nu_eff}),2),2*{norm_s_dist(k)}-1)", fmt="0.0000",
+                     note="GUM G.1.3, G.3.2: the probability that y ± U covers the value (t with ⌊ν_eff⌋ "
+                          "degrees of freedom, normal for ν_eff = ∞)")
+        cache[at("coverage_probability")] = d["coverage_probability"]
         if t.process_sd_um is not None:
             prior_rows.append({"item": i + 1, "label": t.label, "prefix": t.name_prefix, "decision": d,
                                "u": u, "lsl": lsl, "usl": usl, "A_L": acc[0], "A_U": acc[1]})
@@ -275,18 +293,52 @@ def write_sheet(book: Book, kind: str, spec: DecisionSpec, results: dict, decisi
               ChartSeries("upper specification limit", xs, ref_of("usl_rel"), colour="D62728", symbol="dash"),
               ChartSeries("lower acceptance limit", xs, ref_of("A_L_rel"), colour="2CA02C", symbol="dash"),
               ChartSeries("upper acceptance limit", xs, ref_of("A_U_rel"), colour="2CA02C", symbol="dash")]
-    book.scatter(ws, f"B{last + 3}", "Measured value ± U against the specification (red) and acceptance (green) "
+    book.scatter(ws, f"C{last + 3}", "Measured value ± U against the specification (red) and acceptance (green) "
                  "limits, each row on its own tolerance's scale", "item (row of the table)",
                  "position in the tolerance (limits at ±1)", series, width=24, height=11, x_min=0)
-    for name, width in (("characteristic", 18), ("outcome", 18), ("zone", 22)):
-        ws.column_dimensions[col(c[name])].width = width
+    _widths(ws, c, h, last, cache)
     bottom = last + 26
     if prior_rows:
         top = last + 28
         risks.write_node_table(book, ws, top + 1, len(COLUMNS) + 2)
         bottom = risks.write_rows(book, ws, top, prior_rows, cache)
-    book.print_setup(ws, landscape=True, title_rows=h, area=f"A1:{col(c['zone'])}{bottom}")
-    return {SHEET: cache}
+    book.cache_cells(ws, cache)
+    # the chart on the table's page when both fit, else on the next page (never split)
+    breaks = [last + 2] if last + 2 + CHART_ROWS > ROWS_PER_PAGE else []
+    book.print_setup(ws, landscape=True, title_rows=h, title_columns="A:B", min_scale=READABLE_SCALE,
+                     area=f"A1:{col(c['coverage_probability'])}{bottom}", fit_widths=False, footer_pt=10,
+                     row_breaks=breaks)
+    return rows
+
+
+def _widths(ws, c: dict[str, int], h: int, last: int, cache: dict[str, Any]) -> None:
+    """Column widths of the decision table that fit what each column shows (its header, texts,
+    and numbers as their format shows the values the core computed), no wider: the table prints
+    at a fixed scale, pages across (the other columns: as fit_widths makes them)."""
+    from ..workbook.pagesetup import display_len, fit_widths
+
+    fit_widths(ws)
+    for name in COLUMNS:
+        j = c[name]
+        want = 1.1 * len(name) + 1
+        for r in range(h + 1, last + 1):
+            x = ws.cell(row=r, column=j)
+            v = cache.get(x.coordinate, x.value if x.data_type != "f" else None)
+            if isinstance(v, str):
+                want = max(want, len(v))
+            elif isinstance(v, (int, float)):
+                want = max(want, display_len(v, x.number_format))
+        ws.column_dimensions[col(j)].width = round(min(want + 2.0, 40), 1)
+
+
+#: the print scale of the Decision sheet: 11 pt text prints at 9.4 pt, a chart's 10 pt axis labels
+#: at 8.5 pt (as many pages across as that needs, the item and characteristic columns repeated on
+#: each)
+READABLE_SCALE = 0.85
+#: rows of a printed page at that scale (A4 landscape, 17.9 cm between the margins, rows of
+#: 0.45 cm: 47; less a margin) and the rows the chart (11 cm) covers
+ROWS_PER_PAGE = 44
+CHART_ROWS = 26
 
 
 NEWTON_NOTE = ("exact specific-risk acceptance limits A = midpoint ± d·u of a two-sided tolerance: the root "
@@ -338,6 +390,17 @@ def chart_scale(lsl: str | None, usl: str | None, U: str, y: str, d: dict
     t, t_v, off, off_v = (usl, d["usl_mm"], "1+", 1.0) if usl is not None else (lsl, d["lsl_mm"], "-1+", -1.0)
     assert t is not None
     return (off, t, f"MAX(4*{U}/1000,ABS({y}-{t}))", off_v, t_v, max(four_u, abs(d["value_mm"] - t_v)))
+
+
+def chart_scale_values(d: dict) -> tuple[float, float, float]:
+    """(offset, reference, scale) of :func:`chart_scale` for the decision ``d`` (JSON): a value
+    x (mm) is at offset + (x - reference)/scale."""
+    lsl, usl = d["lsl_mm"], d["usl_mm"]
+    if lsl is not None and usl is not None:
+        return 0.0, (lsl + usl) / 2, (usl - lsl) / 2
+    four_u = 4 * d["U_um"] / cf.UM_PER_MM
+    t, off = (usl, 1.0) if usl is not None else (lsl, -1.0)
+    return off, t, max(four_u, abs(d["value_mm"] - t))
 
 
 def mm_format(U_um: float) -> str:

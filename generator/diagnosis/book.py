@@ -29,20 +29,31 @@ from cmmwb.xlfuncs.model.hyperparameters import in_use
 from cmmwb.xlfuncs.pointcloud import Parameters
 
 from ..workbook.book import Book, ChartSeries, Formula
+from ..workbook.pagesetup import LINE_PT, wrapped_lines
 from ..workbook.styles import FMT_SCI, FMT_UM
 from ..workbook.xlref import Block, cell
 from .gls import fill_after, gls_sheets
-from .records import display_unit, length_records, point_records
+from .page import write_page
+from .records import FOOTER_PT, RECORDS_SCALE, display_unit, length_records, point_records
 
 NATIVE_MAX_OBS = 160
+#: a hyper-parameter or a probe offset as typed (0.2, 200, -50), never in General's 12 digits
+FMT_PARAM = "0.0###"
+
+
+def param_unit(key: str) -> str:
+    """The unit of a hyper-parameter, from its name (sigma_R_um -> µm; lambda_P has none)."""
+    tail = key.rsplit("_", 1)[-1]
+    return {"um": "µm", "urad": "µrad", "ppm": "ppm", "mm": "mm"}.get(tail, "1")
 
 
 def write_book(diag: Diagnosis, path: Path, *, title_extra: str = "", params: Parameters | None = None,
-               source: str = "") -> Path:
+               source: str = "", provenance: dict | None = None) -> Path:
     prep = diag.prep
     D = prep.design
     book = Book("diagnose", "diagnosis", "Mismatch locator — recordings against the simulation"
                 + (f" ({title_extra})" if title_extra else ""))
+    book.footer_pt = 11      # the sheets print at 73 % and more: footers of 8 pt and more
     native = prep.C.shape[0] <= NATIVE_MAX_OBS and diag.whitener.mode == "cholesky"
     _instructions(book, diag, native, source)
     inputs = inputs_sheet(book, diag, params)
@@ -54,8 +65,9 @@ def write_book(diag: Diagnosis, path: Path, *, title_extra: str = "", params: Pa
     fill_after(book, diag, obs, gls)
     _candidates(book, diag)
     _groups(book, diag)
-    cached = _results(book, diag, gls, inputs)
+    cached, results_rows = _results(book, diag, gls, inputs)
     _chart(book, diag, obs)
+    write_page(book, diag, provenance, gls["stats"], results_rows, source or "the recordings")
     out = book.save(path)
     from ..workbook import cache
 
@@ -129,12 +141,12 @@ def inputs_sheet(book: Book, diag: Diagnosis, params: Parameters | None) -> dict
     if params is not None:
         for key in in_use(params):
             book.text(ws, r, 1, key)
-            book.number(ws, r, 2, getattr(params, key), fmt="General", computed=True)
-            book.text(ws, r, 4, "simulation parameter (Forbes 2025 Table 3 names); the covariance C was "
-                                "computed from it by the core")
+            book.number(ws, r, 2, getattr(params, key), fmt=FMT_PARAM, computed=True)
+            book.text(ws, r, 3, param_unit(key))
+            book.text(ws, r, 4, "simulation parameter; C computed from it by the core")
             r += 1
     ws.column_dimensions["A"].width = 18
-    ws.column_dimensions["D"].width = 60
+    ws.column_dimensions["D"].width = 52
     r += 1
     book.text(ws, r, 1, "Probes (first = reference of probe_qualification)")
     r += 1
@@ -144,7 +156,7 @@ def inputs_sheet(book: Book, diag: Diagnosis, params: Parameters | None) -> dict
         r += 1
         book.text(ws, r, 1, probe.id)
         for c, v in enumerate(probe.offset_mm):
-            book.number(ws, r, 2 + c, v, fmt="General", computed=True)
+            book.number(ws, r, 2 + c, v, fmt=FMT_PARAM, computed=True)
         probe_cells[probe.id] = cell(r, 1, "Inputs")
     out = {"probe_cells": probe_cells, "free_row": r + 2}
     if prep.design.kind == "point":
@@ -193,6 +205,10 @@ def _discrepancy_rows(book: Book, ws, r: int, d: dict) -> int:
     return r + 2
 
 
+#: the Candidates sheet's reason column (characters): the sheet prints landscape at 75 % or more
+REASON_WIDTH = 40
+
+
 def _candidates(book: Book, diag: Diagnosis) -> None:
     ws = book.sheet("Candidates")
     j = diag.to_json()
@@ -212,12 +228,13 @@ def _candidates(book: Book, diag: Diagnosis) -> None:
         book.text(ws, r, 8, display_unit(fx.BY_NAME[c["name"]].unit))
         if c["reason"]:
             book.text(ws, r, 9, c["reason"], wrap=True)     # wrapped: the sheet prints on the page width
-            ws.row_dimensions[r].height = 13.0 * max(1, math.ceil(len(c["reason"]) / 72))
+            ws.row_dimensions[r].height = LINE_PT * wrapped_lines(c["reason"], REASON_WIDTH) + 2
+            book.align_top(ws, r, len(cols))
     ws.column_dimensions["A"].width = 20
     ws.column_dimensions["B"].width = 16
     for col in "EFG":
         ws.column_dimensions[col].width = 12
-    ws.column_dimensions["I"].width = 70
+    ws.column_dimensions["I"].width = REASON_WIDTH
     r = len(j["candidates"]) + 5
     # second edition (docs/recordings.md section 7): the gates, outliers, noise level
     book.text(ws, r, 1, f"gate: {j['gate'] or 'none'} (omnibus p = {j['p_before']:.3g}, targeted p = "
@@ -277,13 +294,19 @@ def _groups(book: Book, diag: Diagnosis) -> None:
         book.text(ws, r, 2, g["group"])
         for k, key in enumerate(("records", "chi2", "dof", "p_value", "mean_z", "rms_z")):
             ws.cell(row=r, column=3 + k).value = g[key]
+            ws.cell(row=r, column=3 + k).number_format = GROUP_FORMATS[key]
         book.text(ws, r, 9, "yes" if g["flagged"] else "no")
     ws.column_dimensions["B"].width = 22
 
 
-def _results(book: Book, diag: Diagnosis, gls: dict, inputs: dict) -> list[dict]:
+#: the Groups sheet's numbers as a person reads them (General ran them together: 15 98.911538958)
+GROUP_FORMATS = {"records": "0", "chi2": "0.00", "dof": "0", "p_value": "0.00E+00", "mean_z": "0.00",
+                 "rms_z": "0.00"}
+
+
+def _results(book: Book, diag: Diagnosis, gls: dict, inputs: dict) -> tuple[list[dict], dict[str, int]]:
     """The Results sheet; returns its rows' values (the core's numbers, as in diagnosis.json) for
-    the cached values.  A periodic error's period row is the scan's period (Inputs) plus the
+    the cached values, and the row of each quantity.  A periodic error's period row is the scan's period (Inputs) plus the
     refit's step for it."""
     st = gls["stats"]
     js = diag.to_json()
@@ -320,7 +343,7 @@ def _results(book: Book, diag: Diagnosis, gls: dict, inputs: dict) -> list[dict]
         ws.cell(row=r, column=2).number_format = (FMT_SCI if q.startswith("p_") else "0" if q.startswith("dof")
                                                   else "0.00" if q.startswith("chi2") else FMT_UM)
         ws.cell(row=r, column=3).number_format = FMT_UM
-    return cached
+    return cached, {str(row[0]): r for r, row in enumerate(rows, start=2)}
 
 
 def _chart(book: Book, diag: Diagnosis, obs: dict) -> None:
@@ -340,4 +363,5 @@ def _chart(book: Book, diag: Diagnosis, obs: dict) -> None:
     anchor_row = r1 + 3
     book.scatter(ws, f"A{anchor_row}", "Standardized residuals z before and after the refit",
                  x_title, "z", series[::-1], width=24, height=13, page=book)
-    book.print_setup(ws, row_breaks=[anchor_row - 1])
+    book.print_setup(ws, min_scale=RECORDS_SCALE, chart_row=anchor_row - 1, landscape=False, title_columns="A:A",
+                     footer_pt=FOOTER_PT)

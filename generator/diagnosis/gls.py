@@ -53,7 +53,8 @@ def gls_sheets(book: Book, diag: Diagnosis, obs: dict, native: bool) -> dict:
         for w_ in (wc, wi):
             for j in range(n):   # 0.000E+00 of a negative number: 10 characters
                 w_.column_dimensions[get_column_letter(1 + j)].width = 11
-            book.print_setup(w_, matrix=(n, n), caption=(
+            # the top-left 24 x 9 on one landscape page at full size (12 columns printed at 6 pt)
+            book.print_setup(w_, matrix=(n, n), corner=(24, 9), caption=(
                 f"{w_.title}: top-left corner of the {n} x {n} matrix; the whole matrix is in the workbook, "
                 "not in the printout"))
         out["C"] = Cb

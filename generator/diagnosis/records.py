@@ -8,10 +8,14 @@ from __future__ import annotations
 
 from collections.abc import Callable, Iterable, Iterator
 
+from openpyxl.styles import Alignment
+
 from cmmwb.xlfuncs.locator import effects as fx
 from cmmwb.xlfuncs.locator.diagnose import Diagnosis
 
 from ..workbook.book import Book
+from ..workbook.pagesetup import LINE_PT, wrapped_lines
+from ..workbook.styles import FMT_COORD, FMT_MM, NUMBER_FORMAT
 from ..workbook.xlref import block, cell
 from .formulas import Row, alignment_formula, length_formula, point_formula
 
@@ -65,6 +69,14 @@ def travel_cells(book: Book, diag: Diagnosis, inputs: dict, sheet: str, cols: di
 
 # -- records -------------------------------------------------------------------------------------
 
+#: the record sheets print at this scale (percent), pages across and down: 8 pt text from 11 pt
+#: cells (fitted to the page width, 40 columns printed at 4 pt)
+RECORDS_SCALE = 0.75
+#: the footer of a sheet printed at RECORDS_SCALE: 11 pt prints at 8.25 pt
+FOOTER_PT = 11
+#: the width (characters) a wrapped header of a record sheet is counted in (its numbers' width)
+HEADER_WIDTH = 11
+
 #: columns of the recordings (docs/recordings.md names them without a unit) that are in mm: their
 #: headers in the workbook carry it (x1_mm ...)
 LENGTH_MM_COLUMNS = frozenset({"x1", "y1", "z1", "x2", "y2", "z2", "p1x", "p1y", "p1z", "p2x", "p2y", "p2z"})
@@ -88,7 +100,7 @@ def shown(key: str, mm_columns) -> str:
 def _input_column(book: Book, ws, r0: int, c: int, values) -> None:
     """A column of numeric input cells (styled, unlocked, validated by :meth:`Book.number`)."""
     for k, v in enumerate(values):
-        book.number(ws, r0 + k, c, float(v), fmt="General")
+        book.number(ws, r0 + k, c, float(v), fmt=FMT_COORD)
 
 
 def _record_sheet(book: Book, rec, sheet: str, columns: list[str], derived: list[str], notes: dict[str, str],
@@ -115,6 +127,12 @@ def _record_sheet(book: Book, rec, sheet: str, columns: list[str], derived: list
     header = cols + derived
     ci = {k: i + 1 for i, k in enumerate(header)}
     book.header(ws, 1, 1, [shown(h, mm_columns) for h in header], [notes.get(h) for h in header])
+    # the headers wrap (an effect's column is named "squareness_xy:squareness_xy (µm per µrad)"):
+    # the columns are as wide as their numbers, fewer pages across
+    for c in range(1, len(header) + 1):
+        cell_ = ws.cell(row=1, column=c)
+        cell_.alignment = Alignment(wrap_text=True, vertical="top")
+    ws.row_dimensions[1].height = LINE_PT * max(wrapped_lines(shown(h, mm_columns), HEADER_WIDTH) for h in header) + 2
     for k, v in data.items():
         _input_column(book, ws, 2, ci[k], v)
     texts = {"id": rec.ids, **texts, **rec.extra}
@@ -126,8 +144,10 @@ def _record_sheet(book: Book, rec, sheet: str, columns: list[str], derived: list
             book.text(ws, r, ci[k], v[a])
         L = {k: cell(r, ci[k]) for k in ci}
         for k, f in row_formulas(L):
-            book.formula(ws, r, ci[k], f)
+            book.formula(ws, r, ci[k], f, fmt=FMT_MM if k.endswith("_mm") or k.endswith("_um") else NUMBER_FORMAT)
     ws.freeze_panes = "B2"
+    # portrait: 60 records a page; the ids repeated on every page across
+    book.print_setup(ws, min_scale=RECORDS_SCALE, landscape=False, title_columns="A:A", footer_pt=FOOTER_PT)
     return ws, ci, rows
 
 

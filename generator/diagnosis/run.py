@@ -25,6 +25,7 @@ from cmmwb.xlfuncs.model.hyperparameters import in_table
 from .. import __version__
 from ..errors import InputError, model_errors_named
 from ..workbook.atomic import Staging
+from ..workbook.provenance import provenance
 
 # -- the model ----------------------------------------------------------------------------------
 
@@ -74,9 +75,11 @@ def read_recordings(path: Path):
 def run_diagnose(rec_path: Path, model: dg.Model, out_dir: Path, *, alpha: float = 0.01, plots: bool = True,
                  workbook: bool = True, source: str = "", rec=None, task_label: str = "",
                  force: bool = False, exact: bool = False, alpha_name: float | None = None,
-                 warnings: list[str] | tuple[str, ...] = ()) -> tuple[dict, list[Path]]:
+                 warnings: list[str] | tuple[str, ...] = (), task_path: Path | None = None) -> tuple[dict, list[Path]]:
     """Diagnose ``rec_path`` into ``out_dir`` (all or nothing); returns the JSON and the files.
-    ``exact``: the dense record covariance whatever the size (no structured approximation)."""
+    ``exact``: the dense record covariance whatever the size (no structured approximation);
+    ``task_path``: the task file of the simulation (its SHA-256 in ``provenance``), or None."""
+    from ..taskfile import read_toml
     from .book import write_book
     from .plots import write_plots
 
@@ -104,15 +107,18 @@ def run_diagnose(rec_path: Path, model: dg.Model, out_dir: Path, *, alpha: float
         except RecordingsError as e:     # a ModelError too, named by the recordings' line
             raise InputError(e.message, file=rec_path, where=e.where) from None
     result = diag.to_json()
+    prov = provenance(task_path, read_toml(task_path) if task_path is not None else None, read=[rec_path])
     result = {"name": "diagnosis", "version": __version__,
               "recordings": rec_path.name, "simulation": task_label, **result,
-              "warnings": [*warnings, *(f"{rec_path}, {n}" for n in getattr(rec, "notes", ()))]}
+              "warnings": [*warnings, *(f"{rec_path}, {n}" for n in getattr(rec, "notes", ()))],
+              "provenance": prov}
     with Staging(out_dir, force=force) as tmp:
         (tmp / "diagnosis.json").write_text(json.dumps(result, indent=1, ensure_ascii=False, allow_nan=False)
                                             + "\n", encoding="utf-8")
         made = [tmp / "diagnosis.json"]
         if workbook:
-            made.append(write_book(diag, tmp / "diagnosis.xlsx", params=model.params, source=rec_path.name))
+            made.append(write_book(diag, tmp / "diagnosis.xlsx", params=model.params, source=rec_path.name,
+                                   provenance=prov))
         if plots:
             made += write_plots(diag, tmp)
     return result, [Path(out_dir) / p.name for p in made]
@@ -162,7 +168,7 @@ def demo(out_dir: Path) -> list[Path]:
                              comments=[f"cmmwb demo: {note}", f"planted: {planted}, seed {seed}"])
             (tmp / "task.toml").write_text(task_toml(params, DEMO_PROBES, f"demo_{name}", note), encoding="utf-8")
         result, made = run_diagnose(case_dir / "recordings.csv", model, case_dir, source="demo",
-                                    task_label=str(case_dir / "task.toml"))
+                                    task_label=str(case_dir / "task.toml"), task_path=case_dir / "task.toml")
         files += [case_dir / "recordings.csv", case_dir / "task.toml", *made]
         print(f"\n  [{name}] {note}  ({time.perf_counter() - t:.1f} s)")
         print(f"    planted: {', '.join(f'{k} = {v}' for k, v in planted.items())}")

@@ -52,7 +52,6 @@ from .. import __version__
 from ..pointcloud.large_book import LIVE, write_xlwings_conf
 from ..pointcloud.vx_sheets import explain_inputs, write_inputs, write_point_cloud_model, write_points
 from ..workbook.book import Book, BookAdditions, Formula
-from ..workbook.cache import FEATURE_NOT_APPLICABLE
 from ..workbook.styles import FMT_SCI
 from ..workbook.xlref import Block, cell
 from .fit_sheets import feature_label, gn_step_block, write_fit, write_G, write_H, write_jacobian, write_local
@@ -103,7 +102,7 @@ def write_feature_book(task: Task, results: dict, path, fit, method: str, *,
         write_planning(book, task, results)
     if not native:
         write_live(book, task, f, va, probe_rows)
-    _write_results(book, f, rows)
+    _write_results(book, f, rows, results["feature"])
     if not native:
         write_xlwings_conf(book)
     book.save(path, additions)
@@ -113,25 +112,26 @@ def write_feature_book(task: Task, results: dict, path, fit, method: str, *,
 #: then what a person reads: the unit, u in µm (lengths) or µrad (angles; for a unit-vector
 #: component u x 1e6, the tilt of the direction in µrad), and whether the fit is current
 RESULT_COLUMNS = ["parameter", "value", "u", "unit", "u_um", "u_urad", "fit_state"]
-NOT_APPLICABLE = FEATURE_NOT_APPLICABLE
+NOT_APPLICABLE = "—"
 
 
-def result_row(name: str, budget_row: int, step: Block) -> list:
+def result_row(name: str, budget_row: int, step: Block, fe: dict | None = None) -> list:
     """One Results row of parameter ``name`` (its row on 'Budget'); ``step`` = the Gauss-Newton
-    step on 'H'."""
+    step on 'H'; ``fe`` = the results' ``feature`` (the JSON), whose values are cached."""
     scale, shown = u_display(name)
-    u_shown = Formula(f"={cell(budget_row, U_COLUMN, 'Budget')}")
-    return [name, Formula(f"={cell(budget_row, 2, 'Budget')}"),
-            Formula(f"={cell(budget_row, U_COLUMN, 'Budget')}/{scale:g}"), unit_of(name),
+    value, u, state = (fe["parameters"][name], fe["u"][name], fe["fit"]["state"]) if fe else (None, None, None)
+    u_shown = Formula(f"={cell(budget_row, U_COLUMN, 'Budget')}", None if u is None else u * scale)
+    return [name, Formula(f"={cell(budget_row, 2, 'Budget')}", value),
+            Formula(f"={cell(budget_row, U_COLUMN, 'Budget')}/{scale:g}", u), unit_of(name),
             u_shown if shown == "µm" else NOT_APPLICABLE,
             u_shown if shown != "µm" else NOT_APPLICABLE,
-            Formula(f'=IF(SQRT(SUMSQ({step.ref}))>{STALE_STEP:.9f},"{FIT_STALE}","{FIT_CURRENT}")')]
+            Formula(f'=IF(SQRT(SUMSQ({step.ref}))>{STALE_STEP:.9f},"{FIT_STALE}","{FIT_CURRENT}")', state)]
 
 
-def _write_results(book: Book, f, rows: list[tuple[str, int]]) -> None:
+def _write_results(book: Book, f, rows: list[tuple[str, int]], fe: dict | None = None) -> None:
     step = gn_step_block(f.n)
     ws = book.results(
-        RESULT_COLUMNS, [result_row(name, r, step) for name, r in rows],
+        RESULT_COLUMNS, [result_row(name, r, step, fe) for name, r in rows],
         notes=[None, "fitted value, in the unit of column 'unit' (mm, rad, or 1 for a unit-vector "
                "component)", "standard uncertainty, in the unit of column 'unit' (the contract's "
                "column; u_um / u_urad show it in µm or µrad)",

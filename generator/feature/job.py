@@ -31,8 +31,10 @@ from cmmwb.xlfuncs.distributed import get_backend
 
 from .. import __version__
 from ..errors import InputError, model_errors_named
-from ..taskkind import no_type_a
-from ..workbook.book import BookAdditions
+from ..quantities import Cells, Quantity, ToleranceKeys
+from ..taskkind import no_type_a, no_verdicts
+from ..workbook.book import RESULTS, BookAdditions
+from ..workbook.xlref import cell
 from .loader import load as load
 from .loader import safe_rows
 from .task import KIND, Task, fit_state
@@ -55,6 +57,7 @@ EXAMPLES = [
 #: no table beside it; no type A inputs
 NEW_TASK_FILES: dict[str, str] = {}
 add_type_a = no_type_a
+verdicts = no_verdicts
 
 
 # -- computing -----------------------------------------------------------------------------
@@ -230,6 +233,45 @@ def write_plots(task: Task, results: dict, out_dir: Path) -> list[Path]:
         plt.close(fig)
         files.append(p)
     return files
+
+
+# -- the records of the results (generator.quantities) -----------------------------------------
+
+#: a [[decision.tolerances]] entry names a length parameter of the fit; the results give u only:
+#: U = k·u with the [decision] k
+TOLERANCE_KEYS = ToleranceKeys(("parameter",), help='parameter = a length parameter of the fit, e.g. "r0_mm"',
+                               k_from_decision=True, hint=" ; only length parameters (_mm) take a tolerance")
+U_SOURCE = ("the point-cloud model V_X of six influence factors propagated to the fitted parameters "
+            "(V_A = G V_X G^T, Forbes 2022 eq. (12), Forbes 2025)")
+
+
+def quantities(task: Task, results: dict, k: float = 2.0) -> list[Quantity]:
+    """One record per length (mm) and angle (rad) parameter of the fit (its Results row: value
+    and u in the parameter's unit), U = k·u with ``k`` (the ``[decision] k``, default 2).
+    Unit-vector components (unit 1) have no record: they are directions, read on Results."""
+    fe = results["feature"]
+    fitted_to = (f"the least-squares {fe['type']} fitted to {task.points_source}"
+                 + (" (the nominal geometry, not a measurement)" if task.sampling is not None else ""))
+    out = []
+    for i, n in enumerate(fe["parameter_names"]):
+        r = i + 2
+        length = n.endswith("_mm")
+        if not (length or n.endswith("_rad")):
+            continue
+        scale = 1000.0 if length else 1.0
+        out.append(Quantity(label=n, value=fe["parameters"][n], unit="mm" if length else "rad",
+                            u=fe["u"][n] * scale, u_unit="µm" if length else "rad", k=float(k),
+                            U_unit="µm" if length else "rad", ident={"parameter": n},
+                            value_source=fitted_to, u_source=U_SOURCE, own_U=False,
+                            cells=Cells(RESULTS, r, cell(r, 2, RESULTS), cell(r, 3, RESULTS), u_scale=scale)))
+    return out
+
+
+def read_book(cells, rt, points_file: str) -> None:
+    """The way back (``cmmwb read``): :func:`generator.feature.reader.read_feature`."""
+    from .reader import read_feature
+
+    read_feature(cells, rt, points_file)
 
 
 def summary(results: dict) -> list[str]:

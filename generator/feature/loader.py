@@ -19,7 +19,7 @@ from cmmwb.xlfuncs import pointcloud as pc
 from cmmwb.xlfuncs.limits import MAX_COORDINATE_MM, coordinate_problem
 
 from ..errors import InputError, model_errors_named
-from ..taskcloud import read_parameters, read_point_cloud, read_probes
+from ..taskcloud import points_source, read_parameters, read_point_cloud, read_probes
 from ..taskfile import COMMON_TABLES, check_keys, number, string, table, task_kind_and_name, text_list, vector3
 from ..taskworkpiece import apply_workpiece
 from .task import Planning, Task
@@ -183,7 +183,9 @@ def load(path: Path, doc: dict) -> Task:
     planning = _read_planning(path, doc, element, circle_plane, sampling, cloud.m) \
         if "planning" in doc else None
     return Task(path, name, element, circle_plane, cloud, params, weights, axis_hint, reference,
-                max_iter, source, sampling, planning, list(notes), method)
+                max_iter, source, sampling, planning, list(notes), method,
+                points_source=points_source(doc) if has_points else
+                "the nominal points of the sampling plan [sampling]")
 
 
 def _weight(path, w: dict, lab: str) -> float:

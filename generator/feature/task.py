@@ -75,5 +75,6 @@ class Task:
     planning: Planning | None = None
     notes: list[str] = field(default_factory=list)
     va_method: str = "auto"           # [feature] va_method, or "exact" by cmmwb build --exact
+    points_source: str = ""           # where the points come from, in words (taskcloud.points_source)
     _fit: object = None
     _unc: object = None

@@ -74,8 +74,10 @@ def write_V_A(book: Book, f, unc, G: Block, V, method: str) -> dict:
               "unchanged (xlfuncs.features, reported parameters)")
     out_local, out_glob, grey = {}, {}, {}
     Gt = G.ref
+    blocks = [(1, 3 + g - 1)]
     for fac, (L, Gl) in v_a_layout(n, g).items():
         top = L.row
+        blocks.append((top - 2, top + max(n, g) - 1))     # a factor's caption and its matrices, on one page
         book.text(ws, top - 2, 1, f"{fac}: V_A,{fac} paper parameters (left), reported T V_A T^T (right)"
                   if fac != "total" else "total: sum of the contributions (Forbes 2025 section 5.6; W the part's, docs/workpiece.md)")
         matrix_labels(book, ws, top, 2, lnames, lnames)
@@ -113,6 +115,7 @@ def write_V_A(book: Book, f, unc, G: Block, V, method: str) -> dict:
         book.array(Gl, f"=MMULT(MMULT({T.ref},{L.ref}),TRANSPOSE({T.ref}))", fmt=SMALL,
                    note="T V_A T^T: covariance of the reported parameters")
         out_local[fac], out_glob[fac] = L, Gl
+    book.print_setup(ws, blocks=blocks)
     return {"local": out_local, "global": out_glob, "T": T, "grey": grey}
 
 

@@ -28,13 +28,15 @@ def extra_inputs(task) -> list[tuple]:
             ("L_max_mm", m.L_max_mm, "mm", "largest distance of the MPE check", 0.0)]
 
 
-def results_rows(task, first: int) -> list[list]:
+def results_rows(task, first: int, results: dict) -> list[list]:
     """The contract's Results rows: from, to, then references to Budget columns D.. (d, u, U,
-    u_R ... u_P, u_W) of the distance in row ``first + q``."""
+    u_R ... u_P, u_W) of the distance in row ``first + q``, each with the core's value
+    (``results``, the JSON) to cache."""
     labels = task.cloud.labels
-    last = 4 + len(RESULT_COLUMNS) - 2
-    return [[labels[i], labels[j]] + [Formula(f"={cell(first + q, c, 'Budget')}") for c in range(4, last)]
-            for q, (i, j) in enumerate(task.pairs)]
+    return [[labels[i], labels[j]] + [Formula(f"={cell(first + q, c, 'Budget')}", v) for c, v in
+                                      enumerate((d["d_mm"], d["u_um"], d["U_um"],
+                                                 *(d["components_um"][f] for f in pc.FACTORS)), start=4)]
+            for q, ((i, j), d) in enumerate(zip(task.pairs, results["distances"]))]
 
 
 def budget_chart(book: Book, ws, task, first: int) -> None:
@@ -98,7 +100,9 @@ def write_mpe(book: Book, task) -> None:
                  note="max of C(d) over the grid, Forbes 2025 section 6.8")
     book.text(ws, 2, 10, "d_at_max_mm")
     book.formula(ws, 2, 11, f"=L_max_mm*(MATCH(C_max,{Crange},0)-1)/{n - 1}", name="d_at_max_mm", fmt="0.0")
-    book.text(ws, 4, 10, "Conforming parameters: every standard deviation divided by C_max when C_max > 1 (section 6.8)")
+    # short: a longer text ran past the last column and the sheet printed at half size
+    book.note(book.text(ws, 4, 10, "conforming parameters"),
+              "every standard deviation divided by C_max when C_max > 1 (Forbes 2025 section 6.8)")
     r = 5
     for key in in_table("parameters"):     # the machine's (the part's W is not in the MPE statement)
         book.text(ws, r, 10, key)

@@ -18,10 +18,11 @@ from cmmwb.xlfuncs.model.hyperparameters import in_table
 
 from .. import __version__
 from ..errors import InputError, model_errors_named
-from ..taskcloud import read_point_cloud
+from ..quantities import Cells, Quantity, ToleranceKeys, Verdict, unique_labels
+from ..taskcloud import points_source, read_point_cloud
 from ..taskfile import COMMON_TABLES, check_keys, number, string, table, task_kind_and_name, text_list
 from ..taskkind import always_exact, no_type_a
-from ..workbook.book import Book, BookAdditions
+from ..workbook.book import RESULTS, Book, BookAdditions
 from ..workbook.xlref import Block, block, cell
 from .book import KIND, MPE_GRID_POINTS, RESULT_COLUMNS, budget_chart, extra_inputs, results_rows, write_mpe
 from .vx_sheets import NATIVE_MAX_POINTS, explain_inputs, point_block, write_point_cloud_model
@@ -54,6 +55,7 @@ class Task:
     mpe: MPE | None = None
     notes: list[str] = field(default_factory=list)
     all_pairs: bool = False  # the distances are every pair i < j in all_pairs order
+    points_source: str = ""  # where the points come from, in words (taskcloud.points_source)
 
 
 def load(path: Path, doc: dict) -> Task:
@@ -62,6 +64,7 @@ def load(path: Path, doc: dict) -> Task:
     check_keys(path, doc, "task file", {"task", "mpe", "parameters", "probes", "points", "distances"} | COMMON_TABLES)
     check_keys(path, table(path, doc, "task"), "task", {"kind", "name", "notes", "K"})
     cloud, params, pts = read_point_cloud(path, doc)
+    source = points_source(doc)
     notes = text_list(path, doc["task"], "task", "notes")
     mpe = None
     K = number(path, doc["task"], "task", "K", 2.0, positive=True)
@@ -83,7 +86,7 @@ def load(path: Path, doc: dict) -> Task:
             raise InputError("no distances to evaluate (one point only?)", file=path, where="[points]")
         # coincident points are found (and named) by the distance computation itself
         return Task(path, name, cloud, params, pairs_arr, [""] * len(pairs_arr), K, mpe, list(notes),
-                    all_pairs=True)
+                    all_pairs=True, points_source=source)
     else:
         if not isinstance(raw, list) or not all(isinstance(d, dict) for d in raw):
             raise InputError("must be a list of {from, to} tables", file=path, where="[[distances]]")
@@ -109,7 +112,7 @@ def load(path: Path, doc: dict) -> Task:
     pairs_arr = np.array(pairs, dtype=int)
     with model_errors_named(file=path, where="[[distances]]"):
         pc.check_pairs(cloud, pairs_arr)
-    return Task(path, name, cloud, params, pairs_arr, groups, K, mpe, list(notes))
+    return Task(path, name, cloud, params, pairs_arr, groups, K, mpe, list(notes), points_source=source)
 
 
 def compute(task: Task) -> dict:
@@ -156,7 +159,7 @@ def write_book(task: Task, results: dict, path: Path, additions: BookAdditions |
     if task.mpe is not None:
         write_mpe(book, task)
     budget_chart(book, book.wb["Budget"], task, budget)
-    book.results(RESULT_COLUMNS, results_rows(task, budget))
+    book.results(RESULT_COLUMNS, results_rows(task, budget, results))
     book.save(path, additions)
 
 
@@ -256,6 +259,55 @@ def write_plots(task: Task, results: dict, out_dir: Path) -> list[Path]:
     return files
 
 
+# -- the records of the results (generator.quantities) -----------------------------------------
+
+#: a [[decision.tolerances]] entry names a distance by its two point ids
+TOLERANCE_KEYS = ToleranceKeys(("from", "to"), help="from and to = the point ids of a distance")
+U_SOURCE = "the point-cloud model V_X of six influence factors (Forbes 2025 eq. (28)-(30))"
+
+
+def quantities(task: Task, results: dict, k: float = 2.0) -> list[Quantity]:
+    """One record per distance (its Results row; U = K u with the task's K, the named input
+    ``K``).  ``k`` is not used: a point-cloud task's U has its own coverage factor."""
+    ds = results["distances"]
+    labels = unique_labels([f"{d['from']}→{d['to']}" for d in ds])
+    K = float(results["K"])
+    source = f"the distance of two points of {task.points_source}"
+    # the columns d_mm, u_um, U_um of Results as "Results!$C$" (+ row): 10^5 distances in seconds
+    d_col, u_col, U_col = (cell(1, c, RESULTS)[:-1] for c in (3, 4, 5))
+    out = []
+    for i, (d, label) in enumerate(zip(ds, labels)):
+        r = i + 2
+        out.append(Quantity(label=label, value=d["d_mm"], unit="mm", u=d["u_um"], u_unit="µm", k=K, U_unit="µm",
+                            symbol=f"d({label})", ident={"from": d["from"], "to": d["to"]},
+                            value_source=source, u_source=U_SOURCE,
+                            cells=Cells(RESULTS, r, f"{d_col}{r}", f"{u_col}{r}", f"{U_col}{r}", k="K")))
+    return out
+
+
+def verdicts(task: Task, results: dict) -> list[Verdict]:
+    """The MPE check (Forbes 2025 eq. (36), section 6.8) when the task has ``[mpe]``."""
+    if "mpe_check" not in results:
+        return []
+    c = results["mpe_check"]
+    return [Verdict("MPE check", c["C_max"], "C_max <= 1", MPE_WORDS[bool(c["conforms"])],
+                    f"C_max = max over d of K u(d)/(A + d/B) on a grid of {c['grid_points']} distances "
+                    f"0 ... {c['L_max_mm']:g} mm (Forbes 2025 eq. (36)); the model meets the MPE statement "
+                    "E = A + d/B when C_max <= 1", value_cell="C_max",
+                    verdict_cell=f'IF(C_max<=1,"{MPE_WORDS[True]}","{MPE_WORDS[False]}")')]
+
+
+#: the MPE check in words, by whether C_max <= 1
+MPE_WORDS = {True: "meets the MPE (C_max <= 1)", False: "violates the MPE (C_max > 1): divide the sigmas by C_max"}
+
+
+def read_book(cells, rt, points_file: str) -> None:
+    """The way back (``cmmwb read``): :func:`generator.pointcloud.reader.read_pointcloud`."""
+    from .reader import read_pointcloud
+
+    read_pointcloud(cells, rt, points_file)
+
+
 def summary(results: dict) -> list[str]:
     ds = results["distances"]
     longest = max(ds, key=lambda d: d["d_mm"])
@@ -264,7 +316,7 @@ def summary(results: dict) -> list[str]:
     if "mpe_check" in results:
         c = results["mpe_check"]
         lines.append(f"MPE check: C_max = {c['C_max']:.3f} at d = {c['d_at_max_mm']:.0f} mm "
-                     f"({'conforms' if c['conforms'] else 'violates the MPE: divide the sigmas by C_max'})")
+                     f"({MPE_WORDS[bool(c['conforms'])]})")
     return lines
 
 

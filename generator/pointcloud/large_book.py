@@ -83,7 +83,7 @@ def write_large_book(task, results: dict, path: Path, additions: BookAdditions |
     if task.mpe is not None:
         write_mpe(book, task)
     budget_chart(book, book.wb["Budget"], task, first)   # after MPE: the chart draws its MPE line
-    book.results(RESULT_COLUMNS, results_rows(task, first))
+    book.results(RESULT_COLUMNS, results_rows(task, first, results))
     write_xlwings_conf(book)
     book.save(path, additions)
 

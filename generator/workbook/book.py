@@ -25,6 +25,7 @@ from openpyxl.worksheet.worksheet import Worksheet
 
 from .. import __version__
 from .atomic import replacing
+from .cache import fill, referred
 from .pagesetup import FIT_WIDTH_MAX_CELLS, fit_widths, page_setup, size_to_page
 from .sharedstrings import share_strings
 from .styles import (
@@ -55,6 +56,8 @@ class BookAdditions:
 
     info: dict | None = None
     sheets: tuple[Callable[["Book"], None], ...] = ()
+    #: which formula cells get cached values (generator.workbook.cache: results, all, none)
+    cache: str = "results"
 
 
 def _finite(value: float, what: str) -> float:
@@ -93,6 +96,11 @@ class Book:
         self._print: dict[str, dict] = {}
         #: charts sized to their printed page at save time (see :meth:`fill_page`)
         self._page_charts: list[tuple[str, object]] = []
+        #: cached values of formula cells, given when they were written: {sheet: {coordinate: value}}
+        self._values: dict[str, dict[str, object]] = {}
+        #: the footer's size (pt) of every sheet whose print setup gives none (None: 8 pt); the
+        #: footer prints scaled with its page, 11 pt at 0.73 is 8 pt
+        self.footer_pt: float | None = None
 
     # -- sheets ------------------------------------------------------------------------------
     def sheet(self, title: str, *, protect: bool = True) -> Worksheet:
@@ -131,6 +139,17 @@ class Book:
         if wrap:
             c.alignment = Alignment(wrap_text=True, vertical="top")
         return c
+
+    @staticmethod
+    def align_top(ws: Worksheet, row: int, columns: int) -> None:
+        """Every cell of ``row`` (columns 1 .. ``columns``) aligned at the top, wrapping kept: in a
+        row a wrapped text makes high, the other cells stand level with its first line (at the
+        default bottom they read as belonging to the row below)."""
+        for c in range(1, columns + 1):
+            cell_ = ws.cell(row=row, column=c)
+            al = cell_.alignment
+            cell_.alignment = Alignment(horizontal=al.horizontal, vertical="top", wrap_text=al.wrap_text,
+                                        indent=al.indent)
 
     def header(self, ws: Worksheet, row: int, column: int, labels: Sequence[str],
                notes: Sequence[str | None] | None = None) -> None:
@@ -226,8 +245,9 @@ class Book:
         return c
 
     def formula(self, ws: Worksheet, row: int, column: int, formula: str, *, note: str | None = None,
-                fmt: str | None = NUMBER_FORMAT, name: str | None = None):
-        """A single-cell formula (plain, non-array)."""
+                fmt: str | None = NUMBER_FORMAT, name: str | None = None, value=None):
+        """A single-cell formula (plain, non-array).  ``value``: its result as the core computed
+        it, cached in the saved file for programs that do not calculate (:meth:`cache`)."""
         if not formula.startswith("="):
             raise ValueError("a formula starts with '='")
         c = ws.cell(row=row, column=column)
@@ -238,7 +258,26 @@ class Book:
             self.note(c, note)
         if name:
             self.define(name, cell(row, column, ws.title))
+        if value is not None:
+            self.cache(ws, row, column, value)
+            hop = referred(formula, value, ws.title)
+            if hop is not None:          # a formula that merely refers to a cell: that cell's value too
+                self._values.setdefault(hop[0], {}).setdefault(hop[1], value)
         return c
+
+    def cache(self, ws: Worksheet, row: int, column: int, value) -> None:
+        """The cached value of the formula cell (row, column) of ``ws`` (an array formula's top-left
+        cell included), written into the file by :meth:`save`."""
+        self._values.setdefault(ws.title, {})[cell(row, column, absolute=False)] = value
+
+    def cache_cells(self, ws: Worksheet, values: dict[str, object]) -> None:
+        """Cached values of formula cells of ``ws`` by coordinate (``{"C8": 90.012}``)."""
+        self._values.setdefault(ws.title, {}).update(values)
+
+    @property
+    def cached_values(self) -> dict[str, dict[str, object]]:
+        """The cached values given so far: {sheet: {coordinate: value}} (a copy)."""
+        return {s: dict(v) for s, v in self._values.items()}
 
     def array(self, target: Block, formula: str, *, note: str | None = None,
               fmt: str | None = NUMBER_FORMAT) -> None:
@@ -273,7 +312,7 @@ class Book:
     def scatter(ws: Worksheet, anchor: str, title: str, x_title: str, y_title: str,
                 series: Sequence["ChartSeries"], *, width: float = 16, height: float = 9,
                 x_min: float | None = None, y_min: float | None = None,
-                page: "Book | None" = None) -> None:
+                page: "Book | None" = None):
         """A native XY chart with explicit colours (LibreOffice draws unstyled markers white),
         visible axes at the lower and left edges of the plot (not crossing at zero), the legend
         below.  Every series stays visible where series coincide: marker series get distinct
@@ -342,6 +381,23 @@ class Book:
         ws.add_chart(chart, anchor)
         if page is not None:
             page.fill_page(ws, chart)
+        return chart
+
+    @staticmethod
+    def tolerance_bar(ws: Worksheet, anchor: str, series: Sequence["ChartSeries"], *, width: float, height: float,
+                      x_range: tuple[float, float] = (-2.0, 2.0), y_range: tuple[float, float] = (0.0, 1.0)):
+        """A small XY chart with no text (no title, legend, axes or grid lines), made by
+        :meth:`scatter`: a row's tolerance bar on a report page (value ± U against its limits,
+        drawn in coordinates of its own tolerance), which prints at the size of its cells."""
+        chart = Book.scatter(ws, anchor, None, None, None, series, width=width, height=height)
+        chart.title = None
+        chart.legend = None
+        for axis, (lo, hi) in ((chart.x_axis, x_range), (chart.y_axis, y_range)):
+            axis.delete = True
+            axis.title = None
+            axis.majorGridlines = None
+            axis.scaling.min, axis.scaling.max = lo, hi
+        return chart
 
     @staticmethod
     def bars(ws: Worksheet, anchor: str, title: str, y_title: str, categories, values: Sequence,
@@ -391,23 +447,37 @@ class Book:
         self._page_charts.append((ws.title, chart))
 
     # -- printing and column widths --------------------------------------------------------------
-    def print_setup(self, ws: Worksheet, *, landscape: bool | None = None, title_rows: int | None = -1,
+    def print_setup(self, ws: Worksheet, *, landscape: bool | None = None,
+                    title_rows: int | tuple[int, int] | None = -1,
                     area: str | None = None, row_breaks: Sequence[int] = (), fit_widths: bool = True,
                     matrix: tuple[int, int] | None = None, caption: str | None = None,
-                    one_page: bool = False) -> None:
+                    one_page: bool = False, title_columns: str | None = None,
+                    min_scale: float | None = None, footer_pt: float | None = None,
+                    corner: tuple[int, int] = (24, 12), chart_row: int | None = None,
+                    blocks: Sequence[tuple[int, int]] = ()) -> None:
         """How ``ws`` prints (applied by :meth:`save`; sheets without a call get the defaults).
 
         Every sheet a person reads prints on A4, scaled to the page width, with the sheet name and
         page number in the footer.  ``landscape`` None chooses by the width of the used columns;
         ``title_rows`` = the last header row repeated on every page (-1: row 1 when it holds bold
-        headers, None: none); ``area`` a print area; ``row_breaks`` rows that start a new page
+        headers, None: none; (first, last): those rows only, a table's header below a title); ``area`` a print area; ``row_breaks`` rows that start a new page
         (e.g. one budget per page); ``one_page``: scaled to fit one page (the Summary).  ``matrix``
         = (rows, columns) of a large matrix at B2: only its top-left corner prints, with
         ``caption`` in the page header saying so (a 156 x 156 V_X would otherwise fill 60 pages).
-        With an ``area``, only its columns count for the width (landscape, pages across)."""
+        With an ``area``, only its columns count for the width (landscape, pages across).
+        ``min_scale``: print at this scale (0.8: 11 pt text at 8.8 pt) instead of fitting the page
+        width, as many pages across and down as that needs; ``title_columns`` (``"A:B"``) are
+        repeated on every page across.  ``footer_pt``: the footer's font size (default 8; the
+        footer prints scaled with the page).  ``corner``: the (rows, columns) of a ``matrix`` that
+        print.  ``chart_row`` (with ``min_scale``): the row from which a chart anchored in column A
+        stands below the table: its rows print as a range of their own, once, not on every page
+        across.  ``blocks``: (first row, last row) of blocks (a matrix with its caption) that are
+        not split across pages where they fit on one (page breaks before them)."""
         self._print[ws.title] = dict(landscape=landscape, title_rows=title_rows, area=area,
                                      row_breaks=tuple(row_breaks), fit_widths=fit_widths, matrix=matrix,
-                                     caption=caption, one_page=one_page)
+                                     caption=caption, one_page=one_page, title_columns=title_columns,
+                                     min_scale=min_scale, footer_pt=footer_pt, corner=corner,
+                                     chart_row=chart_row, blocks=tuple(blocks))
 
     def _finish_layout(self) -> None:
         """Column widths that fit what each column shows, and the print setup of every sheet."""
@@ -418,7 +488,10 @@ class Book:
             if opts.get("fit_widths", True) and not opts.get("matrix") \
                     and ws.max_row * ws.max_column <= FIT_WIDTH_MAX_CELLS:
                 fit_widths(ws)
-            page_setup(ws, **{k: v for k, v in opts.items() if k != "fit_widths"})
+            kw = {k: v for k, v in opts.items() if k != "fit_widths"}
+            if kw.get("footer_pt") is None and self.footer_pt is not None:
+                kw["footer_pt"] = self.footer_pt
+            page_setup(ws, **kw)
         for title, chart in self._page_charts:
             size_to_page(self.wb[title], chart)
 
@@ -428,8 +501,9 @@ class Book:
                 formats: Sequence[str | None] | None = None) -> Worksheet:
         """The contract's ``Results`` sheet: first row column names, one row per JSON entry.
 
-        Entries that start with ``=`` are formulas (the computed columns); any other string is
-        written as text (labels such as point ids), numbers as numbers.  ``formats``: the display
+        Entries that are :class:`Formula` are formulas (the computed columns; a Formula's value is
+        cached); any other string is written as text (labels such as point ids), numbers as
+        numbers.  ``formats``: the display
         format of each column's formulas (None: :data:`NUMBER_FORMAT`).
         """
         ws = self.sheet(RESULTS)
@@ -438,7 +512,7 @@ class Book:
             for c, value in enumerate(row, start=1):
                 if isinstance(value, Formula):
                     fmt = formats[c - 1] if formats and formats[c - 1] else NUMBER_FORMAT
-                    self.formula(ws, r, c, value, fmt=fmt)
+                    self.formula(ws, r, c, value, fmt=fmt, value=value.value)
                 elif isinstance(value, str):
                     self.text(ws, r, c, value)
                 else:
@@ -487,7 +561,9 @@ class Book:
             write_task_sheet(self, info)
         self.wb.move_sheet(INSTRUCTIONS, offset=-self.wb.sheetnames.index(INSTRUCTIONS))
         self.wb.active = 0
-        return save_atomic(self.wb, path)
+        save_atomic(self.wb, path)
+        fill(path, self._values, additions.cache)
+        return path
 
 
 def _by_column(cells: list[tuple[int, int]]):
@@ -523,7 +599,15 @@ class Formula(str):
     """A string that *is* a formula: only these become formulas in :meth:`Book.results`.
 
     Plain ``str`` values are always written as text, so a point label ``=SUM(A1)`` stays text.
+    ``value``: the formula's result as the core computed it (cached in the file), or None.
     """
+
+    value: object
+
+    def __new__(cls, text: str, value: object = None):
+        obj = super().__new__(cls, text)
+        obj.value = value
+        return obj
 
 
 def save_atomic(wb: Workbook, path: Path) -> Path:

@@ -1,13 +1,15 @@
 """Cached values in a generated workbook, for programs that do not calculate.
 
 openpyxl writes formulas without results (``<c><f>..</f><v/></c>``), so a previewer, pandas or
-openpyxl with ``data_only=True`` sees empty cells.  :func:`store` post-processes the saved
-``.xlsx`` and writes each chosen formula cell's value into its ``<v>`` element:
+openpyxl with ``data_only=True`` sees empty cells.  A writer gives the value of a formula cell
+when it writes the formula (``Book.formula(..., value=...)``, a ``Formula`` with a value in a
+``Results`` row: the numbers the core computed, which the tests hold equal to what ``formulas``
+and LibreOffice compute, to 1e-9), as XlsxWriter's ``write_formula(..., value)`` does;
+``Book.save`` then writes them into the saved file (:func:`fill`), in one of the modes
 
 ``results`` (default, fast)
-    the ``Results`` sheet from the JSON the core computed (which the tests hold equal to what
-    ``formulas`` and LibreOffice compute, to 1e-9), and the cells those Results formulas point
-    at directly (``=Budget!$D$5`` -> ``Budget!D5`` gets the same value);
+    the values the writers gave, and the cells that a formula with a given value merely refers
+    to (``=Budget!$D$5`` -> ``Budget!D5`` gets the same value);
 ``all``
     every formula cell and every cell of every array formula, as the ``formulas`` engine computes
     them (slow for big workbooks: about 25 s for the m = 52 step gauge);
@@ -17,7 +19,8 @@ openpyxl with ``data_only=True`` sees empty cells.  :func:`store` post-processes
 Excel recalculates on load anyway (openpyxl sets ``fullCalcOnLoad``); LibreOffice keeps cached
 values of formulas it is not told to recompute, which is why the values written here must be
 the engines' values and nothing else.  Strings are written as formula *results* (``t="str"``),
-never as formulas.
+never as formulas.  :func:`store` does the same for a saved file from a list of ``Results`` rows
+(the diagnosis and calibration books).
 """
 
 from __future__ import annotations
@@ -36,8 +39,6 @@ from .cached_values import sheet_parts
 from .sharedstrings import texts
 
 MODES = ("results", "all", "none")
-#: what the feature Results show where u_um or u_urad does not apply (generator.feature.book)
-FEATURE_NOT_APPLICABLE = "—"
 ERRORS = {"#NULL!", "#DIV/0!", "#VALUE!", "#REF!", "#NAME?", "#NUM!", "#N/A", "#GETTING_DATA"}
 
 _ROW = re.compile(rb"<row\b([^>]*?)(/>|>(.*?)</row>)", re.S)
@@ -54,39 +55,12 @@ _SHARED = re.compile(rb'\bt="s"')
 _V_TEXT = re.compile(rb"<v>([0-9]+)</v>")
 
 
-# -- what the Results sheet holds, per kind (the contract of docs/cli.md) ----------------
+# -- what the Results sheet holds -------------------------------------------------------------
 
-def results_table(kind: str, results: dict) -> list[dict[str, Any]]:
-    """The rows of the ``Results`` sheet as the JSON gives them, keyed by column name."""
-    if kind == "pointcloud":
-        return [{"from": d["from"], "to": d["to"], "d_mm": d["d_mm"], "u_um": d["u_um"], "U_um": d["U_um"],
-                 **{f"u_{f}_um": u for f, u in d["components_um"].items()}} for d in results["distances"]]
-    if kind == "budget":
-        return [{"name": c["name"], "variant": c["variant"], "value_mm": c["value_mm"], "u_um": c["u_um"],
-                 "U_um": c["U_um"]} for c in results["characteristics"]]
-    if kind == "feature":
-        fe = results["feature"]
-        state = fe.get("fit", {}).get("state")
-        rows = []
-        for n in fe["parameter_names"]:
-            row = {"parameter": n, "value": fe["parameters"][n], "u": fe["u"][n]}
-            # the columns a person reads (generator.feature.book.RESULT_COLUMNS): u in µm for a
-            # length, in µrad for an angle or (x 1e6) a unit-vector component
-            length = n.endswith("_mm")
-            row["u_um"] = fe["u"][n] * 1e3 if length else FEATURE_NOT_APPLICABLE
-            row["u_urad"] = FEATURE_NOT_APPLICABLE if length else fe["u"][n] * 1e6
-            if state is not None:
-                row["fit_state"] = state
-            rows.append(row)
-        return rows
-    if kind == "characteristic":
-        return [{"name": c["name"], "type": c["type"], "value": c["value"], "unit": c["unit"],
-                 "u": c["u"], "u_unit": c["u_unit"]} for c in results["characteristics"]]
-    if kind in ("diagnose", "calibrate"):
-        # the diagnosis (calibration) book's Results rows, built by generator.diagnosis.book
-        # (generator.calibration.book) from the same numbers as diagnosis.json (calibration.json)
-        return list(results["rows"])
-    raise ValueError(f"unknown kind {kind!r}")
+def results_table(results: dict) -> list[dict[str, Any]]:
+    """The rows of a ``Results`` sheet given as ``{"rows": [{column name: value}]}`` (the
+    diagnosis and calibration books build them from the numbers of their JSON)."""
+    return list(results["rows"])
 
 
 # -- the xlsx parts ------------------------------------------------------------------------------
@@ -209,14 +183,13 @@ def _formulas_of(xml: bytes, coords: set[str]) -> dict[str, str]:
     return out
 
 
-# -- entry point ---------------------------------------------------------------------------------
+# -- entry points --------------------------------------------------------------------------------
 
-def store(path: Path, kind: str, results: dict, mode: str = "results",
-          extra: dict[str, dict[str, Any]] | None = None) -> int:
-    """Write cached values into the workbook at ``path`` (rewritten atomically); returns the
-    number of cells that got a value.  ``extra`` = {sheet: {coordinate: value}} of other formula
-    cells whose values the core computed (the Decision and Summary sheets), cached in mode
-    ``results`` too."""
+def fill(path: Path, values: dict[str, dict[str, Any]], mode: str = "results") -> int:
+    """Write cached values into the workbook at ``path`` (rewritten atomically): ``values`` =
+    {sheet: {coordinate: value}} of formula cells (mode ``results``), or every formula cell as
+    ``formulas`` computes it (mode ``all``), or nothing (``none``).  Returns the number of cells
+    that got a value."""
     if mode not in MODES:
         raise ValueError(f"unknown cache mode {mode!r}; choose one of {', '.join(MODES)}")
     if mode == "none":
@@ -231,8 +204,8 @@ def store(path: Path, kind: str, results: dict, mode: str = "results",
             per_part = {parts[s]: v for s, v in values.items() if s in parts}
             arrays = True
         else:
-            per_part = _results_values(z, parts, kind, results)
-            for sheet, vals in (extra or {}).items():
+            per_part = {}
+            for sheet, vals in values.items():
                 if sheet in parts:
                     per_part.setdefault(parts[sheet], {}).update(vals)
             arrays = False
@@ -242,30 +215,53 @@ def store(path: Path, kind: str, results: dict, mode: str = "results",
             if vals:
                 new[part], n = _rewrite(z.read(part), vals, arrays=arrays)
                 count += n
-        _replace_parts(path, z, new)
+        if new:
+            _replace_parts(path, z, new)
     return count
 
 
-def _results_values(z: zipfile.ZipFile, parts: dict[str, str], kind: str, results: dict
-                    ) -> dict[str, dict[str, Any]]:
+def referred(formula: str, value: Any, sheet: str) -> tuple[str, str] | None:
+    """(sheet, coordinate) of the one cell a formula merely refers to (``=Budget!$D$5``), which
+    then holds the same value; None for any other formula."""
+    m = _SINGLE_REF.match(formula)
+    if not m:
+        return None
+    return ((m.group(1) or "").replace("''", "'") or m.group(2) or sheet), f"{m.group(3)}{m.group(4)}"
+
+
+def store(path: Path, kind: str, results: dict, mode: str = "results",
+          extra: dict[str, dict[str, Any]] | None = None) -> int:
+    """Cached values of a saved workbook whose ``Results`` rows are ``results["rows"]``
+    (:func:`results_table`; ``kind`` names the book, it selects nothing), with the values of
+    other formula cells in ``extra`` = {sheet: {coordinate: value}}."""
+    if mode not in MODES:
+        raise ValueError(f"unknown cache mode {mode!r}; choose one of {', '.join(MODES)}")
+    if mode != "results":
+        return fill(path, {}, mode)
+    with zipfile.ZipFile(path) as z:
+        parts = sheet_parts(z)
+        values = _results_values(z, parts, results)
+    for sheet, vals in (extra or {}).items():
+        values.setdefault(sheet, {}).update(vals)
+    return fill(path, values)
+
+
+def _results_values(z: zipfile.ZipFile, parts: dict[str, str], results: dict) -> dict[str, dict[str, Any]]:
     if "Results" not in parts:
         return {}
     xml = z.read(parts["Results"])
     header = _results_header(xml, texts(z))
     values: dict[str, Any] = {}
-    for r, row in enumerate(results_table(kind, results), start=2):
+    for r, row in enumerate(results_table(results), start=2):
         for name, value in row.items():
             if name in header:
                 values[f"{header[name]}{r}"] = value
-    out: dict[str, dict[str, Any]] = {parts["Results"]: values}
+    out: dict[str, dict[str, Any]] = {"Results": values}
     # one hop: Results cells that are plain references to one cell give that cell the same value
     for coord, formula in _formulas_of(xml, set(values)).items():
-        m = _SINGLE_REF.match(formula)
-        if not m:
-            continue
-        sheet = (m.group(1) or "").replace("''", "'") or m.group(2) or "Results"
-        if sheet in parts:
-            out.setdefault(parts[sheet], {})[f"{m.group(3)}{m.group(4)}"] = values[coord]
+        hop = referred(formula, values[coord], "Results")
+        if hop is not None and hop[0] in parts:
+            out.setdefault(hop[0], {})[hop[1]] = values[coord]
     return out
 
 

@@ -32,11 +32,13 @@ MAX_BYTES: dict[str, int] = {
     "task": 16 * MiB,          # a task file (TOML)
     "points": 256 * MiB,       # a points table (CSV)
     "recordings": 256 * MiB,   # a recordings file (CSV)
+    "results": 256 * MiB,      # validation results of calibrated workpieces (CSV, cmmwb validate)
     "workbook": 64 * MiB,      # an .xlsx workbook (cmmwb read / recalc)
     "import": 256 * MiB,       # a file of another program's format (importers: QIF scans are large)
 }
 
 _WHAT = {"task": "the task file", "points": "the points table", "recordings": "the recordings",
+         "results": "the results file",
          "workbook": "the workbook", "import": "the file"}
 
 _NOT_REGULAR = (

@@ -14,6 +14,7 @@ import pytest
 
 from cmmwb.generator import decision
 from cmmwb.generator.errors import InputError
+from cmmwb.generator.workbook import report_page
 from cmmwb.xlfuncs import conformity as cf
 
 from tests.helpers import ENGINES, EXAMPLES, recalc
@@ -94,7 +95,9 @@ def test_an_angle_is_named_as_not_decided(plate):
     assert "not decided yet" in results["not_decided"][0]["reason"]
     ws = openpyxl.load_workbook(book)["Summary"]
     row = next(r for r in range(1, ws.max_row + 1) if ws.cell(r, 1).value == "angle_B_C")
-    assert ws.cell(row, 3).value == "not decided (angle)"
+    assert ws.cell(row, report_page.C["decision"]).value == "not decided (see below)"
+    below = [ws.cell(r, 1).value for r in range(row + 2, row + 6)]
+    assert any(isinstance(t, str) and t.startswith("tolerance not decided: an angle tolerance") for t in below)
 
 
 def test_openpyxl_data_only_shows_the_decisions(plate):
@@ -130,16 +133,23 @@ def test_a_tolerance_typed_on_characteristics_changes_the_decision(plate, tmp_pa
 
 def test_a_decision_table_sets_the_rule_and_k(tmp_path):
     """Simple acceptance with k = 3: cyl_H1_LS (9.17 µm against 9 µm), undecided by ISO 14253-1,
-    is rejected; U = 3u."""
+    is rejected; U = 3u, and every statement names the coverage probability of k = 3, 99.73 %
+    (2Φ(3) - 1, GUM G.1.3), on the Summary too (it said 95 % for every k)."""
     def edit(doc):
         doc["decision"] = {"rule": "simple", "k": 3.0}
     results, book = build(tmp_path, PLATE, edit)
     d = by_name(results)
     assert results["decision_rule"] == {"rule": "simple", "text": cf.DecisionRule("simple").text, "k": 3.0}
-    assert d["cyl_H1_LS"]["outcome"] == cf.DOES_NOT_CONFORM and d["cyl_H1_LS"]["k"] == 3.0
+    assert d["cyl_H1_LS"]["outcome"] == cf.REJECTED and d["cyl_H1_LS"]["k"] == 3.0
+    assert d["cyl_H1_LS"]["conformity"] == cf.NEITHER_PROVEN        # 9.17 µm, U = 0.96 µm, T = 9 µm
     assert d["cyl_H1_LS"]["U_um"] == 3.0 * d["cyl_H1_LS"]["u_um"]
-    assert {x["outcome"] for x in d.values()} == {cf.CONFORMS, cf.DOES_NOT_CONFORM}
-    assert cached(book)["Decision"]
+    assert {x["outcome"] for x in d.values()} == {cf.ACCEPTED, cf.REJECTED}
+    assert all(x["statement"].endswith("(k = 3, coverage probability ≈ 99.73 %)") for x in d.values())
+    assert all(x["coverage_probability"] == pytest.approx(0.9973002039367398, rel=1e-12) for x in d.values())
+    summary = [v for v in cached(book)["Summary"].values() if isinstance(v, str) and " = " in v]
+    assert summary and all("(k = 3, coverage probability ≈ 99.73 %)" in v for v in summary)
+    for engine in ("formulas",):
+        assert assert_engine_agrees(book, engine) > 300
 
 
 @pytest.mark.parametrize("table, where, message", [

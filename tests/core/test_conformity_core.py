@@ -13,8 +13,13 @@ import numpy as np
 import pytest
 
 from cmmwb.xlfuncs.conformity import (
+    ACCEPTED,
+    CONFORMITY_PROVEN,
     CONFORMS,
     DOES_NOT_CONFORM,
+    NEITHER_PROVEN,
+    NONCONFORMITY_PROVEN,
+    REJECTED,
     UNDECIDED,
     DecisionRule,
     Tolerance,
@@ -109,13 +114,14 @@ def test_guarded_acceptance_limits_are_the_tolerance_reduced_by_r_U():
     assert half.acceptance_mm[1] == pytest.approx(25.008, abs=1e-12)
 
 
-def test_at_a_guarded_acceptance_limit_with_w_U_the_item_conforms_with_p_c_0_977():
+def test_at_a_guarded_acceptance_limit_with_w_U_the_item_is_accepted_with_p_c_0_977():
     """JCGM 106:2012, 8.3.2 (w = U, U = 2u, one-sided interval): an item accepted at the limit
-    A_U = T_U - 2u has p_c = Φ(2) = 0.977, i.e. a specific false-acceptance risk of at most 2.3 %."""
+    A_U = T_U - 2u has p_c = Φ(2) = 0.977, i.e. a specific false-acceptance risk of at most 2.3 %;
+    on the limit of the conformance zone, conformity is proven (ISO 14253-1:2017, 5.2)."""
     tol = Tolerance(usl_mm=50.020)
     d = decide(50.016, 2.0, tol, DecisionRule("guarded_acceptance", r=1.0), k=2)
     assert d.acceptance_mm[1] == pytest.approx(50.016, abs=1e-12)
-    assert d.outcome == CONFORMS
+    assert (d.outcome, d.rule_outcome, d.conformity) == (ACCEPTED, ACCEPTED, CONFORMITY_PROVEN)
     assert printed(d.p_c, 0.977, 3)
     assert printed(1 - d.p_c, 0.023, 3)
 
@@ -126,7 +132,9 @@ def test_guarded_rejection_accepts_beyond_the_tolerance_limit():
     d = decide(10.001, 1.0, tol, DecisionRule("guarded_rejection", r=1.0), k=2)
     assert d.acceptance_mm[1] == pytest.approx(10.002, abs=1e-12)
     assert d.w_um == pytest.approx(-2.0)
-    assert d.outcome == CONFORMS and d.p_c < 0.5
+    # accepted under the rule, but outside its tolerance: never said to conform (ISO 14253-1)
+    assert d.outcome == ACCEPTED and d.p_c < 0.5
+    assert d.conformity == NEITHER_PROVEN and d.conformity_zone == "uncertainty range"
 
 
 def test_simple_acceptance_uses_the_tolerance_limits():
@@ -134,8 +142,10 @@ def test_simple_acceptance_uses_the_tolerance_limits():
     tol = Tolerance(9.99, 10.01)
     inside = decide(10.0099, 3.0, tol, DecisionRule("simple"))
     outside = decide(10.0101, 3.0, tol, DecisionRule("simple"))
-    assert inside.outcome == CONFORMS and inside.zone == "acceptance zone"
-    assert outside.outcome == DOES_NOT_CONFORM and outside.zone == "rejection zone"
+    assert inside.outcome == ACCEPTED and inside.zone == "acceptance zone"
+    assert outside.outcome == REJECTED and outside.zone == "rejection zone"
+    # within U of the limits: neither conformity nor non-conformity proven (ISO 14253-1:2017, 5.4)
+    assert inside.conformity == outside.conformity == NEITHER_PROVEN
     assert 0.5 < inside.p_c < 0.52
 
 
@@ -146,9 +156,11 @@ def test_specific_risk_accepts_exactly_when_p_c_reaches_1_minus_max_pfa():
     rule = DecisionRule("specific_risk", max_pfa=0.05)
     at = decide(1.0 - norm_ppf(0.95) * 2.0e-3 - 1e-9, 2.0, tol, rule)
     assert at.acceptance_mm[1] == pytest.approx(1.0 - 1.6448536269514722 * 2e-3, abs=1e-13)
-    assert at.outcome == CONFORMS and at.p_c >= 0.95
+    assert at.outcome == ACCEPTED and at.p_c >= 0.95
     beyond = decide(at.acceptance_mm[1] + 1e-5, 2.0, tol, rule)
-    assert beyond.outcome == DOES_NOT_CONFORM and beyond.p_c < 0.95
+    assert beyond.outcome == REJECTED and beyond.p_c < 0.95
+    # rejected inside the tolerance interval: never said not to conform
+    assert beyond.value_mm < tol.usl_mm and beyond.conformity == NEITHER_PROVEN
 
 
 # -- ISO 14253-1:2017: three outcomes -----------------------------------------------------------
@@ -168,6 +180,9 @@ def test_iso14253_zones(y, outcome, zone):
     tol = Tolerance.symmetric(20.0, 0.020)
     d = decide(y, 2.0, tol, DecisionRule("iso14253"), k=2)
     assert (d.outcome, d.zone) == (outcome, zone)
+    assert d.conformity_zone == zone            # the rule is the conformity statement itself
+    assert d.conformity == {CONFORMS: CONFORMITY_PROVEN, UNDECIDED: NEITHER_PROVEN,
+                            DOES_NOT_CONFORM: NONCONFORMITY_PROVEN}[outcome]
     assert d.acceptance_mm == pytest.approx((19.984, 20.016), abs=1e-12)
     assert d.rejection_mm == pytest.approx((19.976, 20.024), abs=1e-12)
 
@@ -192,6 +207,28 @@ def test_a_guard_band_of_half_the_tolerance_or_more_accepts_nothing():
     lo, hi = acceptance_limits(Tolerance(0.0, 0.004), 2.5)
     assert lo > hi
     d = decide(0.002, 1.25, Tolerance(0.0, 0.004), DecisionRule("guarded_acceptance"), k=2)
-    assert d.outcome == DOES_NOT_CONFORM and d.as_dict()["acceptance_interval_empty"]
+    assert d.outcome == REJECTED and d.as_dict()["acceptance_interval_empty"]
+    assert d.conformity == NEITHER_PROVEN          # rejected, but inside the tolerance
     iso = decide(0.002, 1.25, Tolerance(0.0, 0.004), DecisionRule("iso14253"), k=2)
     assert iso.outcome == UNDECIDED
+
+
+@pytest.mark.parametrize("rule", ["simple", "iso14253", "guarded_acceptance", "guarded_rejection", "specific_risk"])
+def test_the_conformity_statement_never_contradicts_the_tolerance(rule):
+    """ISO 14253-1:2017, ILAC-G8: whatever a rule accepts or rejects, "conformity proven" only
+    inside [T_L + U, T_U - U] and "non-conformity proven" only outside [T_L - U, T_U + U]; the
+    non-conformance limits R = T -/+ U are the same for every rule (the Decision sheet set R = A
+    for the binary rules: R_U = 50.0217 mm > T_U for guarded rejection)."""
+    tol = Tolerance(49.98, 50.02)
+    for y in np.linspace(49.97, 50.03, 121):
+        d = decide(float(y), 1.734, tol, DecisionRule(rule, r=0.5), k=2)
+        inside = tol.lsl_mm <= y <= tol.usl_mm
+        if d.conformity == CONFORMITY_PROVEN:
+            assert tol.lsl_mm + d.U_um / 1000 <= y <= tol.usl_mm - d.U_um / 1000
+        if d.conformity == NONCONFORMITY_PROVEN:
+            assert not inside and not (tol.lsl_mm - d.U_um / 1000 <= y <= tol.usl_mm + d.U_um / 1000)
+        if d.outcome == CONFORMS:
+            assert inside
+        if d.outcome == DOES_NOT_CONFORM:
+            assert not inside
+        assert d.rejection_mm == pytest.approx((49.98 - d.U_um / 1000, 50.02 + d.U_um / 1000), abs=1e-12)

@@ -7,6 +7,7 @@ import math
 
 import pytest
 
+from cmmwb.xlfuncs import dof
 from cmmwb.xlfuncs.dof import coverage_factor, nu_eff, t_cdf, t_quantile
 from cmmwb.xlfuncs.errors import ModelError
 
@@ -50,3 +51,15 @@ def test_welch_satterthwaite():
     assert coverage_factor(9.99) == coverage_factor(9)
     with pytest.raises(ModelError, match="positive"):
         nu_eff([1.0], [0])
+
+
+@pytest.mark.parametrize("nu", [1, 2, 4, 8.6, 30, 64.2, 1000])
+def test_the_coverage_probability_of_the_t_coverage_factor_is_95_45_percent(nu):
+    """coverage_probability inverts coverage_factor (GUM G.6.4: ν truncated to ⌊ν⌋ in both)."""
+    assert dof.coverage_probability(dof.coverage_factor(nu), nu) == pytest.approx(dof.P_K2, abs=1e-12)
+
+
+def test_the_coverage_probability_of_a_normal_k():
+    """GUM G.1.3: k = 1, 2, 3 cover 68.27 %, 95.45 %, 99.73 % (2Φ(k) - 1)."""
+    got = [dof.coverage_probability(k) for k in (1, 2, 3)]
+    assert [round(100 * p, 2) for p in got] == [68.27, 95.45, 99.73]

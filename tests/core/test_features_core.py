@@ -459,3 +459,36 @@ def test_a_plane_fit_with_its_normal_near_minus_z_is_the_svd_plane():
     fit = features.fit("plane", X, normals=N)
     _, _, vt = np.linalg.svd(X - X.mean(axis=0))
     assert np.linalg.norm(np.cross(fit.R[:, 2], vt[2])) <= 1e-15
+
+
+#: 16 points on a ring gauge of 100 mm bore as a CMM drawn from MPE1 measured them
+#: (xlfuncs.validation_sets, seed 6; residuals about 0.15 um): Gauss-Newton reached the optimum,
+#: then its last step (1e-9 mm) lowered the sum of squares by ~1e-18 mm^2, less than rounding moves
+#: it; the line search rejected that step 100 times and the fit reported no convergence
+RING_POINTS = [
+    [49.9997347687945, -0.0007334640926046632, 0.00042002874518232147],
+    [46.19418822250725, 19.132689782542002, -0.0001858447006810593],
+    [35.35568045154298, 35.35386526970717, -0.0002765990663107232],
+    [19.134309862454984, 46.192772475415495, -0.0003325474928743688],
+    [0.0004643877543912822, 49.99889817187341, -0.00019765231941448747],
+    [-19.133529473199474, 46.19292649149952, -0.0005248283326579894],
+    [-35.35486131376081, 35.35491743429793, -9.227212073881219e-05],
+    [-46.19369153919615, 19.133241377117542, -0.0003191696034150482],
+    [-49.99950762095648, -0.0003993964509163561, -1.3876546134383716e-05],
+    [-46.193776902088985, -19.135035563475356, -0.00034143057553137623],
+    [-35.355138108781375, -35.355767432606456, -0.00028821310804971745],
+    [-19.133887650787756, -46.19448155715594, 4.118375002803987e-06],
+    [0.00037475183671631385, -50.00069238756896, -0.0001384164469868665],
+    [19.134085479607847, -46.19474631593306, -0.00024360032936954212],
+    [35.35542794300386, -35.35608841870669, -0.00029560852836141294],
+    [46.19420791480229, -19.13510594819968, -0.00016689829956817448]]
+
+
+def test_a_step_below_rounding_of_the_sum_of_squares_does_not_stall_the_fit():
+    X = np.array(RING_POINTS)
+    for shift in ([0.0, 0.0, 0.0], [650.0, 500.0, 80.0]):
+        f = features.fit("circle", X + shift, circle_plane="xy")
+        assert f.iterations <= 10
+        assert abs(f.values_dict()["r0_mm"] - 50.0) < 2e-3
+        # the optimum: the Gauss-Newton step from it is below the stopping rule
+        assert np.max(np.abs(f.gauss_newton_step())) < 1e-9

@@ -33,12 +33,12 @@ def test_rounding_up_when_asked():
 def test_value_to_the_decimal_place_of_U_across_units():
     # U = 3.4 µm is 0.0034 mm: the value in mm gets four decimals
     s = statement("d", 100.012345, "mm", 3.4449, "µm", 2)
-    assert s == "d = 100.0123 mm, U = 3.4 µm (k = 2, coverage probability ≈ 95 %)"
+    assert s == "d = 100.0123 mm, U = 3.4 µm (k = 2, coverage probability ≈ 95.45 %)"
     # U = 12 µm: the value to 0.001 mm
     assert statement("l", 63.0, "mm", 11.6346, "µm", 2).startswith("l = 63.000 mm, U = 12 µm")
     # same unit on both sides (angles in rad)
     assert statement("a", 0.7853981, "rad", 2.345e-6, "rad", 2, unit_ratio=1) == \
-        "a = 0.7853981 rad, U = 0.0000023 rad (k = 2, coverage probability ≈ 95 %)"
+        "a = 0.7853981 rad, U = 0.0000023 rad (k = 2, coverage probability ≈ 95.45 %)"
 
 
 def test_decimals_for_and_round_to():
@@ -53,5 +53,18 @@ def test_a_value_that_rounds_to_zero_has_no_minus_sign():
 
 
 def test_a_t_distribution_k_shows_two_decimals():
-    assert statement("d", 10.0, "mm", 2.0, "µm", 2.2816).endswith("(k = 2.28, coverage probability ≈ 95 %)")
-    assert statement("d", 10.0, "mm", 2.0, "µm", 2.0).endswith("(k = 2, coverage probability ≈ 95 %)")
+    """k = t_95.45(ν) of GUM G.6.4 (ν_eff = 8.6 -> ν = 8: 2.3664) states the 95.45 % it was chosen for."""
+    assert statement("d", 10.0, "mm", 2.0, "µm", 2.366419499743066, nu=8.6).endswith(
+        "(k = 2.37, coverage probability ≈ 95.45 %)")
+    assert statement("d", 10.0, "mm", 2.0, "µm", 2.0).endswith("(k = 2, coverage probability ≈ 95.45 %)")
+
+
+@pytest.mark.parametrize("k, text", [(3, "99.73"), (2.5, "98.76"), (1, "68.27"), (2, "95.45")])
+def test_the_coverage_probability_follows_k(k, text):
+    """GUM G.1.3: y ± k·u of a normal distribution covers 2Φ(k) - 1 (issue 32: every k printed 95 %)."""
+    assert statement("d", 10.0, "mm", 2.0, "µm", k).endswith(f"coverage probability ≈ {text} %)")
+
+
+def test_a_small_nu_eff_gives_the_t_coverage_probability():
+    """k = 2 with ν_eff = 4 (GUM G.3.2: Student's t): 2 F_t(2; 4) - 1 = 0.8839, not 95.45 %."""
+    assert statement("d", 10.0, "mm", 2.0, "µm", 2.0, nu=4.7).endswith("(k = 2, coverage probability ≈ 88.39 %)")

@@ -162,3 +162,20 @@ def test_the_discrepancy_is_shown_in_the_search_log(books):
     head, vals = rows[at + 1], rows[at + 2]
     for key in ("p_adjusted", "chi2_after", "size_um"):        # xlsx keeps 15-17 digits
         assert close(vals[head.index(key)], d[key]), key
+
+
+@pytest.mark.parametrize("engine", ENGINES)
+@pytest.mark.parametrize("case", ["lengths", "lengths, inflated noise"])
+def test_the_report_page_carries_the_verdicts_and_the_estimates_live(books, case, engine):
+    """The Summary sheet (issue 32): the mismatch verdict as the GLS sheet's formulas decide it,
+    and each estimated effect's rounded statement from the Results cells."""
+    from cmmwb.generator.diagnosis.page import AGREE, DISAGREE
+
+    result, book = books[case]
+    texts = [v for v in recalc(book, engine)["Summary"].values() if isinstance(v, str)]
+    assert (DISAGREE if result["mismatch"] else AGREE) in texts
+    for e in result["effects"]:
+        if e["name"] != "outlier":
+            assert any(t.startswith(f"{e['name']} = ") and "coverage probability" in t for t in texts), e["name"]
+    assert result["provenance"]["input_files"][0]["name"] == "rec.csv"
+    assert any(result["provenance"]["input_files"][0]["sha256"] in t for t in texts)

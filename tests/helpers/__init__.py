@@ -94,3 +94,30 @@ def run_cmmwb(*args, cwd=None, env=None) -> subprocess.CompletedProcess:
     ``env``: variables added to this process's environment."""
     return subprocess.run([sys.executable, "-m", "cmmwb.generator", *args], capture_output=True, text=True, cwd=cwd,
                           env=None if env is None else {**os.environ, **env})
+
+
+#: the contract's Results rows of each task kind as the JSON gives them (docs/cli.md, "Workbooks"),
+#: keyed by column name: what a book's cached Results values must equal
+FACTORS = ("R", "PQ", "S", "ET", "ER", "P")
+
+
+def results_table(kind: str, results: dict) -> list[dict]:
+    if kind == "pointcloud":
+        return [{"from": d["from"], "to": d["to"], "d_mm": d["d_mm"], "u_um": d["u_um"], "U_um": d["U_um"],
+                 **{f"u_{f}_um": d["components_um"][f] for f in FACTORS}} for d in results["distances"]]
+    if kind == "budget":
+        return [{"name": c["name"], "variant": c["variant"], "value_mm": c["value_mm"], "u_um": c["u_um"],
+                 "U_um": c["U_um"]} for c in results["characteristics"]]
+    if kind == "feature":
+        fe = results["feature"]
+        state = fe.get("fit", {}).get("state")
+        rows = []
+        for n in fe["parameter_names"]:
+            length = n.endswith("_mm")
+            rows.append({"parameter": n, "value": fe["parameters"][n], "u": fe["u"][n],
+                         "u_um": fe["u"][n] * 1e3 if length else "—",
+                         "u_urad": "—" if length else fe["u"][n] * 1e6,
+                         **({"fit_state": state} if state is not None else {})})
+        return rows
+    return [{"name": c["name"], "type": c["type"], "value": c["value"], "unit": c["unit"], "u": c["u"],
+             "u_unit": c["u_unit"]} for c in results["characteristics"]]

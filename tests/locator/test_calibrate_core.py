@@ -144,3 +144,55 @@ def test_feeding_back_a_scale_error_compensated_or_as_a_factor():
     part, changes, _ = cp.feed_back(MPE1, [cp.Finding("scale_x", [3.0], [0.2], "um/m")], "compensate")
     assert part.sigma_Sa_ppm == MPE1.sigma_Sa_ppm and "keeps its spread" in changes[0].how
     assert cp.absorbed(["scale_x", "scale_y"]) == set() and cp.absorbed(["scale"]) == {"sigma_S_ppm"}
+
+
+def two_peak_set(repeats, seed):
+    """ISO 10360-2 lengths with the three styli of `THREE`, a machine drawn from MPE1 (seeded):
+    sets whose REML likelihood has two peaks (found by scanning seeds, /bench of issue 36)."""
+    return [reml.record_set(prepared("iso10360", THREE, seed=seed, repeats=repeats), "iso")]
+
+
+def test_a_fit_that_stops_on_the_lower_of_two_peaks_moves_to_the_higher_one():
+    """Six repeats, seed 3: four GP hyper-parameters free (sigma_ET, lambda_ET, sigma_ER, lambda_ER)
+    and sigma_R, sigma_P. From the task's values Fisher scoring stops on a peak with lambda_ET
+    237 mm (log-likelihood -91.895); a start at a quarter of it climbs to lambda_ET 61 mm, 1.377
+    log-units higher. The fit reports the higher peak and says the likelihood has two."""
+    sets = two_peak_set(6, 3)
+    lower = cb.calibrate(sets, MPE1, other_starts=False)
+    assert set(lower.free) >= {"sigma_ET_um", "lambda_ET_mm", "sigma_ER_urad", "lambda_ER_mm"}
+    assert abs(lower.estimates["lambda_ET_mm"].value - 236.8) <= 0.5 and lower.multimodal is None
+    cal = cb.calibrate(sets, MPE1)
+    assert abs(cal.estimates["lambda_ET_mm"].value - 61.45) <= 0.5
+    assert abs(cal.estimates["sigma_ET_um"].value - 0.1497) <= 0.001
+    assert abs((cal.loglik - lower.loglik) - 1.377) <= 0.002
+    assert cal.peaks[0].loglik == cal.loglik and len(cal.peaks) >= 2
+    other = min(cal.peaks[1:], key=lambda p: abs(p.values["lambda_ET_mm"] - 236.8))
+    assert abs(other.values["lambda_ET_mm"] - 236.8) <= 0.5 and other.found_by == "the task's values"
+    text = cal.multimodal
+    assert text.startswith(f"The REML likelihood has {len(cal.peaks)} peaks; the fit is the highest")
+    assert "lambda_ET_mm 61.5 vs 237 mm" in text and "1.377 lower" in text
+    assert "do not rule it out" in text        # 2 x 1.377 < 3.84: the records prefer, not prove
+    assert cal.to_json()["multimodal"] == text and len(cal.to_json()["peaks"]) == len(cal.peaks)
+
+
+def test_a_profile_that_reaches_higher_moves_the_fit_there():
+    """Three repeats, seed 10 (sigma_R, sigma_ER, lambda_ER free): without the other starts the fit
+    stops at lambda_ER 310 mm; the profile of sigma_R reaches a point 0.64 log-units higher, the fit
+    is repeated from there (lambda_ER 42 mm) and both peaks are reported; the profiles are then
+    those of the higher peak (none above it)."""
+    from cmmwb.xlfuncs import calibration_checks as checks
+
+    lower = cb.calibrate(two_peak_set(3, 10), MPE1, other_starts=False)
+    assert abs(lower.estimates["lambda_ER_mm"].value - 310.2) <= 0.5 and len(lower.peaks) == 1
+    cal, profiles = checks.profiles_at_maximum(lower)
+    assert cal is not lower and abs((cal.loglik - lower.loglik) - 0.644) <= 0.002
+    assert abs(cal.estimates["lambda_ER_mm"].value - 41.8) <= 0.5
+    assert cal.peaks[0].found_by.startswith("the profile of ")
+    assert any(abs(p.values["lambda_ER_mm"] - 310.2) <= 0.5 for p in cal.peaks[1:])
+    assert [p["name"] for p in profiles] == cal.free
+    assert max(max(p["delta_loglik"]) for p in profiles) <= cb.PEAK_GAIN
+
+
+def test_a_single_peak_is_not_called_multimodal():
+    cal = cb.calibrate(two_peak_set(3, 0), MPE1)
+    assert len(cal.peaks) == 1 and cal.multimodal is None and cal.to_json()["multimodal"] is None

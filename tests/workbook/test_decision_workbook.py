@@ -70,9 +70,59 @@ def test_a_type_a_repeatability_gives_nu_eff_and_a_t_coverage_factor(knuckle):
     assert d["distribution"] == "t" and math.floor(d["nu_eff"]) == 64
     assert d["k"] == pytest.approx(dof.coverage_factor(64), rel=1e-12) and 2.03 < d["k"] < 2.05
     assert d["U_um"] == pytest.approx(d["k"] * d["u_um"], rel=1e-15)
-    assert "(k = 2.04, coverage probability ≈ 95 %)" in d["statement"]
+    assert "(k = 2.04, coverage probability ≈ 95.45 %)" in d["statement"]
+    assert d["coverage_probability"] == pytest.approx(dof.P_K2, abs=1e-12)    # t_95.45(64) covers 95.45 %
     others = [x for x in results["decisions"] if x["characteristic"] != "S1_S2_distance"]
     assert all(x["distribution"] == "normal" and x["k"] == 2 and x["nu_eff"] is None for x in others)
+
+
+@pytest.fixture(scope="module")
+def small_nu(tmp_path_factory):
+    """S1_S2_distance measured 3 times with s = 10 µm and k = 2 kept (no k_from_dof): ν_eff is
+    small (2.x), so k = 2 covers less than 95 %."""
+    def edit(doc):
+        doc["decision"]["k_from_dof"] = False
+        doc["decision"]["tolerances"][2].update(s_um=10.0, n_repeats=3)
+    return build(tmp_path_factory.mktemp("small_nu"), KNUCKLE, edit)
+
+
+def test_a_small_nu_eff_states_the_t_coverage_probability_of_k(small_nu):
+    """GUM G.3.2, G.6.4: k = 2 with ⌊ν_eff⌋ = 2 covers 2 F_t(2; 2) - 1 = 81.65 %, not 95 %: in the
+    JSON, on the Decision sheet (live: 1 - TDIST(k, INT(ν_eff), 2)) and in every statement."""
+    results, book = small_nu
+    d = next(x for x in results["decisions"] if x["characteristic"] == "S1_S2_distance")
+    assert d["k"] == 2 and d["distribution"] == "normal" and 2 <= d["nu_eff"] < 3
+    assert d["coverage_probability"] == pytest.approx(dof.coverage_probability(2, 2), rel=1e-12)
+    assert round(100 * d["coverage_probability"], 2) == 81.65
+    assert d["statement"].endswith("(k = 2, coverage probability ≈ 81.65 %)")
+    wb = openpyxl.load_workbook(book, data_only=True)
+    row = 8 + [x["characteristic"] for x in results["decisions"]].index("S1_S2_distance")
+    assert wb["Decision"][at(row, "coverage_probability")].value == pytest.approx(d["coverage_probability"])
+    statements = [c.value for r in wb["Summary"].iter_rows() for c in r if isinstance(c.value, str)]
+    assert d["statement"] in statements
+    assert sum("coverage probability ≈ 95.45 %" in t for t in statements) >= 7     # the other results
+    assert assert_engine_agrees(book, "formulas") > 40
+
+
+@pytest.mark.libreoffice
+def test_libreoffice_agrees_on_the_small_nu_eff_book(small_nu):
+    assert assert_engine_agrees(small_nu[1], "libreoffice") > 40
+
+
+def test_a_k_typed_on_the_decision_sheet_changes_the_summary_statement(tmp_path):
+    """Issue 32: k was frozen text in the Summary's formula. cylinder_bore (a feature task, U = k·u
+    with decision_k): k = 3 typed on 'Decision' makes every statement on 'Summary' say k = 3 and
+    99.73 %, the decided ones and the others."""
+    _, book = build(tmp_path, EXAMPLES / "feature_cylinder_bore.toml")
+    wb = openpyxl.load_workbook(book)
+    sheet, ref = next(iter(wb.defined_names["decision_k"].destinations))
+    wb[sheet][ref.replace("$", "")].value = 3
+    edited = tmp_path / "k3.xlsx"
+    wb.save(edited)
+    v = recalc(edited, "formulas")["Summary"]
+    statements = [t for t in v.values() if isinstance(t, str) and "coverage probability" in t]
+    assert len(statements) >= 4
+    assert all(t.endswith("(k = 3, coverage probability ≈ 99.73 %)") for t in statements), statements
 
 
 def test_symmetric_tolerance_is_around_the_nominal_or_the_task_value(knuckle):
@@ -92,8 +142,8 @@ def test_openpyxl_data_only_shows_the_decisions(knuckle):
     assert [ws.cell(r, col).value for r in range(8, 12)] == [
         "conforms", "cannot be decided", "conforms", "does not conform"]
     summary = [c.value for row in wb["Summary"].iter_rows() for c in row if isinstance(c.value, str)]
-    assert "S3_from_S1S2 = 78.0270 mm, U = 4.2 µm (k = 2, coverage probability ≈ 95 %)" in summary
-    assert "does not conform" in summary
+    assert "S3_from_S1S2 = 78.0270 mm, U = 4.2 µm (k = 2, coverage probability ≈ 95.45 %)" in summary
+    assert "does not conform" in summary and "non-conformity proven" in summary
 
 
 @pytest.mark.parametrize("engine", ENGINES)
@@ -177,17 +227,18 @@ def test_guard_bands_of_each_rule(rule_books):
     sr = rule_books["specific_risk (pointcloud)"][0]
     d = sr["decisions"][0]
     assert d["characteristic"] == "L1→L2" and d["w_um"] == pytest.approx(cf.norm_ppf(0.95) * d["u_um"], rel=1e-12)
-    assert [x["outcome"] for x in sr["decisions"]] == ["conforms", "does not conform", "conforms"]
+    assert [x["outcome"] for x in sr["decisions"]] == ["accepted", "rejected", "accepted"]
     for x in sr["decisions"]:
-        assert (x["p_c"] >= 0.95) == (x["outcome"] == "conforms")
+        assert (x["p_c"] >= 0.95) == (x["outcome"] == "accepted")
     ga = rule_books["guarded_acceptance (feature)"][0]["decisions"][0]
     assert ga["w_um"] == pytest.approx(ga["U_um"], rel=1e-15)
     assert ga["U_um"] == pytest.approx(2 * ga["u_um"], rel=1e-15)     # [decision] k = 2
     gr = rule_books["guarded_rejection (feature)"][0]["decisions"][0]
     assert gr["w_um"] == pytest.approx(-0.5 * gr["U_um"], rel=1e-15)
-    assert gr["outcome"] == "conforms" and gr["value_mm"] > gr["usl_mm"]   # accepted beyond T_U
+    assert gr["outcome"] == "accepted" and gr["value_mm"] > gr["usl_mm"]   # accepted beyond T_U ...
+    assert gr["conformity"] == "neither proven"                           # ... never said to conform
     simple = rule_books["simple (feature)"][0]["decisions"][0]
-    assert simple["w_um"] == 0 and simple["outcome"] == "conforms"
+    assert simple["w_um"] == 0 and simple["outcome"] == "accepted"
 
 
 @pytest.mark.parametrize("engine", ENGINES)
@@ -200,7 +251,7 @@ def test_every_engine_agrees_for_each_rule(rule_books, label, engine):
 
 @pytest.mark.parametrize("edit, where, message", [
     (lambda d: d["decision"].update(rule="lenient"), "[decision] rule", "must be one of"),
-    (lambda d: d["decision"].update(k=2), "[decision] k", "feature tasks"),
+    (lambda d: d["decision"].update(k=2), "[decision] k", "results give u only"),
     (lambda d: d["decision"].update(r=1.0), "[decision] r", "guarded rules only"),
     (lambda d: d["decision"]["tolerances"][2].update(lsl_mm=89.9), "#3 key 'tol_mm'", "either tol_mm"),
     (lambda d: d["decision"]["tolerances"][0].update(usl_mm="0.05"), "#1 key 'usl_mm'", "finite number"),
@@ -233,5 +284,5 @@ def test_build_prints_rounded_statements_and_decisions(tmp_path, capsys):
 
     assert main(["build", str(KNUCKLE), "--out", str(tmp_path / "out"), "--no-plots"]) == 0
     out = capsys.readouterr().out
-    assert "S3_position = 0.041 mm, U = 11 µm (k = 2, coverage probability ≈ 95 %): cannot be decided" in out
-    assert "S1_S2_distance = 90.0120 mm, U = 4.6 µm (k = 2.04, coverage probability ≈ 95 %): conforms" in out
+    assert "S3_position = 0.041 mm, U = 11 µm (k = 2, coverage probability ≈ 95.45 %): cannot be decided" in out
+    assert "S1_S2_distance = 90.0120 mm, U = 4.6 µm (k = 2.04, coverage probability ≈ 95.45 %): conforms" in out

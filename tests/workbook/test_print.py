@@ -152,3 +152,51 @@ def test_every_results_value_is_cached(demo):
                                                "p_targeted", "p_after"):
                     continue   # diagnose statistics have no u
                 assert v is not None, f"{book.name} Results {row[0]} {h}: no cached value"
+
+
+# -- the report page and the Decision sheet, legible (issue 32) -----------------------------------------
+
+TASK_KINDS = ("pointcloud", "budget", "feature", "characteristic")
+#: the smallest printed text of a Summary or Decision page (points on the paper)
+MIN_PT = 8.0
+
+
+def _task_books(demo) -> list[Path]:
+    return [b for b in demo if b.parent.name in TASK_KINDS]
+
+
+def test_every_task_book_has_the_report_page(demo):
+    """Each demo book of the four kinds prints a Summary with the inspection report's columns."""
+    books = _task_books(demo)
+    assert len(books) >= 18
+    for b in books:
+        text = "\n".join(p for p in demo[b] if _sheet(p) == "Summary")
+        for head in ("characteristic", "nominal", "lower limit", "upper limit", "value", "deviation", "decision",
+                     "conformity", "tolerance bar", "coverage probability", "SHA-256"):
+            assert head in text, (b.name, head)
+
+
+def test_the_smallest_printed_text_of_every_summary_and_decision_page_is_8_pt(demo):
+    """Measured from the PDF (the size of every text-showing operator, tests/helpers/pdftext.py):
+    the Decision sheets printed at 4-5 pt before issue 32."""
+    from tests.helpers.pdftext import font_sizes, sheet_of_pages
+
+    small = []
+    n = 0
+    for b in _task_books(demo):
+        pdf = b.with_suffix(".pdf")
+        for page, (sizes, sheet) in enumerate(zip(font_sizes(pdf), sheet_of_pages(pdf)), start=1):
+            if sheet in ("Summary", "Decision"):
+                n += 1
+                assert sizes, (b.name, page)
+                if min(sizes) < MIN_PT:
+                    small.append((b.name, page, sheet, round(min(sizes), 2)))
+    assert n >= 40 and not small, small
+
+
+def test_the_pointcloud_mpe_verdict_is_on_the_report_page(demo):
+    """The MPE2 step gauges' C_max = 1.020 violates the MPE: said on their Summary."""
+    for b in demo:
+        if b.stem.startswith("stepgauge") and b.stem.endswith("MPE2"):
+            text = "\n".join(p for p in demo[b] if _sheet(p) == "Summary")
+            assert "MPE check" in text and "1.0201" in text and "violates the MPE" in text, b.name

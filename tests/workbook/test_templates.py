@@ -13,9 +13,10 @@ from openpyxl.worksheet.formula import ArrayFormula
 from cmmwb.generator import templates
 from cmmwb.generator.jobs import job
 from cmmwb.generator.reader import TASK_SHEET
-from cmmwb.generator.workbook.cache import results_table
 from cmmwb.generator.workbook.recalc import read_cached, results_rows
 from cmmwb.generator.workbook.styles import DEFAULT_FILL, INPUT_FILL
+
+from tests.helpers import results_table
 
 SOURCES = templates.sources()
 

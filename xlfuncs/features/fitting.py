@@ -250,6 +250,11 @@ def _gauss_newton(kind, X, w, origin, R, shape, scale, max_iter):
         if step <= tol:
             return origin, R, shape, it
         t = 1.0
+        # the sum of squares a step may not increase beyond: its relative rounding, and what
+        # rounding of the residuals (1e-13 x scale each, a tenth of the stopping rule's) changes
+        # in it -- a step of 1e-9 mm lowers ss by ~1e-18 mm^2, far below the ~1e-17 mm^2 that
+        # rounding moves ss when the residuals are 0.1 um, and was rejected 100 times over
+        slack = ss * 1e-12 + (1e-3 * tol) ** 2 + 2.0 * math.sqrt(ss) * 1e-13 * scale * math.sqrt(mk)
         for _ in range(40):
             o2, R2, sh2 = update_one(kind, origin, R, shape, t * delta)
             try:
@@ -257,7 +262,7 @@ def _gauss_newton(kind, X, w, origin, R, shape, scale, max_iter):
                 ss2 = float(d2 @ d2)
             except DegenerateGeometryError:
                 ss2 = math.inf
-            if ss2 <= ss * (1 + 1e-12) + (1e-3 * tol) ** 2:
+            if ss2 <= ss + slack:
                 break
             t *= 0.5
         else:
