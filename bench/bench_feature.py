@@ -6,7 +6,7 @@
    `formulas` and LibreOffice, to measure the native-formula limit:
    python bench/bench_feature.py --workbooks 24 48 72 100
 
-Prints one line per measurement; the numbers quoted in the README and in
+Prints one line per measurement; the numbers quoted in docs/benchmarks.md and in
 generator/feature/book.py (FEATURE_NATIVE_MAX_POINTS) come from here.
 """
 

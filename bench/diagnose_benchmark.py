@@ -33,7 +33,7 @@ Usage::
     python bench/diagnose_benchmark.py                 # full benchmark (~3-5 min on one core)
     python bench/diagnose_benchmark.py --quick 20      # 20 effect sets + 20 null sets
 
-Writes ``bench/results/diagnose_rates.md`` (the table for the README) and, with ``--json``,
+Writes ``bench/results/diagnose_rates.md`` (the table docs/benchmarks.md quotes) and, with ``--json``,
 ``bench/results/diagnose_benchmark.json`` (every data set, about 0.5 MB).
 """
 

@@ -22,7 +22,7 @@ from cmmwb.xlfuncs.model.hyperparameters import PROBE_OVERRIDES, in_table, of_fa
 from cmmwb.xlfuncs.pointcloud import Parameters, PointCloud, Probe
 
 from .errors import InputError, model_errors_named
-from .taskfile import check_keys, note, number, string, table, vector3
+from .taskfile import Names, check_keys, note, number, string, table, vector3
 from .taskworkpiece import apply_workpiece
 from .workbook.guarded import MAX_BYTES, read_text
 
@@ -60,14 +60,11 @@ def read_probes(path: Path, doc: dict) -> tuple[Probe, ...]:
     if not isinstance(raw, list) or not raw or not all(isinstance(p, dict) for p in raw):
         raise InputError("must be one or more [[probes]] tables", file=path, where="[[probes]]")
     probes = []
-    seen = set()
+    seen = Names(path, "probe id")
     for n, p in enumerate(raw, start=1):
         section = f"[[probes]] #{n}"
         check_keys(path, p, section, {"id", "offset_mm", *PROBE_OVERRIDES})
-        pid = check_label(string(path, p, section, "id").strip(), path, f"{section} id")
-        if pid in seen:
-            raise InputError(f"probe id {pid!r} used twice", file=path, where=f"{section} id")
-        seen.add(pid)
+        pid = seen.add(check_label(string(path, p, section, "id").strip(), path, f"{section} id"), f"{section} id")
         if "offset_mm" in p:
             offset = vector3(path, p, section, "offset_mm")
             length = math.sqrt(sum(v * v for v in offset))
@@ -312,3 +309,33 @@ def read_point_cloud(path: Path, doc: dict) -> tuple[PointCloud, Parameters, Poi
                            probes, tablep.labels)
     cloud, params = apply_workpiece(path, doc, cloud, params)
     return cloud, params, tablep
+
+
+@dataclass(frozen=True)
+class MPE:
+    """The MPE statement of a task's ``[mpe]`` (Forbes 2025 eq. (36)): E = A + L/B (µm, L in
+    mm), coverage factor K, longest probe length P and the largest distance of the check."""
+
+    A_um: float
+    B_mm: float
+    K: float
+    P_mm: float
+    L_max_mm: float
+
+
+MPE_KEYS = {"A_um", "B_mm", "K", "P_mm", "L_max_mm"}
+DEFAULT_L_MAX_MM = 1000.0
+
+
+def read_mpe(path: Path, doc: dict, probes) -> MPE | None:
+    """The task's ``[mpe]`` (None without one), the one reader of it (``build`` and ``calibrate``):
+    unknown keys, a missing, non-finite, negative or zero A_um/B_mm/K are errors naming the key;
+    P_mm defaults to the longest probe offset."""
+    if "mpe" not in doc:
+        return None
+    t = table(path, doc, "mpe")
+    check_keys(path, t, "mpe", MPE_KEYS)
+    longest = max((math.sqrt(sum(v * v for v in p.offset_mm)) for p in probes), default=0.0)
+    return MPE(number(path, t, "mpe", "A_um", positive=True), number(path, t, "mpe", "B_mm", positive=True),
+               number(path, t, "mpe", "K", 2.0, positive=True), number(path, t, "mpe", "P_mm", longest, lo=0.0),
+               number(path, t, "mpe", "L_max_mm", DEFAULT_L_MAX_MM, positive=True))

@@ -203,12 +203,69 @@ def add_line(err: InputError, path: Path, text: str | None = None) -> None:
         err.where = f"{err.where} (line {n})"
 
 
+def place(path: Path, where: str) -> str:
+    """``where`` with the line of its key in the task file ``path`` (``[[frames]] #1 name (line
+    80)``), as an error message names a second place besides its own."""
+    err = InputError("", file=path, where=where)
+    add_line(err, path)
+    return err.where or where
+
+
+class Names:
+    """One namespace of names a task file defines (features, frames, characteristics, probes
+    ...): the place where each name was first given.  A name given twice is an
+    :class:`InputError` naming the file and both places, never the second silently replacing the
+    first."""
+
+    def __init__(self, path: Path, what: str):
+        self.path, self.what = Path(path), what
+        self.first: dict[str, str] = {}
+
+    def add(self, name: str, where: str) -> str:
+        if name in self.first:
+            raise InputError(f"{self.what} {name!r} is given twice: here and at "
+                             f"{place(self.path, self.first[name])}; give each {self.what} its own name",
+                             file=self.path, where=where)
+        self.first[name] = where
+        return name
+
+    def __contains__(self, name: object) -> bool:
+        return name in self.first
+
+    def where(self, name: str) -> str:
+        return self.first[name]
+
+
+def _table_key(where: str) -> str:
+    """The dotted place of :func:`_check_structure` as the readers name places: ``report.lab`` ->
+    ``[report] lab``, ``characteristics[2].name`` -> ``[[characteristics]] #3 name``; others as
+    they are."""
+    m = re.fullmatch(r"([A-Za-z0-9_\-]+)(?:\[(\d+)\])?\.([A-Za-z0-9_\-]+)", where)
+    if m is None:
+        return where
+    if m.group(2) is None:
+        return f"[{m.group(1)}] {m.group(3)}"
+    return f"[[{m.group(1)}]] #{int(m.group(2)) + 1} {m.group(3)}"
+
+
+#: the characters a workbook cannot store (XML 1.0 allows tab, line feed and carriage return only)
+_UNSTORABLE = re.compile("[\x00-\x08\x0b\x0c\x0e-\x1f]")
+
+
 def _check_structure(path: Path, value, where: str, depth: int) -> None:
-    """Refuse integers beyond 64 bits and nesting deeper than MAX_DEPTH, naming the key."""
+    """Refuse integers beyond 64 bits, nesting deeper than MAX_DEPTH and texts holding a control
+    character a workbook cannot store (any text of a task may reach a cell), naming the key."""
     if depth > MAX_DEPTH:
         raise InputError(f"nested deeper than {MAX_DEPTH} levels of arrays or tables", file=path,
                          where=where or None)
     if isinstance(value, bool):
+        return
+    if isinstance(value, str):
+        bad = _UNSTORABLE.search(value)
+        if bad is not None:
+            what = "a NUL character (0x00)" if bad.group() == "\x00" else f"the control character {ord(bad.group()):#04x}"
+            raise InputError(f"holds {what}, which a workbook cannot store (XML 1.0): remove it", file=path,
+                             where=_table_key(where) or None)
         return
     if isinstance(value, int):
         if abs(value) > MAX_INT:

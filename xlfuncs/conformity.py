@@ -114,6 +114,11 @@ class Tolerance:
         return 0.5 * (self.lsl_mm + self.usl_mm)
 
 
+#: the smallest max_pfa of the specific-risk rule: p_c >= 1 - max_pfa is still decidable in double
+#: precision (and in the Decision sheet's NORMSINV); 1e-17 would make 1 - max_pfa exactly 1
+MIN_PFA = 1e-9
+
+
 @dataclass(frozen=True)
 class DecisionRule:
     """How a measured value is turned into a decision.
@@ -130,8 +135,9 @@ class DecisionRule:
             raise ModelError(f"unknown decision rule {self.kind!r}; choose one of {', '.join(RULES)}")
         if not (math.isfinite(self.r) and self.r >= 0):
             raise ModelError(f"r = {self.r!r} must be a number >= 0 (guard band w = r·U)")
-        if not (math.isfinite(self.max_pfa) and 0 < self.max_pfa < 0.5):
-            raise ModelError(f"max_pfa = {self.max_pfa!r} must lie strictly between 0 and 0.5")
+        if not (math.isfinite(self.max_pfa) and MIN_PFA <= self.max_pfa < 0.5):
+            raise ModelError(f"max_pfa = {self.max_pfa!r} must lie between {MIN_PFA:g} and 0.5 (0.5 excluded; "
+                             f"below {MIN_PFA:g}, 1 - max_pfa is 1 to the precision of the decision)")
 
     @property
     def text(self) -> str:

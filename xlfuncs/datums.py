@@ -35,6 +35,12 @@ from .partial import frame_from_axis
 __all__ = ["Geometry", "Frame", "datum_frame", "PLANE", "AXIS", "POINT", "role"]
 
 PLANE, AXIS, POINT = "plane", "axis", "point"
+#: the smallest angle between datums that still fixes a frame: a secondary plane or axis within
+#: this angle of parallel to the primary plane, or a tertiary plane within it of the line of the
+#: other two, leaves a direction or the origin undetermined (a 0.1 mrad tilt between nominally
+#: parallel planes put the origin kilometres away); refused instead of computed
+MIN_DATUM_ANGLE_DEG = 1.0
+_MIN_SIN = float(np.sin(np.radians(MIN_DATUM_ANGLE_DEG)))
 
 
 @dataclass(frozen=True)
@@ -86,6 +92,11 @@ def _dot(a, b):
     return np.einsum("bi,bi->b", a, b)
 
 
+def _angle_deg(sines) -> float:
+    """The smallest angle (deg) of the sines of the batch."""
+    return float(np.degrees(np.arcsin(np.clip(np.min(sines), 0.0, 1.0))))
+
+
 def _unit(v, what):
     n = np.linalg.norm(v, axis=-1, keepdims=True)
     if np.any(n < 1e-12):
@@ -112,16 +123,21 @@ def datum_frame(primary: Geometry, secondary: Geometry | None = None,
         rs = role(secondary)
         if rs == PLANE:
             nB = secondary.direction
-            x = -_unit(nB - _dot(nB, z)[:, None] * z,
-                       "the secondary datum plane is parallel to the primary")
+            across = nB - _dot(nB, z)[:, None] * z
+            if np.any(np.linalg.norm(across, axis=-1) < _MIN_SIN):
+                raise DegenerateGeometryError(
+                    "datum frame: the secondary datum plane is parallel to the primary (within "
+                    f"{MIN_DATUM_ANGLE_DEG:g} deg; angle {_angle_deg(np.linalg.norm(across, axis=-1)):.3g} deg): it "
+                    "fixes no direction of the frame")
+            x = -_unit(across, "the secondary datum plane is parallel to the primary")
             rows.append(nB)
             rhs.append(_dot(nB, secondary.point))
         else:
             v = z if rs == POINT else secondary.direction
             den = _dot(v, z)
-            if np.any(np.abs(den) < 1e-9):
+            if np.any(np.abs(den) < _MIN_SIN):
                 raise DegenerateGeometryError("datum frame: the secondary datum axis is parallel "
-                                              "to the primary datum plane")
+                                              f"to the primary datum plane (within {MIN_DATUM_ANGLE_DEG:g} deg)")
             origin = secondary.point + (_dot(z, pA - secondary.point) / den)[:, None] * v
     if tertiary is not None:
         if secondary is None:
@@ -146,9 +162,13 @@ def datum_frame(primary: Geometry, secondary: Geometry | None = None,
         Amat = np.stack(rows, axis=1)           # B x r x 3
         b = np.stack(rhs, axis=1)               # B x r
         if Amat.shape[1] == 3:
-            if np.any(np.abs(np.linalg.det(Amat)) < 1e-9):
-                raise DegenerateGeometryError("datum frame: the three datum planes do not meet "
-                                              "in a point")
+            Aunit = Amat / np.linalg.norm(Amat, axis=-1, keepdims=True)
+            det = np.abs(np.linalg.det(Aunit))
+            if np.any(det < _MIN_SIN):
+                raise DegenerateGeometryError(
+                    "datum frame: the three datum planes do not meet in a point: the tertiary is "
+                    f"parallel to the line of the other two (within {MIN_DATUM_ANGLE_DEG:g} deg; angle "
+                    f"{_angle_deg(det):.3g} deg)")
             origin = np.linalg.solve(Amat, b[..., None])[..., 0]
         else:
             r = b - np.einsum("bri,bi->br", Amat, pA)

@@ -100,3 +100,28 @@ def check_diagnose_fits(kind: str, n_records: int, dims: int = 3, available: int
     raise ResourceError(f"diagnosing {n_records:,} {kind} records needs about {_gib(need)} of memory, "
                         f"{_gib(have)} are available: at most about {fits:,} records fit; split the "
                         "recordings into smaller files (e.g. by group) and diagnose each")
+
+
+#: recordings with fewer data lines are parsed before their memory is checked (:func:`check_records_fit`)
+PARSE_FIRST_RECORDS = 100_000
+
+
+def check_records_fit(n_records: int, available: int | None = None) -> None:
+    """Raise :class:`ResourceError` when even the least any diagnosis or calibration of
+    ``n_records`` records needs (the structured covariance, linear in n: :func:`diagnose_bytes`)
+    exceeds what is available -- checked from the number of lines, before the recordings are
+    parsed (parsing ten million records alone took 28 s and 3.9 GB before the later refusal).
+    Below :data:`PARSE_FIRST_RECORDS` records the file is parsed first (at most about 0.3 s and
+    40 MB): their kind is then known and :func:`check_diagnose_fits` says exactly what fits (for a
+    few records the dense covariance, 80 n^2 bytes for length records, is the smaller need)."""
+    if n_records < PARSE_FIRST_RECORDS:
+        return
+    need = diagnose_bytes("point", n_records, structured=True)
+    have = available_bytes() if available is None else available
+    if need <= have:
+        return
+    fits = max((have - STRUCTURED_BASE_BYTES) // STRUCTURED_BYTES_PER_RECORD, 0)
+    raise ResourceError(f"{n_records:,} records: their diagnosis or calibration needs at least about "
+                        f"{_gib(need)} of memory (the structured covariance, "
+                        f"{STRUCTURED_BYTES_PER_RECORD // 2**10} KB per record), {_gib(have)} are available: "
+                        f"at most about {fits:,} records fit; split the recordings into smaller files")

@@ -48,7 +48,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from . import pointcloud as pc
-from .errors import ModelError
+from .errors import ModelError, about
 from .locator.model import Prepared, is_structured, length_covariance
 from .model import sq_dists
 from .model.hyperparameters import GP, HYPERPARAMETERS, LINEAR, NAMES, PARTNER, UNITS  # noqa: F401
@@ -267,14 +267,14 @@ def reml_terms(sets: list[RecordSet], values: dict[str, float], free: list[str],
     :meth:`DenseRecordCovariance.reml`)."""
     k = len(free)
     total = RemlTerms(0.0, np.zeros(k), np.zeros((k, k)) if fisher else None, 0.0, 0)
-    for s in sets:
+    for i, s in enumerate(sets):
         try:
             t = s.op.reml(s.y, s.Q, values, free, fisher)
             if isinstance(t, tuple):          # the structured operator's terms
                 t = RemlTerms(*t)
         except np.linalg.LinAlgError:
-            raise ModelError(f"{s.name}: the record covariance is not positive definite at "
-                             + ", ".join(f"{n} = {values[n]:.4g}" for n in free)) from None
+            raise about(ModelError(f"{s.name}: the record covariance is not positive definite at "
+                                   + ", ".join(f"{n} = {values[n]:.4g}" for n in free)), "sets", i) from None
         total.loglik += t.loglik
         total.grad += t.grad
         if fisher:

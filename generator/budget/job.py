@@ -24,7 +24,7 @@ from cmmwb.xlfuncs.limits import coordinate_problem
 from .. import __version__
 from ..errors import InputError, model_errors_named
 from ..quantities import Cells, Quantity, ToleranceKeys
-from ..taskfile import COMMON_TABLES, check_keys, number, table, task_kind_and_name, text_list
+from ..taskfile import COMMON_TABLES, check_keys, number, place, table, task_kind_and_name, text_list
 from ..taskkind import always_exact, no_verdicts
 from ..taskworkpiece import read_workpiece
 from ..workbook.book import RESULTS, BookAdditions
@@ -35,8 +35,10 @@ KIND = "budget"
 EXAMPLES = ["knuckle.toml"]
 EXAMPLES_DIR = Path(__file__).resolve().parents[1] / "examples"
 
-#: the commented steering-knuckle task written by ``cmmwb new budget``
-NEW_TASK: str = (EXAMPLES_DIR / "knuckle.toml").read_text(encoding="utf-8")
+#: the commented steering-knuckle task written by ``cmmwb new budget``, named ``my_budget`` like the
+#: other kinds' starting tasks (``my_pointcloud``, ``my_feature``, ``my_part``)
+NEW_TASK: str = (EXAMPLES_DIR / "knuckle.toml").read_text(encoding="utf-8").replace(
+    '\nname = "knuckle" ', '\nname = "my_budget"', 1)
 #: the task names no table beside it (its points are in the TOML)
 NEW_TASK_FILES: dict[str, str] = {}
 #: the task-kind contract's hooks (generator.taskkind): a budget is exact at every size and has no
@@ -217,8 +219,10 @@ def load(path: Path, doc: dict) -> Task:
     for n, entry in enumerate(raw, start=1):
         c = _read_characteristic(path, n, entry, points, ds)
         if c.name.lower() in seen:
+            first = place(path, f"[[characteristics]] #{seen[c.name.lower()]} key 'name'")
             raise _err(path, f"{c.where} key 'name'",
-                       f"{c.name!r} is also the name of characteristic #{seen[c.name.lower()]}")
+                       f"{c.name!r} is also the name of characteristic #{seen[c.name.lower()]} (at {first}; "
+                       "names are sheet names: letter case aside, each is another)")
         seen[c.name.lower()] = n
         chars.append(c)
     wp = read_workpiece(path, doc)

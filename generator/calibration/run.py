@@ -23,6 +23,8 @@ import numpy as np
 from cmmwb.xlfuncs import calibration as cr
 from cmmwb.xlfuncs import conformity as cf
 from cmmwb.xlfuncs import pointcloud as pc
+from cmmwb.xlfuncs.errors import ModelError
+from cmmwb.xlfuncs.limits import plausibility_problem
 from cmmwb.xlfuncs.locator import diagnose as dg
 from cmmwb.xlfuncs.locator.recordings import RecordingsError, write_recordings
 from cmmwb.xlfuncs.model.hyperparameters import PROBE_OVERRIDES, in_table
@@ -30,6 +32,8 @@ from cmmwb.xlfuncs.model.hyperparameters import PROBE_OVERRIDES, in_table
 from .. import __version__
 from ..diagnosis.run import read_recordings
 from ..errors import InputError, model_errors_named
+from ..taskcloud import read_mpe
+from ..taskfile import note
 from ..workbook.atomic import Staging
 from ..workbook.provenance import provenance
 
@@ -38,8 +42,9 @@ GRID_POINTS = cr.GRID_POINTS
 DEFAULT_L_MAX_MM = cr.DEFAULT_L_MAX_MM
 
 
-def parse_mpe(text: str | None, doc: dict | None, probes) -> dict | None:
-    """The MPE statement: ``--mpe A,B[,K]`` or the task's [mpe] (P_mm: the longest probe)."""
+def parse_mpe(text: str | None, doc: dict | None, probes, path: Path | None = None) -> dict | None:
+    """The MPE statement: ``--mpe A,B[,K]`` or the task's [mpe] (its one reader,
+    :func:`generator.taskcloud.read_mpe`; P_mm: the longest probe)."""
     longest = max((float(np.linalg.norm(p.offset_mm)) for p in probes), default=0.0)
     if text is not None:
         parts = [p.strip() for p in text.split(",")]
@@ -49,16 +54,14 @@ def parse_mpe(text: str | None, doc: dict | None, probes) -> dict | None:
             raise InputError(f"--mpe: expected A,B or A,B,K (numbers), got {text!r}") from None
         if len(vals) not in (2, 3) or not all(math.isfinite(v) and v > 0 for v in vals):
             raise InputError(f"--mpe: expected A,B or A,B,K (positive numbers), got {text!r}")
+        for key, v in zip(("A_um", "B_mm"), vals):      # a unit mix-up (mm for µm) is warned about
+            problem = plausibility_problem(key, v)
+            if problem:
+                note(problem, where="--mpe")
         return {"A_um": vals[0], "B_mm": vals[1], "K": vals[2] if len(vals) == 3 else 2.0,
                 "P_mm": longest, "L_max_mm": DEFAULT_L_MAX_MM}
-    if doc and isinstance(doc.get("mpe"), dict):
-        m = doc["mpe"]
-        try:
-            return {"A_um": float(m["A_um"]), "B_mm": float(m["B_mm"]), "K": float(m.get("K", 2.0)),
-                    "P_mm": float(m.get("P_mm", longest)), "L_max_mm": float(m.get("L_max_mm", DEFAULT_L_MAX_MM))}
-        except (KeyError, TypeError, ValueError):
-            raise InputError("[mpe] needs numbers A_um and B_mm") from None
-    return None
+    m = read_mpe(path or Path("task.toml"), doc, probes) if doc else None
+    return None if m is None else {"A_um": m.A_um, "B_mm": m.B_mm, "K": m.K, "P_mm": m.P_mm, "L_max_mm": m.L_max_mm}
 
 
 def parse_rule(text: str | None) -> cf.DecisionRule:
@@ -87,15 +90,17 @@ def run_calibrate(paths: list[Path], model: dg.Model, out_dir: Path, *, task_pat
                   task_label: str = "", effects: str = "auto", feedback: str = "compensate",
                   mpe: dict | None = None, alpha: float = 0.01, workbook: bool = True, force: bool = False,
                   profiles: str = "auto", covariance: str = "auto",
-                  rule: cf.DecisionRule | None = None) -> tuple[dict, list[Path]]:
+                  rule: cf.DecisionRule | None = None,
+                  warnings: list[str] | tuple[str, ...] = ()) -> tuple[dict, list[Path]]:
     """Calibrate from ``paths`` into ``out_dir`` (all or nothing); returns the JSON and the files.
     ``covariance``: the record covariance of the fit, ``dense``, ``structured`` or ``auto`` (dense
     up to ``reml.DENSE_MAX_OBS`` observations per file, structured above).  ``profiles``: the
     likelihood profiles (about 9 refits per estimated hyper-parameter), ``yes``, ``no`` or
     ``auto`` (only when every file has the dense covariance: on a structured one each refit is a
     large fit of its own).  ``rule``: the decision rule of the MPE verdict (default ISO 14253-1).
-    The computations are :mod:`xlfuncs.calibration`'s; this reads the files and writes the
-    outputs."""
+    ``warnings``: what the task's readers noted (an implausible value); the JSON's ``warnings``
+    add what was detected in each recordings file.  The computations are
+    :mod:`xlfuncs.calibration`'s; this reads the files and writes the outputs."""
     from ..taskfile import read_toml
 
     if not (0.0 < alpha < 1.0):
@@ -104,6 +109,7 @@ def run_calibrate(paths: list[Path], model: dg.Model, out_dir: Path, *, task_pat
         raise InputError(f"--profiles must be auto, yes or no, got {profiles!r}")
     doc = read_toml(task_path) if task_path is not None else None
     files: list[cr.FileFit] = []
+    rec_notes: list[str] = []
     names = {}
     for path in paths:
         path = Path(path)
@@ -112,6 +118,7 @@ def run_calibrate(paths: list[Path], model: dg.Model, out_dir: Path, *, task_pat
             raise InputError(f"two recordings files named {stem!r}: give distinct file names", file=path)
         names[stem] = path
         rec = read_recordings(path)
+        rec_notes.extend(f"{path}, {n}" for n in getattr(rec, "notes", ()))
         with model_errors_named(path):
             try:
                 files.append(cr.prepare_file(stem, rec, model, effects=effects, alpha=alpha, covariance=covariance))
@@ -119,8 +126,11 @@ def run_calibrate(paths: list[Path], model: dg.Model, out_dir: Path, *, task_pat
                 raise InputError(str(e), file=path, where="--effects") from None
             except RecordingsError as e:     # a ModelError too, named by the recordings' line
                 raise InputError(e.message, file=path, where=e.where) from None
-    with model_errors_named(task_label or paths[0]):
+    try:
         cal = cr.fit(files, model.params)
+    except ModelError as e:   # a file's own problem names that file, the others the task
+        item = e.item if e.item is not None and e.item[0] == "sets" else None
+        raise InputError(str(e), file=paths[item[1]] if item else (task_label or paths[0])) from None
 
     large = [f.name for f in files if f.set.structured]
     profiles_note = None
@@ -141,6 +151,7 @@ def run_calibrate(paths: list[Path], model: dg.Model, out_dir: Path, *, task_pat
               "provenance": provenance(task_path, doc, read=[Path(p) for p in paths])}
     if result["indicated"] is not None:
         result["indicated"]["text"] = indicated_text(result)
+    result["warnings"] = [*warnings, *rec_notes]
     result["summary"] = summary(result)
     with Staging(out_dir, force=force) as tmp:
         (tmp / "calibration.json").write_text(json.dumps(result, indent=1, ensure_ascii=False, allow_nan=False)
@@ -208,7 +219,8 @@ def mpe_verdict_text(f: dict) -> str:
     if d["U"] is None:
         return (head + f" ({'within' if d['within_limit'] else 'above'} the limit 1; no u(C_max): nothing was "
                 "estimated, so no decision rule could be applied).")
-    return (head + f", U = {d['U']:.2g} (k = {d['k']:g}) against C_max <= 1, {d['rule_name']} rule: "
+    return (head + f", U = {d['U']:.2g} (dimensionless, as C_max; k = {d['k']:g}) against C_max <= 1, "
+            f"{d['rule_name']} rule: "
             f"{d['outcome']}; {d['conformity']} ({d['conformity_zone']}; p_c = {d['p_c']:.3f}).")
 
 

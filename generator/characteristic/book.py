@@ -228,6 +228,11 @@ def _write_characteristics(book: Book, res, va: Block, srows: dict, task) -> lis
         book.text(ws, r, 2, c.type)
         book.text(ws, r, 3, c.method if c.type in ch.FORM_TYPES + ch.ORIENTATION_TYPES else "")
         book.number(ws, r, 4, x.value, fmt=FMT_MM, computed=True)
+        if c.measured is not None:
+            book.note(ws.cell(row=r, column=4),
+                      f"Measured value given in the task ('measured', e.g. a QIF results file's), not computed "
+                      f"from this task's points (they give {x.points_value:.6g}); the points give the "
+                      "sensitivities and so u: read the task's notes for what they are (a stand-in part?).")
         book.text(ws, r, 5, x.unit)
         scale = U_FACTOR[x.unit]
         if x.smooth:

@@ -12,7 +12,8 @@ Task file::
     [[frames]]          name, primary, secondary, tertiary      (datum reference frames)
     [[characteristics]] name, type, features = [...], method (LS | MZ), frame, datum, nominal,
                         nominal_position_mm, zone (planar | diametral), material_condition
-                        (RFS | MMC | LMC), size, internal, direction, lsl, usl, tolerance_mm
+                        (RFS | MMC | LMC), size, internal, direction, lsl, usl, tolerance_mm,
+                        measured (the value measured elsewhere: the points then give only u)
 
     [decision]          rule, r, max_pfa, k   (optional; ISO 14253-1 and k = 2 when absent)
     [report]            lab, operator, cmm, artefact, job_id, notes
@@ -31,12 +32,14 @@ from pathlib import Path
 from cmmwb.xlfuncs import characteristics as ch
 from cmmwb.xlfuncs import features as ft
 from cmmwb.xlfuncs import pointcloud as pc
+from cmmwb.xlfuncs.errors import ModelError
+from cmmwb.xlfuncs.limits import coordinate_problem
 
 from .. import __version__
-from ..errors import InputError, model_errors_named
+from ..errors import InputError
 from ..quantities import Cells, Quantity, ToleranceKeys
-from ..taskcloud import read_point_cloud
-from ..taskfile import COMMON_TABLES, check_keys, number, string, table, task_kind_and_name, text_list, vector3
+from ..taskcloud import check_label, read_point_cloud
+from ..taskfile import COMMON_TABLES, Names, check_keys, number, string, table, task_kind_and_name, text_list, vector3
 from ..taskkind import always_exact, no_type_a, no_verdicts
 from ..workbook.book import RESULTS, BookAdditions
 from ..workbook.xlref import cell
@@ -52,7 +55,7 @@ FEATURE_KEYS = {"name", "type", "ids", "id_prefix", "circle_plane", "axis_hint"}
 FRAME_KEYS = {"name", "primary", "secondary", "tertiary"}
 CHAR_KEYS = {"name", "type", "features", "method", "frame", "datum", "nominal",
              "nominal_position_mm", "zone", "material_condition", "size", "internal",
-             "direction", "lsl", "usl", "tolerance_mm"}
+             "direction", "lsl", "usl", "tolerance_mm", "measured"}
 
 
 @dataclass
@@ -91,19 +94,39 @@ def _names(path, tbl, section, key):
     return tuple(v)
 
 
-def load(path: Path, doc: dict) -> Task:
-    _, name = task_kind_and_name(path, doc)
-    notes = text_list(path, table(path, doc, "task"), "task", "notes")
-    check_keys(path, doc, "file", {"task", "points", "parameters", "probes", "features", "frames",
-                                   "characteristics"} | COMMON_TABLES)
-    cloud, params, tbl = read_point_cloud(path, doc)
-    labels = list(cloud.labels)
-    index = {lab: i for i, lab in enumerate(labels)}
-    feats = []
+#: the keys of a [[characteristics]] entry beyond name, type, features, and the types that use
+#: each (a key given to a type that does not use it is refused: it would be dropped silently)
+APPLIES = {
+    "method": ch.FORM_TYPES + ch.ORIENTATION_TYPES,
+    "frame": ch.ORIENTATION_TYPES + ("position",),
+    "datum": ch.ORIENTATION_TYPES,
+    "nominal": ch.SIZE_TYPES + ("distance", "angle", "angularity"),
+    "nominal_position_mm": ("position",),
+    "zone": ch.ORIENTATION_TYPES + ("position",),
+    "material_condition": ("position",),
+    "size": ("position",),
+    "internal": ("position",),
+    "direction": ("straightness",),
+    "lsl": ch.SIZE_TYPES + ("distance", "angle"),
+    "usl": ch.SIZE_TYPES + ("distance", "angle"),
+    "tolerance_mm": ("diameter", "width", "distance") + ch.FORM_TYPES + ch.ORIENTATION_TYPES + ("position",),
+}
+#: the features a characteristic type takes
+FEATURE_COUNT = {"width": 2, "distance": 2, "angle": 2}
+#: the values of the keys with a fixed set of them
+CHOICES = {"method": ("LS", "MZ"), "zone": ("planar", "diametral"), "material_condition": ("RFS", "MMC", "LMC")}
+#: the smallest number of points of a feature whose minimum zone is asked for (xlfuncs.minzone:
+#: k free zone parameters need k + 2 points)
+MZ_MIN_POINTS = {"straightness": 3, "flatness": 4, "roundness": 4, "cylindricity": 6}
+
+
+def _read_features(path, doc, labels, index) -> tuple[list[ch.FeatureSpec], list[str]]:
+    feats, places = [], []
+    names = Names(path, "feature")
     for n, t in enumerate(_array_of_tables(path, doc, "features"), start=1):
         sec = f"[[features]] #{n}"
         check_keys(path, t, sec, FEATURE_KEYS)
-        fname = string(path, t, sec, "name")
+        fname = names.add(check_label(string(path, t, sec, "name"), path, f"{sec} name"), f"{sec} name")
         el = string(path, t, sec, "type")
         if el not in ft.ELEMENTS:
             raise InputError(f"unknown feature type {el!r}; known: {', '.join(ft.ELEMENTS)}",
@@ -117,6 +140,9 @@ def load(path: Path, doc: dict) -> Task:
             bad = [i for i in ids if i not in index]
             if bad:
                 raise InputError(f"unknown point id {bad[0]!r}", file=path, where=f"{sec} ids")
+            twice = next((i for k, i in enumerate(ids) if i in ids[:k]), None)
+            if twice is not None:
+                raise InputError(f"point id {twice!r} is listed twice", file=path, where=f"{sec} ids")
             idx = tuple(index[i] for i in ids)
         else:
             pre = string(path, t, sec, "id_prefix")
@@ -129,44 +155,207 @@ def load(path: Path, doc: dict) -> Task:
             raise InputError("must be xy, yz, zx or space", file=path, where=f"{sec} circle_plane")
         hint = vector3(path, t, sec, "axis_hint") if "axis_hint" in t else None
         feats.append(ch.FeatureSpec(fname, el, idx, None if plane == "space" else plane, hint))
-    frames = []
+        places.append(sec)
+    return feats, places
+
+
+def _read_frames(path, doc, features: dict[str, ch.FeatureSpec]) -> tuple[list[ch.FrameSpec], list[str], Names]:
+    """The datum reference frames: each names its datum features (in order of precedence), each
+    feature once; the primary is a plane (xlfuncs.datums)."""
+    frames, places = [], []
+    names = Names(path, "datum frame")
     for n, t in enumerate(_array_of_tables(path, doc, "frames", required=False), start=1):
         sec = f"[[frames]] #{n}"
         check_keys(path, t, sec, FRAME_KEYS)
-        frames.append(ch.FrameSpec(string(path, t, sec, "name"), string(path, t, sec, "primary"),
-                                   t.get("secondary"), t.get("tertiary")))
-    chars = []
-    for n, t in enumerate(_array_of_tables(path, doc, "characteristics"), start=1):
+        fname = names.add(check_label(string(path, t, sec, "name"), path, f"{sec} name"), f"{sec} name")
+        datums: dict[str, str] = {}
+        for key in ("primary", "secondary", "tertiary"):
+            if key not in t:
+                if key == "primary":
+                    string(path, t, sec, key)      # the missing-key message
+                continue
+            if key == "tertiary" and "secondary" not in t:
+                raise InputError("a tertiary datum needs a secondary datum", file=path, where=f"{sec} tertiary")
+            v = t[key]
+            if not isinstance(v, str):
+                raise InputError(f"must be the name of one datum feature (text), got {v!r}", file=path,
+                                 where=f"{sec} {key}")
+            if v not in features:
+                raise InputError(f"unknown feature {v!r}; the [[features]] are {', '.join(features) or 'none'}",
+                                 file=path, where=f"{sec} {key}")
+            if v in datums.values():
+                other = next(k for k, x in datums.items() if x == v)
+                raise InputError(f"feature {v!r} is already the {other} datum of frame {fname!r}; each datum "
+                                 "of a frame is another feature", file=path, where=f"{sec} {key}")
+            datums[key] = v
+        if features[datums["primary"]].element != "plane":
+            raise InputError(f"the primary datum {datums['primary']!r} is a "
+                             f"{features[datums['primary']].element}; it must be a plane", file=path,
+                             where=f"{sec} primary")
+        frames.append(ch.FrameSpec(fname, datums["primary"], datums.get("secondary"), datums.get("tertiary")))
+        places.append(sec)
+    return frames, places, names
+
+
+def _tolerance_number(path, t, sec, key, lo_zero: bool) -> float:
+    v = number(path, t, sec, key)
+    problem = coordinate_problem(v)
+    if problem is not None:
+        raise InputError(problem, file=path, where=f"{sec} {key}")
+    if lo_zero and v < 0:
+        raise InputError(f"a zone width cannot be negative, got {v:g} mm", file=path, where=f"{sec} {key}")
+    return v
+
+
+def _read_characteristics(path, doc, features: dict[str, ch.FeatureSpec], frames: Names,
+                          ) -> tuple[list[ch.CharacteristicSpec], list[str]]:
+    chars, places = [], []
+    names = Names(path, "characteristic")
+    raw = _array_of_tables(path, doc, "characteristics")
+    for n, t in enumerate(raw, start=1):
         sec = f"[[characteristics]] #{n}"
         check_keys(path, t, sec, CHAR_KEYS)
-        kw = {}
-        for k in ("nominal", "lsl", "usl", "tolerance_mm"):
+        cname = names.add(check_label(string(path, t, sec, "name"), path, f"{sec} name"), f"{sec} name")
+        typ = string(path, t, sec, "type")
+        if typ not in ch.TYPES:
+            raise InputError(f"unknown type {typ!r}; known: {', '.join(ch.TYPES)}", file=path, where=f"{sec} type")
+        for key, types in APPLIES.items():
+            if key in t and typ not in types:
+                raise InputError(f"a {typ} takes no {key} (it applies to: {', '.join(types)}); a value "
+                                 "here would be ignored: leave it out", file=path, where=f"{sec} {key}")
+        feats = _names(path, t, sec, "features")
+        need = FEATURE_COUNT.get(typ, 1)
+        if len(feats) != need:
+            raise InputError(f"a {typ} takes {need} feature{'s' if need > 1 else ''}, got {len(feats)}",
+                             file=path, where=f"{sec} features")
+        for f in feats:
+            if f not in features:
+                raise InputError(f"unknown feature {f!r}; the [[features]] are {', '.join(features)}",
+                                 file=path, where=f"{sec} features")
+        kw: dict = {}
+        for k in ("nominal", "lsl", "usl", "measured"):
             if k in t:
-                kw[k] = number(path, t, sec, k)
+                kw[k] = _tolerance_number(path, t, sec, k, lo_zero=False)
+        if "lsl" in kw and "usl" in kw and not kw["lsl"] < kw["usl"]:
+            raise InputError(f"{cname}: the lower limit lsl = {kw['lsl']:g} must be below the upper usl = "
+                             f"{kw['usl']:g}",
+                             file=path, where=f"{sec} lsl")
+        if "tolerance_mm" in t:
+            kw["tolerance_mm"] = _tolerance_number(path, t, sec, "tolerance_mm", lo_zero=True)
         for k in ("method", "frame", "datum", "zone", "material_condition", "size"):
             if k in t:
                 kw[k] = string(path, t, sec, k)
+                if k in CHOICES and kw[k] not in CHOICES[k]:
+                    raise InputError(f"must be {' or '.join(CHOICES[k])}, got {kw[k]!r}", file=path,
+                                     where=f"{sec} {k}")
+        if "frame" in kw and kw["frame"] not in frames:
+            raise InputError(f"unknown datum frame {kw['frame']!r}; the [[frames]] are "
+                             f"{', '.join(frames.first) or 'none'}", file=path, where=f"{sec} frame")
+        if "datum" in kw:
+            if kw["datum"] not in features:
+                raise InputError(f"unknown feature {kw['datum']!r}", file=path, where=f"{sec} datum")
+            if "frame" in kw:
+                raise InputError("give the datum feature or the frame, not both", file=path, where=f"{sec} datum")
+        if typ in ch.ORIENTATION_TYPES and "frame" not in kw and "datum" not in kw:
+            raise InputError(f"a {typ} needs its datum: frame = a [[frames]] name, or datum = a feature",
+                             file=path, where=sec)
+        if "tolerance_mm" in kw and ("lsl" in kw or "usl" in kw):
+            raise InputError("give either lsl/usl or tolerance_mm, not both", file=path,
+                             where=f"{sec} tolerance_mm")
+        if typ == "position":
+            for key in ("frame", "nominal_position_mm"):
+                if key not in t:
+                    raise InputError("a position needs its datum frame (frame = a [[frames]] name) and its "
+                                     "true position (nominal_position_mm, frame coordinates)", file=path,
+                                     where=f"{sec} {key}")
+            if kw.get("zone", "diametral") != "diametral":
+                raise InputError("a position's zone is diametral (a cylinder about the true position)",
+                                 file=path, where=f"{sec} zone")
+            mc = kw.get("material_condition", "RFS")
+            if mc != "RFS" and "size" not in kw:
+                raise InputError(f"a position at {mc} takes its bonus from the size of its feature: give size "
+                                 "= the name of that diameter characteristic", file=path,
+                                 where=f"{sec} material_condition")
+            if mc == "RFS" and ("size" in kw or "internal" in t):
+                key = "size" if "size" in kw else "internal"
+                raise InputError(f"{key} gives the bonus of a position at MMC or LMC; this one is RFS (give "
+                                 "material_condition)", file=path, where=f"{sec} {key}")
+            if "size" in kw:
+                s = next((x for x in raw if isinstance(x, dict) and x.get("name") == kw["size"]), None)
+                if s is None or s.get("type") != "diameter" or not ("lsl" in s and "usl" in s):
+                    raise InputError(f"size must name a diameter characteristic with lsl and usl (the size "
+                                     f"limits the bonus comes from), got {kw['size']!r}", file=path,
+                                     where=f"{sec} size")
+                if tuple(_names(path, s, sec, "features")) != feats:
+                    raise InputError(f"the size {kw['size']!r} is of feature {s.get('features')!r}, this position "
+                                     f"of {feats[0]!r}: the bonus comes from the same feature's size", file=path,
+                                     where=f"{sec} size")
+            if "tolerance_mm" in kw and kw["tolerance_mm"] == 0 and mc == "RFS":
+                raise InputError("a zone of width 0 is only meaningful at MMC or LMC (zero tolerance, the bonus "
+                                 "is the zone); at RFS nothing could conform", file=path,
+                                 where=f"{sec} tolerance_mm")
+        elif kw.get("tolerance_mm") == 0:
+            raise InputError(f"a zone of width 0: no {typ} could conform", file=path, where=f"{sec} tolerance_mm")
         if "internal" in t:
             if not isinstance(t["internal"], bool):
                 raise InputError("must be true or false", file=path, where=f"{sec} internal")
             kw["internal"] = t["internal"]
         if "direction" in t:
             kw["direction"] = vector3(path, t, sec, "direction")
+        if typ == "straightness" and "direction" not in kw:
+            raise InputError("a straightness needs its zone direction (direction = the surface's normal)",
+                             file=path, where=sec)
         if "nominal_position_mm" in t:
             v = t["nominal_position_mm"]
             if (not isinstance(v, list) or len(v) not in (2, 3) or
-                    not all(isinstance(x, (int, float)) and not isinstance(x, bool) and
-                            math.isfinite(x) for x in v)):
-                raise InputError("must be two or three numbers (frame coordinates, mm)",
+                    not all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in v)):
+                raise InputError(f"must be two or three numbers (frame coordinates, mm), got {v!r}",
                                  file=path, where=f"{sec} nominal_position_mm")
+            for k, x in enumerate(v):     # nan, inf, 1e300: the coordinate's own problem, not 'not numbers'
+                problem = coordinate_problem(float(x))
+                if problem:
+                    raise InputError(f"{'xyz'[k]}: {problem}", file=path,
+                                     where=f"{sec} nominal_position_mm")
             kw["nominal_position_mm"] = tuple(float(x) for x in v)
-        chars.append(ch.CharacteristicSpec(string(path, t, sec, "name"), string(path, t, sec, "type"),
-                                           _names(path, t, sec, "features"), **kw))
+        if typ in MZ_MIN_POINTS and kw.get("method") == "MZ":
+            m = len(features[feats[0]].indices)
+            if m < MZ_MIN_POINTS[typ]:
+                raise InputError(f"the minimum zone of a {typ} needs at least {MZ_MIN_POINTS[typ]} points; "
+                                 f"feature {feats[0]!r} has {m}", file=path, where=f"{sec} method")
+        chars.append(ch.CharacteristicSpec(cname, typ, feats, **kw))
+        places.append(sec)
+    margins = {margin_label(c.name): c.name for c in chars
+               if c.type == "position" and c.material_condition != "RFS"}
+    for c, sec in zip(chars, places):
+        if c.name in margins:
+            raise InputError(f"{c.name!r} is the name of the margin of position {margins[c.name]!r} (decided at "
+                             f"its material condition); give this characteristic another name", file=path,
+                             where=f"{sec} name")
+    return chars, places
+
+
+def load(path: Path, doc: dict) -> Task:
+    _, name = task_kind_and_name(path, doc)
+    notes = text_list(path, table(path, doc, "task"), "task", "notes")
+    check_keys(path, doc, "file", {"task", "points", "parameters", "probes", "features", "frames",
+                                   "characteristics"} | COMMON_TABLES)
+    cloud, params, tbl = read_point_cloud(path, doc)
+    labels = list(cloud.labels)
+    index = {lab: i for i, lab in enumerate(labels)}
+    feats, feat_places = _read_features(path, doc, labels, index)
+    by_name = {f.name: f for f in feats}
+    frames, frame_places, frame_names = _read_frames(path, doc, by_name)
+    chars, char_places = _read_characteristics(path, doc, by_name, frame_names)
     pts = table(path, doc, "points")
     task = Task(name, notes, cloud, params, feats, frames, chars, Path(path),
                 pts.get("file") if isinstance(pts.get("file"), str) else None)
-    with model_errors_named(file=path):
+    places = {"features": feat_places, "frames": frame_places, "characteristics": char_places}
+    try:
         fitted(task)
+    except ModelError as e:
+        item = getattr(e, "item", None)
+        where = places[item[0]][item[1]] if item is not None and item[0] in places else None
+        raise InputError(str(e), file=path, where=where) from None
     return task
 
 
@@ -193,6 +382,9 @@ def _row(r: ch.Result) -> dict:
         "bonus_mm": r.bonus_mm, "zone_mm": r.zone_mm, "margin_mm": r.margin_mm,
         "u_margin_um": r.u_margin_um,
         "contact_points": [],
+        # issue 33: a value measured elsewhere (a QIF file's) decided with the u of these points
+        "value_source": "measured" if c.measured is not None else "points",
+        "points_value": r.points_value,
     }
     return out
 
@@ -233,13 +425,18 @@ def write_plots(task: Task, results: dict, out_dir: Path) -> list[Path]:
 
 
 def summary(results: dict) -> list[str]:
+    """One line per characteristic: the value in the unit of the JSON and the decisions (mm, deg),
+    u in µm or µrad, so that a quantity is never shown in two units."""
     lines = []
+    given = [r["name"] for r in results["characteristics"] if r.get("value_source") == "measured"]
+    if given:
+        lines.append(f"{len(given)} of {len(results['characteristics'])} values are measured values given in the "
+                     "task ('measured'); their u comes from this task's points: see its notes for what those are")
     for r in results["characteristics"]:
-        small = r["unit"] == "mm" and r["type"] not in ch.SIZE_TYPES + ("distance",)
-        v, unit = (r["value"] * 1e3, "µm") if small else (r["value"], r["unit"])
+        v = f"{r['value']:.6f} mm" if r["unit"] == "mm" else f"{r['value']:.4f} {r['unit']}"
         u_unit = "µm" if r["u_unit"] == "um" else "µrad"
-        extra = f", zone {r['zone_mm'] * 1e3:.1f} µm" if r["zone_mm"] is not None else ""
-        lines.append(f"{r['name']}: {v:.4f} {unit}, u = {r['u']:.3f} {u_unit}{extra}")
+        extra = f", zone {r['zone_mm']:.4f} mm" if r["zone_mm"] is not None else ""
+        lines.append(f"{r['name']}: {v}, u = {r['u']:.3f} {u_unit}{extra}")
     return lines
 
 

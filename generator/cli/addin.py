@@ -23,19 +23,38 @@ def cmd_build_oxt(args) -> int:
 
 
 LO_PYTHON = "/usr/bin/python3"  # LibreOffice's Python (python3-uno on Debian/Ubuntu)
+#: the sheet whose add-in formulas relink binds (generator/lo_addin/relink_live.py: LIVE)
+LIVE_SHEET = "Live_addin"
 
 
 def cmd_relink(args) -> int:
+    """Checks first, in cmmwb's process (the workbook guard, the ``Live_addin`` sheet, the output's
+    folder), then LibreOffice on a private copy of the book: its lock file (``.~lock.NAME#``) is
+    made and removed in that copy's folder, never beside the user's file."""
     import shutil
     import subprocess
+    import tempfile
+    import zipfile
 
     from ..oxt import SOURCES
+    from ..workbook.cache import sheet_parts
+    from ..workbook.safe_xlsx import check
 
     book, out = Path(args.book), Path(args.out)
-    if not book.is_file():
-        raise InputError("no such workbook", file=book)
+    check(book)                    # the workbook guard: a regular .xlsx, no macros, links, DDE, bombs
+    with zipfile.ZipFile(book) as z:
+        try:
+            sheets = sheet_parts(z)
+        except (KeyError, ValueError, zipfile.BadZipFile) as e:
+            raise InputError(f"cannot list the workbook's sheets ({e})", file=book) from None
+    if LIVE_SHEET not in sheets:
+        raise InputError(f"has no {LIVE_SHEET} sheet: only the large workbooks cmmwb build writes above the "
+                         "native size have one (this one computes without the add-in); nothing to relink",
+                         file=book)
     if out.suffix.lower() != ".ods":
         raise InputError("the relinked workbook must end in .ods (it keeps the add-in names)", file=out)
+    if not out.parent.is_dir():
+        raise InputError("the output's folder does not exist (create it first)", file=out)
     if out.exists() and not args.force:
         raise InputError("exists already (use --force to overwrite)", file=out)
     python = args.lo_python or LO_PYTHON
@@ -43,14 +62,19 @@ def cmd_relink(args) -> int:
                                                          capture_output=True).returncode != 0:
         raise InputError(f"needs LibreOffice (soffice) and its Python with uno ({python}; "
                          "apt-get install libreoffice-script-provider-python python3-numpy)", file=book)
-    cmd = [python, str(SOURCES / "relink_live.py"), str(book), "--out", str(out)]
-    if args.profile:
-        cmd += ["--profile", args.profile]
-    if args.cache:
-        cmd += ["--cache", args.cache]
-    run = subprocess.run(cmd, capture_output=True, text=True)
+    with tempfile.TemporaryDirectory(prefix="cmmwb-relink-") as tmp:
+        copy = Path(tmp) / book.name
+        shutil.copyfile(book, copy)
+        cmd = [python, str(SOURCES / "relink_live.py"), str(copy), "--out", str(out.resolve())]
+        if args.profile:
+            cmd += ["--profile", args.profile]
+        if args.cache:
+            cmd += ["--cache", args.cache]
+        run = subprocess.run(cmd, capture_output=True, text=True)
     if run.returncode != 0:
-        raise InputError(f"LibreOffice could not relink the workbook: {run.stderr.strip()}", file=book)
+        lines = [line.strip() for line in run.stderr.splitlines() if line.strip()]
+        raise InputError("LibreOffice could not relink the workbook: " + (lines[-1] if lines else
+                         f"exit status {run.returncode}"), file=book)
     print(run.stdout.strip())
     return 0
 

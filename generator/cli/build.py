@@ -18,12 +18,16 @@ def register(sub) -> None:
                     ("cmmwb build gauge.toml --out gauge",
                      "cmmwb build gauge.toml --out gauge --force      # after editing the workbook",
                      "cmmwb build bore.toml --out bore --no-plots --cache none",
-                     "cmmwb build knuckle.toml --out knuckle --pdf    # and a printed PDF for the audit file"))
+                     "cmmwb build knuckle.toml --out knuckle --pdf    # and a printed PDF for the audit file",
+                     "cmmwb import results.qif --stand-in --out plate.toml && cmmwb build plate.toml --out plate"
+                     "   # a QIF file's characteristics decided (docs/import.md)"))
     s.add_argument("task", metavar="TASK.toml", help="the task file (see cmmwb new)")
     s.add_argument("--out", required=True, metavar="DIR", help="output folder (created if missing)")
     s.add_argument("--no-plots", action="store_true", help="skip the PNG plots (default: write them)")
     s.add_argument("--pdf", action="store_true",
-                   help="also print the workbook to DIR/<name>.pdf for the audit file (needs LibreOffice)")
+                   help="also print the workbook to DIR/<name>.pdf for the audit file (needs LibreOffice); "
+                        "a later build of the task without --pdf removes that PDF, as it does every file "
+                        "of the previous build it does not write again (an edited one: see --force)")
     s.add_argument("--force", action="store_true",
                    help="replace outputs that were edited since cmmwb wrote them, keeping NAME.bak backups "
                         "(default: refuse)")

@@ -4,12 +4,14 @@ hyper-parameters from the machine's recordings by REML (docs/calibrate.md;
 
 from __future__ import annotations
 
+import sys
+from contextlib import nullcontext
 from dataclasses import replace
 from pathlib import Path
 
 from cmmwb.xlfuncs.model import MPE1
 
-from ..taskfile import read_toml
+from ..taskfile import collecting_notes, naming_lines, read_toml
 from .common import add_command
 
 
@@ -66,20 +68,25 @@ def run(args) -> int:
     from ..calibration.run import parse_mpe, parse_rule, run_calibrate  # the REML fit (scipy): only when run
     from ..diagnosis.run import load_model
 
-    model, label = load_model(args.task, args.sigma_um)
-    if args.start == "mpe1":
-        model = replace(model, params=MPE1)
-        label += " (starting values: Forbes 2025 Table 3 MPE1)"
-    task_path = Path(args.task) if args.task else None
-    doc = None
-    if task_path is not None:
-        doc = read_toml(task_path)
-    mpe = parse_mpe(args.mpe, doc, model.probes)
+    with collecting_notes() as notes:       # implausible values of the task or --mpe: warned about
+        model, label = load_model(args.task, args.sigma_um)
+        if args.start == "mpe1":
+            model = replace(model, params=MPE1)
+            label += " (starting values: Forbes 2025 Table 3 MPE1)"
+        task_path = Path(args.task) if args.task else None
+        doc = None
+        if task_path is not None:
+            doc = read_toml(task_path)
+        with naming_lines(task_path) if task_path is not None else nullcontext():
+            mpe = parse_mpe(args.mpe, doc, model.probes, task_path)
     rule = parse_rule(args.rule)
     result, files = run_calibrate([Path(p) for p in args.recordings], model, Path(args.out), task_path=task_path,
                                   task_label=label, effects=args.effects, feedback=args.feedback, mpe=mpe,
                                   alpha=args.alpha, workbook=not args.no_workbook, force=args.force,
-                                  covariance=args.covariance, profiles=args.profiles, rule=rule)
+                                  covariance=args.covariance, profiles=args.profiles, rule=rule,
+                                  warnings=notes)
+    for w in result["warnings"]:
+        print(f"cmmwb: warning: {w}", file=sys.stderr)
     print(result["summary"])
     for f in files:
         print(f"  -> {f}")

@@ -17,7 +17,10 @@ def register(sub) -> None:
                     "Writes a commented task file of the given kind that builds as it is; a point-cloud "
                     "task comes with its points table TASK_points.csv beside it.",
                     ("cmmwb new pointcloud --out gauge.toml   # also writes gauge_points.csv",
-                     "cmmwb new budget --out knuckle.toml", "cmmwb new feature --out bore.toml"))
+                     "cmmwb new budget --out knuckle.toml", "cmmwb new feature --out bore.toml",
+                     "cmmwb new characteristic --out plate.toml   # also writes plate_points.csv",
+                     "cmmwb import results.qif --stand-in --out plate.toml   # a characteristic task from a QIF "
+                     "file's characteristics (docs/import.md)"))
     s.add_argument("kind", choices=KINDS, help="task kind: " + ", ".join(KINDS))
     s.add_argument("--out", required=True, metavar="TASK.toml", help="task file to write")
     s.add_argument("--force", action="store_true",

@@ -17,6 +17,7 @@ from cmmwb.xlfuncs.errors import ModelError
 
 from .. import __version__
 from ..errors import InputError, os_error_reason
+from ..workbook.atomic import COMMITTED
 from . import addin, build, calibrate, demo, diagnose, import_, new, read, recalc, simulate, validate
 from .common import examples_epilog
 
@@ -120,9 +121,19 @@ def _catch_termination() -> dict:
     return previous
 
 
+def _interrupted_line() -> str:
+    """'interrupted', and where the command had already written its complete outputs (a signal
+    held back during the commit is delivered once it is complete)."""
+    if not COMMITTED:
+        return "cmmwb: interrupted"
+    return ("cmmwb: interrupted after its outputs were written, complete, into "
+            + ", ".join(str(d) for d in dict.fromkeys(COMMITTED)))
+
+
 def _run(args) -> int:
     """Run a command; every failure a user can cause is one line on stderr and exit status 2
     (130 for Ctrl-C; a closed output pipe ends quietly), never a traceback."""
+    COMMITTED.clear()
     try:
         return args.func(args)
     except InputError as e:
@@ -130,7 +141,7 @@ def _run(args) -> int:
     except ModelError as e:
         return _fail(str(e))
     except KeyboardInterrupt:
-        print("cmmwb: interrupted", file=sys.stderr)
+        print(_interrupted_line(), file=sys.stderr)
         return 128 + _terminated_by if _terminated_by else 130
     except BrokenPipeError:
         _silence_stdout()        # `cmmwb recalc book.xlsx | head`: the reader left; nothing to say
@@ -144,7 +155,7 @@ def _run(args) -> int:
         return _fail("the input is nested too deeply to process")
     except Exception as e:  # a bug: say so plainly
         if _interrupted or _terminated_by:
-            print("cmmwb: interrupted", file=sys.stderr)
+            print(_interrupted_line(), file=sys.stderr)
             return 128 + _terminated_by if _terminated_by else 130
         if os.environ.get("CMMWB_DEBUG"):
             raise

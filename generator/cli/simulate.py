@@ -4,6 +4,7 @@ rec.csv``: recordings of a realistic layout measured by a CMM drawn from the tas
 
 from __future__ import annotations
 
+import inspect
 import math
 from pathlib import Path
 
@@ -49,15 +50,22 @@ def register(sub) -> None:
                    help="artefact temperature: T or T0,T1 (a ramp over the session) in °C "
                         "(default: no temperature column)")
     s.add_argument("--hours", type=float, default=None,
-                   help="length of the session in hours (adds time_s; default: no time column)")
+                   help="length of the session in hours, over which the records' time_s is spread (every "
+                        f"layout writes time_s; default: the layout's own, {_default_hours()})")
     s.add_argument("--repeats", type=int, default=None,
                    help="repetitions (iso10360, stepgauge; default: the layout's own)")
     s.add_argument("--out", required=True, metavar="REC.csv", help="recordings CSV to write")
     s.set_defaults(func=run)
 
 
+def _default_hours() -> str:
+    """Each layout's default session length (the ``hours`` of its builder), for the help text."""
+    hours = {name: inspect.signature(getattr(sm, name)).parameters["hours"].default for name in sm.LAYOUTS}
+    return ", ".join(f"{name} {h:g} h" for name, h in hours.items())
+
+
 def run(args) -> int:
-    from ..diagnosis.run import load_model  # the locator (scipy): only when run
+    from ..diagnosis.run import load_model, planted_text  # the locator (scipy): only when run
 
     if (args.layout is None) == (args.validation is None):
         raise InputError("give one of --layout (recordings) or --validation (a validation set)")
@@ -89,8 +97,7 @@ def run(args) -> int:
                 "planted: " + (", ".join(f"{k}={v}" for k, v in planted.items()) or "nothing")]
     out = Path(args.out)
     write_text(out, write_recordings(rec, comments=comments))
-    print(f"{rec.n} {rec.kind} records ({args.layout}), planted "
-          + (", ".join(f"{k} = {v}" for k, v in planted.items()) or "nothing") + f" -> {out}")
+    print(f"{rec.n} {rec.kind} records ({args.layout}), planted {planted_text(planted)} -> {out}")
     return 0
 
 
@@ -147,14 +154,14 @@ def parse_effect(text: str, probes) -> tuple[str, object]:
     if name == "probe_qualification":
         if ":" not in value:
             raise InputError("expected probe_qualification=PROBE:dx,dy,dz (µm)", where=where)
-        pid, vec = value.split(":", 1)
+        pid, vec = value.rsplit(":", 1)      # a probe id may hold ":" (the numbers do not)
         return name, {pid.strip(): numbers(vec, 3)}
     if name == "offset_drift":
         return name, numbers(value, 3)
     if name == "probe_lobing":
         if ":" not in value:
             raise InputError("expected probe_lobing=PROBE:c2,s2,c3,s3,c4,s4 (µm)", where=where)
-        pid, vec = value.split(":", 1)
+        pid, vec = value.rsplit(":", 1)      # a probe id may hold ":" (the numbers do not)
         return name, {pid.strip(): numbers(vec, 6)}
     if name in sm.STRAIGHTNESS_NAMES:
         return name, numbers(value, 2)       # c2, c3 (µm): orders 2 and 3 of the travel

@@ -21,6 +21,7 @@ from cmmwb.xlfuncs import conformity as cf
 from cmmwb.xlfuncs import dof
 from cmmwb.xlfuncs import global_risk as gr
 from cmmwb.xlfuncs.errors import ModelError
+from cmmwb.xlfuncs.limits import MAX_COORDINATE_MM
 from cmmwb.xlfuncs.statement import statement
 
 from ..errors import InputError
@@ -82,13 +83,30 @@ def tolerance_where(n: int, key: str | None = None) -> str:
     return f"{TOL_SECTION} #{n}" + (f" key '{key}'" if key else "")
 
 
+#: the smallest standard deviation (s_um, process_sd_um) taken: below it u^4 of the
+#: Welch-Satterthwaite formula underflows
+MIN_SD_UM = 1e-6
+
+
 def _num(path: Path, tbl: dict, key: str, where: str) -> float | None:
+    """A finite number; a length (``_mm``) or a standard deviation (``_um``) within the plausible
+    range of a coordinate measuring machine (xlfuncs.limits: +-100 m), whose arithmetic keeps a
+    nanometre: beyond it the rounded statement and the risks overflow."""
     if key not in tbl:
         return None
     v = tbl[key]
     if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(float(v)):
         raise InputError(f"must be a finite number, got {v!r}", file=path, where=where)
-    return float(v)
+    v = float(v)
+    scale = 1e3 if key.endswith("_um") else 1.0 if key.endswith("_mm") else None
+    if scale is not None and abs(v) > MAX_COORDINATE_MM * scale:
+        unit = "µm" if scale > 1 else "mm"
+        raise InputError(f"{v:g} {unit} is outside the plausible range of a CMM measurement "
+                         f"(+-{MAX_COORDINATE_MM * scale:g} {unit}); is the unit {unit}?", file=path, where=where)
+    if key.endswith("_um") and 0 < abs(v) < MIN_SD_UM:
+        raise InputError(f"{v:g} µm is below {MIN_SD_UM:g} µm (a picometre): no CMM measurement repeats that "
+                         "well; is the unit µm?", file=path, where=where)
+    return v
 
 
 def read_spec(path: Path, doc: dict, keys: ToleranceKeys) -> DecisionSpec | None:
@@ -120,6 +138,9 @@ def read_spec(path: Path, doc: dict, keys: ToleranceKeys) -> DecisionSpec | None
                          "with their own coverage factor", file=path, where=f"[{SECTION}] k")
     if k is not None and not (0 < k <= 10):
         raise InputError(f"must be a coverage factor in (0, 10], got {k!r}", file=path, where=f"[{SECTION}] k")
+    if r is not None and r > 10:     # like k: r = 1e300 accepted (guarded_rejection) any value at all
+        raise InputError(f"must be a guard-band factor in [0, 10] (w = r·U), got {r!r}", file=path,
+                         where=f"[{SECTION}] r")
     try:
         rule = cf.DecisionRule(rule_kind, 1.0 if r is None else r, 0.05 if pfa is None else pfa)
     except ModelError as e:

@@ -124,7 +124,7 @@ def _probe_radius_length(name, par, R, probe_cells, travel):
 
 
 def _probe_qualification_length(name, par, R, probe_cells, travel):
-    pid, comp = par.split(".d")
+    pid, comp = par.rsplit(".d", 1)
     k = probe_cells[pid]
     return f"={R['na' + comp]}*(EXACT({R['probe2']},{k})*1-EXACT({R['probe1']},{k})*1)"
 
@@ -153,7 +153,7 @@ def _reversal_length(name, par, R, probe_cells, travel):
 
 
 def _probe_lobing_length(name, par, R, probe_cells, travel):
-    pid, h = par.split(".")
+    pid, h = par.rsplit(".", 1)
     k = probe_cells[pid]
     n2, n1 = _normals_dot(R)
     return (f"={n2}*{_harmonic_formula(h, R['n2x'], R['n2y'])}*EXACT({R['probe2']},{k})*1"
@@ -205,7 +205,7 @@ def _probe_radius_point(name, par, a, P, c, probe_cells, travel):
 
 
 def _probe_qualification_point(name, par, a, P, c, probe_cells, travel):
-    pid, comp = par.split(".d")
+    pid, comp = par.rsplit(".d", 1)
     return f"=EXACT({P['probe']},{probe_cells[pid]})*1" if comp == "xyz"[a] else 0.0
 
 
@@ -235,7 +235,7 @@ def _reversal_point(name, par, a, P, c, probe_cells, travel):
 
 
 def _probe_lobing_point(name, par, a, P, c, probe_cells, travel):
-    pid, h = par.split(".")
+    pid, h = par.rsplit(".", 1)
     return (f"={P['n' + 'xyz'[a]]}*{_harmonic_formula(h, P['nx'], P['ny'])}"
             f"*EXACT({P['probe']},{probe_cells[pid]})*1")
 

@@ -123,25 +123,33 @@ def _record_sheet(book: Book, rec, sheet: str, columns: list[str], derived: list
     if rec.group is not None:
         cols.append("group")
         texts = {**texts, "group": rec.group}
-    cols += list(rec.extra)
-    header = cols + derived
-    ci = {k: i + 1 for i, k in enumerate(header)}
-    book.header(ws, 1, 1, [shown(h, mm_columns) for h in header], [notes.get(h) for h in header])
+    # the recordings' own extra columns are the user's names: shown as they are, kept apart from the
+    # column keys (an extra column 'd_mm' or 'http://x' is neither a derived column nor an effect's)
+    extras = list(rec.extra)
+    ci = {k: i + 1 for i, k in enumerate(cols)}
+    xi = {k: len(cols) + i + 1 for i, k in enumerate(extras)}
+    ci.update({k: len(cols) + len(extras) + i + 1 for i, k in enumerate(derived)})
+    taken = {shown(h, mm_columns) for h in cols + derived}
+    heads = ([shown(h, mm_columns) for h in cols] + [f"{h} (recordings)" if h in taken else h for h in extras]
+             + [shown(h, mm_columns) for h in derived])
+    book.header(ws, 1, 1, heads, [notes.get(h) for h in cols] + [None] * len(extras) + [notes.get(h) for h in derived])
     # the headers wrap (an effect's column is named "squareness_xy:squareness_xy (µm per µrad)"):
     # the columns are as wide as their numbers, fewer pages across
-    for c in range(1, len(header) + 1):
+    for c in range(1, len(heads) + 1):
         cell_ = ws.cell(row=1, column=c)
         cell_.alignment = Alignment(wrap_text=True, vertical="top")
-    ws.row_dimensions[1].height = LINE_PT * max(wrapped_lines(shown(h, mm_columns), HEADER_WIDTH) for h in header) + 2
+    ws.row_dimensions[1].height = LINE_PT * max(wrapped_lines(t, HEADER_WIDTH) for t in heads) + 2
     for k, v in data.items():
         _input_column(book, ws, 2, ci[k], v)
-    texts = {"id": rec.ids, **texts, **rec.extra}
+    texts = {"id": rec.ids, **texts}
     rows = []
     for a in range(rec.n):
         r = a + 2
         rows.append(Row(sheet, r, ci))
         for k, v in texts.items():
             book.text(ws, r, ci[k], v[a])
+        for k, v in rec.extra.items():
+            book.text(ws, r, xi[k], v[a])
         L = {k: cell(r, ci[k]) for k in ci}
         for k, f in row_formulas(L):
             book.formula(ws, r, ci[k], f, fmt=FMT_MM if k.endswith("_mm") or k.endswith("_um") else NUMBER_FORMAT)

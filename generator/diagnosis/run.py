@@ -18,7 +18,7 @@ from cmmwb.xlfuncs.distributed import get_backend
 from cmmwb.xlfuncs.locator import diagnose as dg
 from cmmwb.xlfuncs.locator import simulate as sm
 from cmmwb.xlfuncs.locator.recordings import RecordingsError, parse_recordings, write_recordings
-from cmmwb.xlfuncs.memory import ResourceError, check_diagnose_fits
+from cmmwb.xlfuncs.memory import ResourceError, check_diagnose_fits, check_records_fit
 from cmmwb.xlfuncs.model import MPE1  # Forbes 2025 Table 3, MPE1: the model of the demonstrations
 from cmmwb.xlfuncs.model.hyperparameters import in_table
 
@@ -66,6 +66,11 @@ def read_recordings(path: Path):
     from ..workbook.guarded import read_text
 
     text = read_text(path, "recordings")   # a regular file within its size cap, UTF-8
+    lines = text.count("\n") + (not text.endswith("\n")) - text.count("\n#") - text.startswith("#")
+    try:
+        check_records_fit(max(lines - 1, 0))       # before parsing: the data lines are the records
+    except ResourceError as e:
+        raise InputError(str(e), file=path) from None
     try:
         return parse_recordings(text)
     except RecordingsError as e:
@@ -139,11 +144,37 @@ def task_toml(params: pc.Parameters, probes, name: str, note: str) -> str:
     return "\n".join(lines) + "\n"
 
 
-def demo(out_dir: Path) -> list[Path]:
+def planted_text(planted: dict) -> str:
+    """The planted effects of a simulation, each with its unit (docs/recordings.md section 4):
+    ``squareness_xy = 9 µrad``, ``probe_qualification = P2: (0.5, 0, 0) µm``, ``periodic_x = 0.5,
+    -0.3 µm, period 40 mm``; ``nothing`` when none."""
+    from cmmwb.xlfuncs.locator.effects import BY_NAME
+
+    def numbers(v) -> str:
+        return ", ".join(f"{x:g}" for x in v)
+
+    out = []
+    for name, value in planted.items():
+        unit = BY_NAME[name].unit.replace("um", "µm").replace("urad", "µrad")
+        if isinstance(value, dict):             # per probe: probe_qualification, probe_lobing
+            text = "; ".join(f"{pid}: ({numbers(v)}) {unit}" for pid, v in value.items())
+        elif name.startswith("periodic_"):      # a, b (µm), period (mm)
+            text = f"{numbers(value[:2])} {unit}, period {value[2]:g} mm"
+        elif isinstance(value, (list, tuple)):
+            text = f"({numbers(value)}) {unit}"
+        else:
+            text = f"{value:g} {unit}"
+        out.append(f"{name} = {text}")
+    return ", ".join(out) or "nothing"
+
+
+def demo(out_dir: Path, verbose: bool = True, force: bool = False) -> list[Path]:
     """Two cases into ``out_dir``: a squareness error concealed in an ISO 10360-2 length test
     (no larger in any record than noise reaches anyway, only in the diagonal lengths) found and
     modelled; and a pitch
-    error measured with one probe offset, reported as aliased with an x scale error."""
+    error measured with one probe offset, reported as aliased with an x scale error.  The files
+    written; ``verbose``: each case's answer and files printed too; ``force``: files edited since
+    an earlier demo wrote them are replaced (kept as ``NAME.bak``)."""
     out_dir = Path(out_dir)
     params = MPE1
     model = dg.Model(params, DEMO_PROBES, True)
@@ -157,22 +188,24 @@ def demo(out_dir: Path) -> list[Path]:
          "the same test with one probe offset (0, 0, -50) mm, planted EBX (pitch of the X carriage) = 150 "
          "µrad/m: it moves the tip like an x scale error of p_z * kappa = -7.5 µm/m (Forbes 2025 section 3.3)"),
     ]
-    print(f"\n[diagnose] mismatch locator demonstrations -> {out_dir}/")
+    say = print if verbose else (lambda *_: None)
+    say(f"\n[diagnose] mismatch locator demonstrations -> {out_dir}/")
     for name, planted, seed, note in cases:
         t = time.perf_counter()
         L = sm.iso10360(DEMO_PROBES)
         rec = sm.simulate(L, params, planted, seed=seed, temperature_C=20.0)
         case_dir = out_dir / name
-        with Staging(case_dir) as tmp:
+        with Staging(case_dir, force=force) as tmp:
             write_recordings(rec, tmp / "recordings.csv",
                              comments=[f"cmmwb demo: {note}", f"planted: {planted}, seed {seed}"])
             (tmp / "task.toml").write_text(task_toml(params, DEMO_PROBES, f"demo_{name}", note), encoding="utf-8")
         result, made = run_diagnose(case_dir / "recordings.csv", model, case_dir, source="demo",
-                                    task_label=str(case_dir / "task.toml"), task_path=case_dir / "task.toml")
+                                    task_label=str(case_dir / "task.toml"), task_path=case_dir / "task.toml",
+                                    force=force)
         files += [case_dir / "recordings.csv", case_dir / "task.toml", *made]
-        print(f"\n  [{name}] {note}  ({time.perf_counter() - t:.1f} s)")
-        print(f"    planted: {', '.join(f'{k} = {v}' for k, v in planted.items())}")
-        print(f"    {result['summary']}")
+        say(f"\n  [{name}] {note}  ({time.perf_counter() - t:.1f} s)")
+        say(f"    planted: {planted_text(planted)}")
+        say(f"    {result['summary']}")
         for f in [case_dir / "recordings.csv", case_dir / "task.toml", *made]:
-            print(f"    -> {f}")
+            say(f"    -> {f}")
     return files

@@ -25,11 +25,24 @@ AQDEF_SUFFIXES = (".dfq", ".dfd", ".dfx")
 
 
 def run_import(src: Path, out: Path, *, features: list[str] | None = None, kind: str | None = None,
-               normals: str = "file", force: bool = False) -> tuple[list[Path], list[str]]:
+               normals: str = "file", force: bool = False, stand_in: bool = False,
+               part: str | None = None) -> tuple[list[Path], list[str]]:
     """Import ``src`` into ``out`` (``.toml``: a task with its points CSV beside it; ``.csv``:
-    recordings).  Returns the files written and the report lines (what was read, converted,
-    derived and left out)."""
+    recordings; ``.qif``: a copy with the characteristics' u; ``stand_in``: the characteristics as
+    a characteristic task of the simulated stand-in part, the values of ``part``).  Returns the
+    files written and the report lines (what was read, converted, derived and left out)."""
     src, out = Path(src), Path(out)
+    if (stand_in or part is not None) and src.suffix.lower() not in QIF_SUFFIXES:
+        raise InputError("--stand-in and --part read a QIF file's characteristics", file=src)
+    if part is not None and not stand_in:
+        raise InputError("--part chooses the measured part of a --stand-in task; give --stand-in too",
+                         where="--part")
+    if stand_in:
+        if features or kind:
+            raise InputError("--stand-in writes every characteristic of the file on the stand-in part: leave "
+                             "--feature and --kind out", where="--stand-in")
+        from .qif_stand_in import write_stand_in_task
+        return write_stand_in_task(src, out, part=part, force=force)
     suffix = src.suffix.lower()
     if suffix in AQDEF_SUFFIXES:
         from .aqdef import import_aqdef
@@ -44,7 +57,7 @@ def run_import(src: Path, out: Path, *, features: list[str] | None = None, kind:
 
     doc = qif.read_qif(src)
     report = [f"QIF {doc.version}: {len(doc.sets)} point sets, {len(doc.features)} features with points",
-              f"length unit: {doc.unit_name} -> mm (x {doc.mm_per_unit:g})",
+              f"length unit: {doc.unit_name}" + ("" if doc.mm_per_unit == 1.0 else f" -> mm (x {doc.mm_per_unit:g})"),
               "frame: the file's primary coordinate system (sets in other frames are refused)"]
     report += [f"not imported: {s}" for s in doc.not_read]
     if out.suffix.lower() == ".csv":
@@ -61,7 +74,7 @@ def run_import(src: Path, out: Path, *, features: list[str] | None = None, kind:
     if kind == "feature" and len(chosen) != 1:
         raise InputError("a feature task fits one element: give one --feature", file=src)
     labels, X, N, notes = [], [], [], [f"imported by cmmwb import from {src.name} (QIF {doc.version})",
-                                         f"coordinates converted from {doc.unit_name} to mm"]
+                                         _coordinates_note(doc.unit_name, doc.mm_per_unit)]
     for f in chosen:
         ps = doc.points_of(f)
         n = ps.N
@@ -116,8 +129,8 @@ def _write_recordings(doc, src: Path, out: Path, features: list[str] | None,
         raise InputError("exists already (use --force to overwrite)", file=out)
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
-    buf.write(f"# imported by cmmwb import from {_comment(src.name)} (QIF {doc.version}): coordinates in mm "
-              f"(converted from {_comment(doc.unit_name)})\n"
+    buf.write(f"# imported by cmmwb import from {_comment(src.name)} (QIF {doc.version}): "
+              f"{_comment(_coordinates_note(doc.unit_name, doc.mm_per_unit))}\n"
               "# nominal points are the closest points on the nominal elements; nx ny nz their outward "
               "normals; group is the feature\n")
     w.writerow(["id", "x_nom", "y_nom", "z_nom", "x", "y", "z", "nx", "ny", "nz", "group"])
@@ -131,6 +144,13 @@ def _write_recordings(doc, src: Path, out: Path, features: list[str] | None,
     with replacing(out) as tmp:
         tmp.write_text(buf.getvalue(), encoding="utf-8")
     return [out], lines
+
+
+def _coordinates_note(unit_name: str, mm_per_unit: float) -> str:
+    """What was done to the file's coordinates: nothing when they are in mm already."""
+    if mm_per_unit == 1.0:
+        return f"coordinates in mm, as in the file ({unit_name})"
+    return f"coordinates converted from {unit_name} to mm (x {mm_per_unit:g})"
 
 
 def _comment(text: str) -> str:

@@ -131,6 +131,24 @@ def _children(el, name: str):
     return [c for c in el if _local(c.tag) == name]
 
 
+def unique_ids(path: Path, root) -> None:
+    """Every ``id`` of a QIF document names one element (the QIF 3 schema's ``QIFIdUnique`` over
+    all elements): an id given twice is refused naming both elements, because every reference to
+    it (a feature's point set, a characteristic's feature, a measured value's item, ``--part``)
+    would silently reach one of them."""
+    first: dict[str, str] = {}
+    for el in root.iter():
+        i = el.get("id")
+        if i is None or not isinstance(el.tag, str):
+            continue
+        here = f"{_local(el.tag)} id={i}"
+        if i in first:
+            raise InputError(f"id {i} is used twice (also {first[i]}, the first): QIF ids name one element "
+                             "each, and a reference to this one would reach either", file=path,
+                             where=f"{here} (the second)")
+        first[i] = here
+
+
 def _numbers(path: Path, text: str | None, where: str) -> np.ndarray:
     try:
         v = np.array([float(t) for t in (text or "").split()], dtype=float)
@@ -141,25 +159,81 @@ def _numbers(path: Path, text: str | None, where: str) -> np.ndarray:
     return v
 
 
-def _linear_unit(path: Path, el, where: str) -> tuple[str, float] | None:
-    """(UnitName, mm per unit) of a ``LinearUnit`` element, or None."""
+#: unit names understood without a ``UnitConversion`` (QIF's defaults are mm and degrees): length
+#: units in mm, angle units in degrees
+LENGTH_UNITS = {"mm": 1.0, "millimeter": 1.0, "millimetre": 1.0, "millimeters": 1.0, "millimetres": 1.0,
+                "m": 1000.0, "meter": 1000.0, "metre": 1000.0, "meters": 1000.0, "metres": 1000.0,
+                "cm": 10.0, "centimeter": 10.0, "centimetre": 10.0, "um": 1e-3, "micrometer": 1e-3,
+                "micrometre": 1e-3, "micron": 1e-3, "inch": 25.4, "inches": 25.4, "in": 25.4,
+                "ft": 304.8, "foot": 304.8, "feet": 304.8}
+ANGLE_UNITS = {"deg": 1.0, "degree": 1.0, "degrees": 1.0, "rad": 180.0 / np.pi, "radian": 180.0 / np.pi,
+               "radians": 180.0 / np.pi}
+
+
+def _unit_conversion(path: Path, el, where: str, known: dict, si_scale: float, what: str) -> tuple[str, float] | None:
+    """(UnitName, cmmwb units per file unit) of a ``LinearUnit``/``AngularUnit`` element, or None.
+    ``UnitConversion/Factor`` converts to the SI unit (metre, radian) and ``si_scale`` turns that
+    into mm or degrees; without it the name must be one of ``known``.  A Factor that is not one
+    positive number, or an Offset, is an error naming the element."""
     if el is None:
         return None
-    name = (_child(el, "UnitName").text or "").strip() if _child(el, "UnitName") is not None else "?"
+    name_el = _child(el, "UnitName")
+    name = (name_el.text or "").strip() if name_el is not None else "?"
     conv = _child(el, "UnitConversion")
     if conv is None or _child(conv, "Factor") is None:
-        known = {"mm": 1.0, "millimeter": 1.0, "millimetre": 1.0, "m": 1000.0, "meter": 1000.0,
-                 "inch": 25.4, "in": 25.4}
         if name.lower() not in known:
-            raise InputError(f"length unit {name!r} without UnitConversion/Factor", file=path, where=where)
+            raise InputError(f"{what} unit {name!r} without UnitConversion/Factor (known without one: "
+                             f"{', '.join(sorted(known))})", file=path, where=where)
         return name, known[name.lower()]
     factor = _numbers(path, _child(conv, "Factor").text, f"{where}/UnitConversion/Factor")
     offset = _child(conv, "Offset")
     if offset is not None and np.any(_numbers(path, offset.text or "0", f"{where}/UnitConversion/Offset") != 0):
-        raise InputError("a length unit with an offset is not supported", file=path, where=where)
+        raise InputError(f"a {what} unit with an offset is not supported", file=path, where=where)
     if factor.size != 1 or factor[0] <= 0:
-        raise InputError("UnitConversion/Factor must be one positive number", file=path, where=where)
-    return name, float(factor[0]) * 1000.0
+        raise InputError("UnitConversion/Factor must be one positive number", file=path,
+                         where=f"{where}/UnitConversion/Factor")
+    out = float(factor[0]) * si_scale
+    if name.lower() in known and not np.isclose(out, known[name.lower()], rtol=1e-6):
+        raise InputError(f"UnitName {name!r} but UnitConversion/Factor {factor[0]:g} (a {name} is "
+                         f"{known[name.lower()] / si_scale:g}): which is it?", file=path,
+                         where=f"{where}/UnitConversion/Factor")
+    return name, out
+
+
+def _linear_unit(path: Path, el, where: str) -> tuple[str, float] | None:
+    """(UnitName, mm per unit) of a ``LinearUnit`` element, or None."""
+    return _unit_conversion(path, el, where, LENGTH_UNITS, 1000.0, "length")
+
+
+@dataclass(frozen=True)
+class FileUnits:
+    """The units of a QIF document's values (``FileUnits/PrimaryUnits``), the one reader of them
+    for points and characteristics: mm per file length unit, degrees per file angle unit."""
+
+    length_name: str
+    mm_per_unit: float
+    angle_name: str
+    deg_per_unit: float
+    stated: bool                      # the file has FileUnits/PrimaryUnits
+
+    @property
+    def text(self) -> str:
+        if not self.stated:
+            return "no FileUnits in the file: lengths read as mm, angles as degrees (QIF's defaults)"
+        return (f"lengths in {self.length_name} (x {self.mm_per_unit:g} -> mm), angles in {self.angle_name} "
+                f"(x {self.deg_per_unit:g} -> deg)")
+
+
+def file_units(path: Path, root) -> FileUnits:
+    """The :class:`FileUnits` of the document ``root`` (QIF defaults: mm, degrees)."""
+    fu = _child(root, "FileUnits")
+    pu = None if fu is None else _child(fu, "PrimaryUnits")
+    where = "FileUnits/PrimaryUnits"
+    lin = None if pu is None else _linear_unit(path, _child(pu, "LinearUnit"), f"{where}/LinearUnit")
+    ang = None if pu is None else _unit_conversion(path, _child(pu, "AngularUnit"), f"{where}/AngularUnit",
+                                                   ANGLE_UNITS, 180.0 / np.pi, "angle")
+    return FileUnits(lin[0] if lin else "mm", lin[1] if lin else 1.0, ang[0] if ang else "degree",
+                     ang[1] if ang else 1.0, pu is not None)
 
 
 def read_qif(path: str | Path) -> QifDocument:
@@ -176,12 +250,12 @@ def read_qif(path: str | Path) -> QifDocument:
         raise InputError(f"root element is {_local(root.tag)!r}, not QIFDocument", file=path)
     version = root.get("versionQIF", "?")
 
-    unit = None
+    units = file_units(path, root)
     fu = _child(root, "FileUnits")
-    if fu is not None and _child(fu, "PrimaryUnits") is not None:
-        unit = _linear_unit(path, _child(_child(fu, "PrimaryUnits"), "LinearUnit"),
-                            "FileUnits/PrimaryUnits/LinearUnit")
-    unit_name, mm = unit if unit else ("mm (QIF default: no FileUnits/PrimaryUnits/LinearUnit)", 1.0)
+    has_linear = fu is not None and _child(fu, "PrimaryUnits") is not None and \
+        _child(_child(fu, "PrimaryUnits"), "LinearUnit") is not None
+    unit_name = units.length_name if has_linear else "mm (QIF default: no FileUnits/PrimaryUnits/LinearUnit)"
+    mm = units.mm_per_unit
     doc = QifDocument(path, version, unit_name, mm)
 
     # names and nominals of the feature items
@@ -228,10 +302,14 @@ def read_qif(path: str | Path) -> QifDocument:
             dia = diameters.get(nominal_def.get(f.nominal_id, ""))
             if dia is not None:
                 f.nominal["Diameter"] = dia
+    unique_ids(path, root)      # after the point sets, whose own message says what a twice-used id breaks
     if not doc.sets:
+        other = ("; its characteristics: --out COPY.qif writes a copy with their uncertainties, --stand-in "
+                 "--out TASK.toml a characteristic task on a simulated stand-in part that cmmwb build decides "
+                 "(docs/import.md)") if _child(root, "Characteristics") is not None else ""
         raise InputError("no measured points (no MeasuredPointSet and no PointList/MeasurePoint): "
                          "cmmwb imports measured point sets; this file holds "
-                         + (", ".join(sorted({_local(c.tag) for c in root})) or "nothing"), file=path)
+                         + (", ".join(sorted({_local(c.tag) for c in root})) or "nothing") + other, file=path)
     doc.not_read.append("plans, characteristics and statistics are not read (cmmwb needs the points and "
                         "the nominal elements)")
     return doc
@@ -274,6 +352,9 @@ def _read_set(doc: QifDocument, el) -> None:
         N = _unit(path, N, where)
     comp = _child(el, "Compensated")
     radius = _child(el, "ProbeRadius")
+    if sid in doc.sets:
+        raise InputError(f"point set id {sid} is used twice (also {doc.sets[sid].where}, the first): a feature "
+                         "referring to it would get the other's points", file=path, where=f"{where} (the second)")
     doc.sets[sid] = PointSet(sid, P.reshape(-1, 3) * mm, N,
                              None if comp is None else (comp.text or "").strip() == "true",
                              None if radius is None else _radius(path, radius, where) * mm, where)
@@ -342,6 +423,9 @@ def _read_feature(doc: QifDocument, el, tag: str, items, nominal_def, definition
             comp = _child(mps[0], "Compensated")
             radius = _child(mps[0], "ProbeRadius")
             sid = f"feature{fid}"
+            if sid in doc.sets:
+                raise InputError(f"feature id {fid} is used twice (also {doc.sets[sid].where}, the first): its "
+                                 "points would be the other's", file=path, where=f"{where} (the second)")
             normals = None if any(n is None for n in N) else _unit(path, np.array(N), where)
             doc.sets[sid] = PointSet(sid, np.array(X) * doc.mm_per_unit, normals,
                                      None if comp is None else (comp.text or "").strip() == "true",

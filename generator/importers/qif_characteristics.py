@@ -46,8 +46,11 @@ from xml.etree import ElementTree as ET
 
 from defusedxml import ElementTree as DET
 
+from cmmwb.xlfuncs.limits import coordinate_problem
+
 from ..errors import InputError
 from ..workbook.guarded import read_bytes
+from .qif import file_units, unique_ids
 
 #: QIF characteristic kinds -> xlfuncs.characteristics types
 KIND_MAP = {
@@ -59,6 +62,8 @@ KIND_MAP = {
 }
 MATERIAL = {"NONE": "RFS", "REGARDLESS": "RFS", "MAXIMUM": "MMC", "LEAST": "LMC",
             "MMC": "MMC", "LMC": "LMC", "RFS": "RFS"}
+#: QIF kinds whose values are angles (the file's angular unit)
+ANGLE_KINDS = ("Angle", "AngleBetween")
 
 
 @dataclass
@@ -79,6 +84,19 @@ class Definition:
         """The cmmwb characteristic type, or None (not supported)."""
         return KIND_MAP.get(self.kind)
 
+    @property
+    def zone_problem(self) -> str | None:
+        """Why the ``ToleranceValue`` is not a zone the value can be decided against, or None: a
+        negative width (NIST's SMS Plate and Cover files have -0.13), or 0 regardless of feature
+        size (nothing could conform; 0 at MMC/LMC is a zero tolerance whose zone is the bonus)."""
+        if self.tolerance is None:
+            return None
+        if self.tolerance < 0:
+            return f"ToleranceValue {self.tolerance:g} is negative, which a zone width cannot be"
+        if self.tolerance == 0 and self.material_condition in (None, "RFS"):
+            return "ToleranceValue 0 regardless of feature size: a zone of width 0, nothing could conform"
+        return None
+
 
 @dataclass
 class Item:
@@ -87,6 +105,8 @@ class Item:
     definition: Definition
     nominal: float | None
     feature_ids: list[str] = field(default_factory=list)
+    #: the feature's side from its FeatureDefinition's InternalExternal: True a hole, False a pin
+    internal: bool | None = None
 
     @property
     def lsl(self) -> float | None:
@@ -128,6 +148,61 @@ class QifCharacteristics:
     units: str                         # how lengths and angles were read
     has_points: bool
     unsupported: dict[str, int]        # QIF kind -> number of definitions
+    mm_per_unit: float = 1.0           # the file's length unit in mm (qif.file_units)
+    deg_per_unit: float = 1.0          # the file's angle unit in degrees
+    length_unit: str = "mm"            # their names as the file gives them
+    angle_unit: str = "degree"
+
+    def unit_of(self, item: Item) -> str:
+        """The name of the file's unit of ``item``'s values."""
+        return self.angle_unit if self.is_angle(item) else self.length_unit
+
+    def is_angle(self, item: Item) -> bool:
+        return item.definition.kind in ANGLE_KINDS
+
+    def to_file_unit(self, item: Item, value: float) -> float:
+        """A value or u of ``item`` in mm (degrees for an angle) expressed in the file's unit."""
+        return value / (self.deg_per_unit if self.is_angle(item) else self.mm_per_unit)
+
+    def size_actual(self, part: Part, actual: Actual) -> Actual | None:
+        """The measured diameter of the same measured feature as ``actual`` (a position) in
+        ``part``: the measurement whose FeatureActualIds / FeatureMeasurementIds are the
+        position's, of a diameter with both limits; None when the part has none."""
+        if not actual.feature_ids:
+            return None
+        return next((b for b in part.actuals if b.item.definition.type == "diameter"
+                     and b.feature_ids == actual.feature_ids and b.item.lsl is not None
+                     and b.item.usl is not None), None)
+
+    def size_of(self, item: Item) -> Item | None:
+        """The diameter characteristic of the feature of the position ``item``, whose limits give
+        the bonus at MMC/LMC (ASME Y14.5-2018 5.8.1): measured on the same feature as the position
+        (NIST's SMS files: DIAMETER4, a pattern of four holes, measured on feature 34 like
+        POSITION1), else the diameter item of the same FeatureItemIds; None when the file has none."""
+        for p in self.parts:
+            for a in p.actuals:
+                if a.item is item:
+                    b = self.size_actual(p, a)
+                    if b is not None:
+                        return b.item
+        if len(item.feature_ids) != 1:
+            return None
+        return next((it for it in self.items if it.definition.type == "diameter"
+                     and it.feature_ids == item.feature_ids and it.lsl is not None and it.usl is not None), None)
+
+    def bonus_problem(self, item: Item) -> str | None:
+        """Why a position at MMC/LMC cannot carry its bonus, or None (RFS, or a size to take it from)."""
+        d = item.definition
+        if d.type != "position" or d.material_condition not in ("MMC", "LMC"):
+            return None
+        size = self.size_of(item)
+        if size is None:
+            return (f"at {d.material_condition} but the file has no diameter of its feature "
+                    f"({', '.join(item.feature_ids) or 'none named'}) to take the bonus from")
+        if item.internal is None:
+            return (f"at {d.material_condition}, size {size.name}, but the file does not say whether the feature is "
+                    "a hole or a pin (InternalExternal), which decides the MMC limit")
+        return None
 
     def table(self) -> list[dict]:
         """One row per (part, characteristic): name, QIF kind, cmmwb type, nominal,
@@ -144,8 +219,8 @@ class QifCharacteristics:
         return out
 
 
-def _local(tag: str) -> str:
-    return tag.rsplit("}", 1)[-1]
+def _local(tag) -> str:
+    return tag.rsplit("}", 1)[-1] if isinstance(tag, str) else ""
 
 
 def _child(el, name):
@@ -160,7 +235,10 @@ def _text(el, name):
     return None if c is None or c.text is None else c.text.strip()
 
 
-def _num(path, el, name, where, scale=1.0):
+def _num(path, el, name, where, scale=1.0, *, angle=False):
+    """The number of the child ``name`` of ``el`` times ``scale`` (to mm, or degrees for an
+    ``angle``), None without one; a length beyond the coordinate range (+-100 m) is refused like
+    every coordinate cmmwb reads (xlfuncs/limits.py)."""
     t = _text(el, name)
     if t is None:
         return None
@@ -170,32 +248,10 @@ def _num(path, el, name, where, scale=1.0):
         raise InputError(f"{name} is not a number: {t[:40]!r}", file=path, where=where) from None
     if not math.isfinite(v):
         raise InputError(f"{name} is not finite", file=path, where=where)
+    problem = None if angle else coordinate_problem(v * scale)
+    if problem:
+        raise InputError(f"{name} {t.strip()[:40]}: {problem}", file=path, where=where)
     return v * scale
-
-
-def _units(root) -> tuple[float, float, str]:
-    """(mm per file length unit, deg per file angle unit, description)."""
-    fu = _child(root, "FileUnits")
-    if fu is None:
-        return 1.0, 1.0, "no FileUnits in the file: lengths read as mm, angles as degrees"
-    pu = _child(fu, "PrimaryUnits")
-    lin, ang = 1.0, 1.0
-    desc = []
-    for key, unit in (("LinearUnit", "mm"), ("AngularUnit", "deg")):
-        el = None if pu is None else _child(pu, key)
-        if el is None:
-            continue
-        name = _text(el, "UnitName") or "?"
-        conv = _child(el, "UnitConversion")
-        f = _num(None, conv, "Factor", key) if conv is not None else None
-        if key == "LinearUnit":
-            lin = 1.0 if f is None and name.lower() in ("mm", "millimeter", "millimetre") else (
-                (f or 1.0) * 1000.0)
-        else:
-            ang = 1.0 if f is None and name.lower().startswith("deg") else (
-                math.degrees(f) if f is not None else 1.0)
-        desc.append(f"{key} {name}")
-    return lin, ang, ", ".join(desc) or "FileUnits without linear/angular units: mm, degrees"
 
 
 def read_characteristics(path: str | Path) -> QifCharacteristics:
@@ -209,7 +265,9 @@ def read_characteristics(path: str | Path) -> QifCharacteristics:
     if _local(root.tag) != "QIFDocument":
         raise InputError(f"not a QIF document (root element {_local(root.tag)!r})", file=path)
     ns = root.tag[1:].split("}")[0] if root.tag.startswith("{") else ""
-    mm, deg, units = _units(root)
+    fu = file_units(path, root)
+    unique_ids(path, root)
+    mm, deg, units = fu.mm_per_unit, fu.deg_per_unit, fu.text
     chars = _child(root, "Characteristics")
     if chars is None:
         raise InputError("the document has no Characteristics section", file=path)
@@ -218,13 +276,13 @@ def read_characteristics(path: str | Path) -> QifCharacteristics:
     for d in _child(chars, "CharacteristicDefinitions") or []:
         kind = _local(d.tag).replace("CharacteristicDefinition", "")
         where = f"CharacteristicDefinitions/{_local(d.tag)} id={d.get('id')}"
-        scale = deg if kind in ("Angle", "AngleBetween") else mm
+        scale = deg if kind in ANGLE_KINDS else mm
         tol = _child(d, "Tolerance")
         zs = _child(d, "ZoneShape")
         df = Definition(
             id=d.get("id"), kind=kind, name=_text(d, "Name") or d.get("id"),
-            lsl=None if tol is None else _num(path, tol, "MinValue", where, scale),
-            usl=None if tol is None else _num(path, tol, "MaxValue", where, scale),
+            lsl=None if tol is None else _num(path, tol, "MinValue", where, scale, angle=kind in ANGLE_KINDS),
+            usl=None if tol is None else _num(path, tol, "MaxValue", where, scale, angle=kind in ANGLE_KINDS),
             tolerance=_num(path, d, "ToleranceValue", where, mm),
             material_condition=MATERIAL.get(_text(d, "MaterialCondition") or "", None),
             diametral=zs is not None and _child(zs, "DiametricalZone") is not None,
@@ -240,8 +298,10 @@ def read_characteristics(path: str | Path) -> QifCharacteristics:
             raise InputError(f"nominal {n.get('id')} names an unknown definition {did!r}",
                              file=path, where="CharacteristicNominals")
         d = defs[did]
-        scale = deg if d.kind in ("Angle", "AngleBetween") else mm
-        nominals[n.get("id")] = (d, _num(path, n, "TargetValue", f"nominal {n.get('id')}", scale))
+        scale = deg if d.kind in ANGLE_KINDS else mm
+        nominals[n.get("id")] = (d, _num(path, n, "TargetValue", f"nominal {n.get('id')}", scale,
+                                         angle=d.kind in ANGLE_KINDS))
+    feature_items, measured_features, side = _features(root)
     items: dict[str, Item] = {}
     for it in _child(chars, "CharacteristicItems") or []:
         nid = _text(it, "CharacteristicNominalId")
@@ -250,7 +310,14 @@ def read_characteristics(path: str | Path) -> QifCharacteristics:
                              where="CharacteristicItems")
         d, target = nominals[nid]
         fids = [c.text.strip() for c in (_child(it, "FeatureItemIds") or []) if c.text]
-        items[it.get("id")] = Item(it.get("id"), _text(it, "Name") or d.name, d, target, fids)
+        missing = [f for f in fids if f not in feature_items]
+        if missing:
+            raise InputError(f"FeatureItemIds names feature {missing[0]}, which the file does not have (no "
+                             "FeatureItem with that id): its points and size would be another's or none",
+                             file=path, where=f"CharacteristicItems/CharacteristicItem id={it.get('id')}")
+        sides = {side.get(f) for f in fids}
+        items[it.get("id")] = Item(it.get("id"), _text(it, "Name") or d.name, d, target, fids,
+                                   sides.pop() if len(sides) == 1 else None)
     parts = []
     for mr in root.iter():
         if _local(mr.tag) != "MeasurementResults":
@@ -265,10 +332,15 @@ def read_characteristics(path: str | Path) -> QifCharacteristics:
                 raise InputError(f"actual {a.get('id')} names an unknown item {iid!r}", file=path,
                                  where=f"MeasurementResults id={mr.get('id')}")
             it = items[iid]
-            scale = deg if it.definition.kind in ("Angle", "AngleBetween") else mm
+            scale = deg if it.definition.kind in ANGLE_KINDS else mm
             st = _child(a, "Status")
             fm = _child(a, "FeatureMeasurementIds") or _child(a, "FeatureActualIds") or []
-            actuals.append(Actual(it, _num(path, a, "Value", f"actual {a.get('id')}", scale),
+            here = f"MeasurementResults id={mr.get('id')}/{_local(a.tag)} id={a.get('id')}"
+            missing = [c.text.strip() for c in fm if c.text and c.text.strip() not in measured_features]
+            if missing:
+                raise InputError(f"names the measured feature {missing[0]}, which the file does not have (no "
+                                 "FeatureMeasurement or FeatureActual with that id)", file=path, where=here)
+            actuals.append(Actual(it, _num(path, a, "Value", here, scale, angle=it.definition.kind in ANGLE_KINDS),
                                   None if st is None else _text(st, "CharacteristicStatusEnum"),
                                   [c.text.strip() for c in fm if c.text]))
         ins = _child(mr, "InspectionStatus")
@@ -278,7 +350,29 @@ def read_characteristics(path: str | Path) -> QifCharacteristics:
                      for e in root.iter())
     return QifCharacteristics(path=path, version=root.get("versionQIF", "?"), namespace=ns,
                               items=list(items.values()), parts=parts, units=units,
-                              has_points=has_points, unsupported=unsupported)
+                              has_points=has_points, unsupported=unsupported, mm_per_unit=mm, deg_per_unit=deg,
+                              length_unit=fu.length_name, angle_unit=fu.angle_name)
+
+
+def _features(root) -> tuple[set[str], set[str], dict[str, bool | None]]:
+    """(ids of the FeatureItems, ids of the feature measurements/actuals, FeatureItem id -> its
+    side: True INTERNAL, False EXTERNAL, None not said) of the document."""
+    items, measured, item_nominal, nominal_def, definition_side = set(), set(), {}, {}, {}
+    for el in root.iter():
+        tag, fid = _local(el.tag), el.get("id")
+        if not fid:
+            continue
+        if tag.endswith("FeatureItem"):
+            items.add(fid)
+            item_nominal[fid] = _text(el, "FeatureNominalId")
+        elif tag.endswith(("FeatureMeasurement", "FeatureActual")):
+            measured.add(fid)
+        elif tag.endswith("FeatureNominal"):
+            nominal_def[fid] = _text(el, "FeatureDefinitionId")
+        elif tag.endswith("FeatureDefinition"):
+            definition_side[fid] = {"INTERNAL": True, "EXTERNAL": False}.get(_text(el, "InternalExternal") or "")
+    side = {i: definition_side.get(nominal_def.get(n or "") or "") for i, n in item_nominal.items()}
+    return items, measured, side
 
 
 def decimal_text(u: float, digits: int = 3) -> str:
@@ -290,11 +384,15 @@ def decimal_text(u: float, digits: int = 3) -> str:
     return f"{u:.{places}f}"
 
 
-def write_uncertainties(src: str | Path, u_by_item: dict[str, float], out: str | Path) -> int:
+def write_uncertainties(src: str | Path, u_by_item: dict[str, float], out: str | Path,
+                        sources: dict[str, str] | None = None, header: str | None = None) -> int:
     """A copy of the QIF document ``src`` with ``combinedUncertainty`` (in the value's unit of
     the file) on the Value of every characteristic actual whose item is in ``u_by_item``;
-    returns the number of values annotated.  The rest of the document is unchanged in content
-    (ElementTree re-serialises it; the namespace stays the default one)."""
+    returns the number of values annotated.  ``sources``: per item, where its u comes from, written
+    as an XML comment just before each annotated Value (``<!-- cmmwb: combinedUncertainty from a
+    simulated stand-in part ... -->``); ``header``: a comment at the start of the document.  The
+    rest of the document is unchanged in content (ElementTree re-serialises it; the namespace
+    stays the default one; comments are invisible to the schema)."""
     src = Path(src)
     data = read_bytes(src, "import")
     root = DET.fromstring(data)
@@ -302,9 +400,9 @@ def write_uncertainties(src: str | Path, u_by_item: dict[str, float], out: str |
     if ns:
         ET.register_namespace("", ns)
     n = 0
-    for a in root.iter():
-        if not _local(a.tag).endswith(("CharacteristicActual", "CharacteristicMeasurement")):
-            continue
+    actuals = [a for a in root.iter()
+               if isinstance(a.tag, str) and _local(a.tag).endswith(("CharacteristicActual", "CharacteristicMeasurement"))]
+    for a in actuals:
         iid = _text(a, "CharacteristicItemId")
         v = _child(a, "Value")
         if iid in u_by_item and v is not None:
@@ -312,8 +410,19 @@ def write_uncertainties(src: str | Path, u_by_item: dict[str, float], out: str |
             if not (math.isfinite(u) and u >= 0):
                 raise ValueError(f"uncertainty of item {iid} must be finite and >= 0")
             v.set("combinedUncertainty", decimal_text(u))
+            if sources and iid in sources:
+                a.insert(list(a).index(v), ET.Comment(f" cmmwb: combinedUncertainty {_comment(sources[iid])} "))
             n += 1
+    if header:
+        root.insert(0, ET.Comment(f" {_comment(header)} "))
     tree = ET.ElementTree(root)
     out = Path(out)
     tree.write(out, encoding="utf-8", xml_declaration=True)
     return n
+
+
+def _comment(text: str) -> str:
+    """Text safe inside an XML comment (no '--', no trailing '-')."""
+    while "--" in text:
+        text = text.replace("--", "-")
+    return text.rstrip("-")

@@ -105,6 +105,7 @@ def simulate(doc: QifCharacteristics, seed: int = 1):
     b.add("C", "plane", C, np.tile([0.0, -1.0, 0.0], (len(C), 1)))
     frames = [ch.FrameSpec("ABC", "A", "B", "C")]
     chars, names, skipped = [], {}, []
+    holes: dict[str, tuple[float, float]] = {}      # diameter item id -> its hole's place
     for k, it in enumerate(doc.items):
         d = it.definition
         cname = f"q{it.id}"
@@ -112,19 +113,30 @@ def simulate(doc: QifCharacteristics, seed: int = 1):
         if t is None:
             skipped.append((it.name, f"QIF {d.kind} is not a cmmwb characteristic"))
             continue
-        mid = it.nominal if it.nominal is not None else (
-            0.5 * (d.lsl + d.usl) if d.lsl is not None and d.usl is not None else None)
+        tol = None if d.zone_problem else d.tolerance     # a negative or RFS-zero zone decides nothing
+        mid = _middle(it)
         if t == "flatness":
-            chars.append(ch.CharacteristicSpec(cname, "flatness", ("A",), method="MZ",
-                                               tolerance_mm=d.tolerance))
+            chars.append(ch.CharacteristicSpec(cname, "flatness", ("A",), method="MZ", tolerance_mm=tol))
         elif t == "diameter":
             x, y = b.place()
             b.hole(f"H{it.id}", x, y, mid)
-            chars.append(ch.CharacteristicSpec(cname, "diameter", (f"H{it.id}",), lsl=d.lsl, usl=d.usl))
+            holes[it.id] = (x, y)
+            chars.append(ch.CharacteristicSpec(cname, "diameter", (f"H{it.id}",), lsl=it.lsl, usl=it.usl))
+        elif t == "position" and d.diametral and doc.size_of(it) is not None and not doc.bonus_problem(it):
+            # at MMC/LMC: the hole of its size characteristic, the bonus from that size (ASME Y14.5 5.8.1)
+            size = doc.size_of(it)
+            if size.id not in holes:
+                x, y = b.place()
+                b.hole(f"H{size.id}", x, y, _middle(size))
+                holes[size.id] = (x, y)
+            chars.append(ch.CharacteristicSpec(cname, t, (f"H{size.id}",), frame="ABC", zone="diametral",
+                                               tolerance_mm=tol, nominal_position_mm=holes[size.id],
+                                               material_condition=d.material_condition, size=f"q{size.id}",
+                                               internal=bool(it.internal)))
         elif t in ("perpendicularity", "position") and d.diametral:
             x, y = b.place()
             b.hole(f"H{it.id}", x, y, 10.0)
-            kw = dict(frame="ABC", zone="diametral", tolerance_mm=d.tolerance)
+            kw = dict(frame="ABC", zone="diametral", tolerance_mm=tol)
             if t == "position":
                 kw["nominal_position_mm"] = (x, y)
             chars.append(ch.CharacteristicSpec(cname, t, (f"H{it.id}",), **kw))
@@ -132,19 +144,26 @@ def simulate(doc: QifCharacteristics, seed: int = 1):
             x, y = b.place()
             b.cone(f"K{it.id}", x, y, half_deg=(mid or 90.0) / 2)
             chars.append(ch.CharacteristicSpec(cname, "cone_angle", (f"K{it.id}",), nominal=mid,
-                                               lsl=d.lsl, usl=d.usl))
+                                               lsl=it.lsl, usl=it.usl))
         elif t == "distance" and mid is not None:
             x, y = b.place()
             b.slot += int(np.ceil(mid / PITCH_MM))
             b.hole(f"D{it.id}a", x, y, 4.0)
             b.hole(f"D{it.id}b", x + mid, y, 4.0)
             chars.append(ch.CharacteristicSpec(cname, "distance", (f"D{it.id}a", f"D{it.id}b"),
-                                               nominal=mid, lsl=d.lsl, usl=d.usl))
+                                               nominal=mid, lsl=it.lsl, usl=it.usl))
         else:
             skipped.append((it.name, f"{t} is not simulated on the stand-in plate"))
             continue
         names[it.id] = cname
     return (np.vstack(b.X), np.vstack(b.N), b.features, frames, chars, names, skipped)
+
+
+def _middle(it) -> float | None:
+    """The nominal of an item: its TargetValue, else the middle of its limits (mm or deg)."""
+    if it.nominal is not None:
+        return it.nominal
+    return 0.5 * (it.lsl + it.usl) if it.lsl is not None and it.usl is not None else None
 
 
 def uncertainties(doc: QifCharacteristics, seed: int = 1):
@@ -155,10 +174,11 @@ def uncertainties(doc: QifCharacteristics, seed: int = 1):
     jf = ch.fit_features(X, N, feats)
     res = ch.evaluate(jf, frames, chars, pc.V_X_components(cloud, PARAMS))
     by = {r.name: r for r in res}
+    items = {it.id: it for it in doc.items}
     u = {}
     for iid, cname in names.items():
         r = by[cname]
-        u[iid] = r.u * 1e-3 if r.unit == "mm" else r.u * 1e-6 * 180.0 / np.pi
+        u[iid] = doc.to_file_unit(items[iid], r.u * 1e-3 if r.unit == "mm" else r.u * 1e-6 * 180.0 / np.pi)
     return u, res, skipped
 
 
@@ -205,17 +225,56 @@ def from_points(src: Path, doc: QifCharacteristics) -> tuple[dict[str, float], l
         cloud = pc.PointCloud(ps.X_mm, N, np.zeros(len(ps.X_mm), int), PROBES)
         r = ch.evaluate(ch.fit_features(ps.X_mm, N, [spec]), [], [c],
                         pc.V_X_components(cloud, PARAMS))[0]
-        u[a.item.id] = r.u * 1e-3
+        u[a.item.id] = doc.to_file_unit(a.item, r.u * 1e-3)
         lines.append(f"{a.item.name}: u from the file's {len(ps.X_mm)} points of {f.name} "
                      f"({note}; {'tip centres' if ps.compensated is False else 'surface points'})")
     return u, lines
+
+
+#: what a u from the stand-in part is, in the report and in the QIF copy
+STAND_IN = ("from a simulated stand-in part (the file's nominals on a plate, not this part's points; "
+            "MPE1-like model of Forbes 2025 Table 3; generator/importers/qif_simulation.py)")
+
+
+def item_lines(doc: QifCharacteristics, u: dict[str, float], source: dict[str, str]) -> list[str]:
+    """One report line per characteristic: tolerance (and why it cannot be decided against),
+    material condition and bonus, every value of the first part (an item measured several times
+    per part shows each), u in the file's unit and where it comes from."""
+    first = doc.parts[0] if doc.parts else None
+    lines = []
+    for it in doc.items:
+        d = it.definition
+        angle = doc.is_angle(it)      # values in deg, else mm (converted from the file's units)
+        unit = "deg" if angle else "mm"
+        tol = (f"zone {d.tolerance:g} {unit}" if d.tolerance is not None else
+               f"{it.lsl:g} .. {it.usl:g} {unit}" if it.lsl is not None and it.usl is not None else "-")
+        if d.zone_problem:
+            tol += f" ({d.zone_problem}; not decided)"
+        if d.type == "position" and d.material_condition in ("MMC", "LMC"):
+            why = doc.bonus_problem(it)
+            size = doc.size_of(it)
+            tol += (f" {why}; not decided at {d.material_condition} (RFS would ignore "
+                    "the bonus)" if why else
+                    f" at {d.material_condition}, bonus from {size.name} "
+                    f"({'hole' if it.internal else 'pin'})")
+        vals = [a for a in first.actuals if a.item is it] if first else []
+        shown = ", ".join("-" if a.value is None else f"{a.value:g} {unit}" + (f" {a.status}" if a.status else "")
+                          for a in vals) or "-"
+        count = f" ({len(vals)} measurements)" if len(vals) > 1 else ""
+        # u as cmmwb states it everywhere (µm, µrad); the copy carries it in the file's own unit
+        uu = "-" if it.id not in u else (
+            (f"u = {np.deg2rad(u[it.id]) * 1e6:.3g} µrad" if angle else f"u = {u[it.id] * 1e3:.3g} µm")
+            + f" ({source.get(it.id, '')})")
+        lines.append(f"{it.name} [{d.kind}]: tolerance {tol}; part {first.id if first else '-'}{count}: {shown}; {uu}")
+    return lines
 
 
 def annotate_file(src: Path, out: Path, *, force: bool = False) -> tuple[list[Path], list[str]]:
     """``cmmwb import FILE.qif --out COPY.qif``: the characteristics of ``src`` listed, their u
     from the file's own points where a characteristic is of one measured feature with points
     (:func:`from_points`), else from the stand-in measurement of this module, and a copy with
-    ``combinedUncertainty`` on every supported measured value."""
+    ``combinedUncertainty`` (in the file's own unit) on every supported measured value, each
+    preceded by a comment saying where its u comes from."""
     src, out = Path(src), Path(out)
     if out.exists() and not force:
         raise InputError("exists (use --force to replace it)", file=out)
@@ -223,8 +282,12 @@ def annotate_file(src: Path, out: Path, *, force: bool = False) -> tuple[list[Pa
     u, res, skipped = uncertainties(doc)
     u_pts, pts_lines = from_points(src, doc)
     u.update(u_pts)
+    source = {iid: ("from the file's own points" if iid in u_pts else STAND_IN) for iid in u}
+    header = (f"cmmwb import: combinedUncertainty added to {len(u)} characteristics, "
+              f"{len(u_pts)} from the file's own points, {len(u) - len(u_pts)} {STAND_IN}; "
+              f"standard uncertainties in the file's own units ({doc.length_unit}, {doc.angle_unit}); no meanError")
     with replacing(out, ".qif.tmp") as tmp:
-        n = write_uncertainties(src, u, tmp)
+        n = write_uncertainties(src, u, tmp, sources=source, header=header)
     report = [f"QIF {doc.version}: {len(doc.items)} characteristics, {len(doc.parts)} measured "
               f"part(s); units: {doc.units}",
               "points: " + (f"the file has points: {len(u_pts)} characteristics of one measured "
@@ -232,20 +295,14 @@ def annotate_file(src: Path, out: Path, *, force: bool = False) -> tuple[list[Pa
                             if doc.has_points else
                             "none in the file -- u from a simulated measurement of a stand-in "
                             "part with the file's nominals (generator/importers/qif_simulation.py)"),
-              f"combinedUncertainty written on {n} measured values"]
+              f"combinedUncertainty written on {n} measured values",
+              f"in the file's own units ({doc.length_unit}, {doc.angle_unit}); a comment before each value says "
+              "where its u comes from"]
     report += [f"not supported: {k} ({v} definition{'s' if v > 1 else ''})"
                for k, v in sorted(doc.unsupported.items())]
     from_file = {it.name for it in doc.items if it.id in u_pts}
     report += [f"not simulated: {name} ({why})" for name, why in skipped if name not in from_file]
     report += pts_lines
-    first = {a.item.id: a for a in doc.parts[0].actuals} if doc.parts else {}
-    for it in doc.items:
-        d = it.definition
-        tol = (f"zone {d.tolerance:g}" if d.tolerance is not None else
-               f"{it.lsl:g} .. {it.usl:g}" if it.lsl is not None and it.usl is not None else "-")
-        a = first.get(it.id)
-        val = "-" if a is None or a.value is None else f"{a.value:g} {a.status or ''}".strip()
-        uu = "-" if it.id not in u else f"u = {u[it.id]:.3g}"
-        report.append(f"{it.name} [{d.kind}]: tolerance {tol}; part {doc.parts[0].id if doc.parts else '-'}: "
-                      f"{val}; {uu}")
+    report += item_lines(doc, u, {iid: ("from the file's points" if iid in u_pts else "stand-in part")
+                                  for iid in u})
     return [out], report

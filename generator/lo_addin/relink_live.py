@@ -169,9 +169,12 @@ def main(argv=None) -> int:
         return 2
     proc, desktop = _connect(a.profile, a.cache, f"cmmwb_relink_{os.getpid()}")
     timing = {}
+    doc = None
     try:
         t0 = time.perf_counter()
         doc = desktop.loadComponentFromURL(book.as_uri(), "_blank", 0, (_pv("Hidden", True),))
+        if doc is None or not doc.Sheets.hasByName(LIVE):
+            raise SystemExit(f"{book.name}: no {LIVE} sheet (not a large cmmwb workbook)")
         timing["load_s"] = time.perf_counter() - t0
         t0 = time.perf_counter()
         n = 0 if a.no_relink else relink(doc)
@@ -189,8 +192,16 @@ def main(argv=None) -> int:
                 part = Path(tmp) / out.name
                 doc.storeToURL(part.as_uri(), (_pv("FilterName", "calc8"),))
                 part.replace(out)
-        doc.close(True)
+    except SystemExit:
+        raise
+    except Exception as e:   # UNO errors: one line for cmmwb's message, not a traceback
+        raise SystemExit(f"{type(e).__name__}: {str(e).splitlines()[0] if str(e) else ''}") from None
     finally:
+        if doc is not None:     # closed on every path: LibreOffice removes its lock file
+            try:
+                doc.close(True)
+            except Exception:
+                pass
         try:
             desktop.terminate()
         except Exception:

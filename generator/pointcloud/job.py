@@ -19,8 +19,8 @@ from cmmwb.xlfuncs.model.hyperparameters import in_table
 from .. import __version__
 from ..errors import InputError, model_errors_named
 from ..quantities import Cells, Quantity, ToleranceKeys, Verdict, unique_labels
-from ..taskcloud import points_source, read_point_cloud
-from ..taskfile import COMMON_TABLES, check_keys, number, string, table, task_kind_and_name, text_list
+from ..taskcloud import MPE, points_source, read_mpe, read_point_cloud
+from ..taskfile import COMMON_TABLES, check_keys, number, place, string, table, task_kind_and_name, text_list
 from ..taskkind import always_exact, no_type_a
 from ..workbook.book import RESULTS, Book, BookAdditions
 from ..workbook.xlref import Block, block, cell
@@ -32,15 +32,6 @@ EXAMPLES = ["stepgauge_I_MPE1.toml", "stepgauge_I_MPE2.toml",
 #: the task-kind contract's hooks (generator.taskkind): exact at every size, no type A inputs
 force_exact = always_exact
 add_type_a = no_type_a
-
-
-@dataclass
-class MPE:
-    A_um: float
-    B_mm: float
-    K: float
-    P_mm: float
-    L_max_mm: float
 
 
 @dataclass
@@ -66,15 +57,9 @@ def load(path: Path, doc: dict) -> Task:
     cloud, params, pts = read_point_cloud(path, doc)
     source = points_source(doc)
     notes = text_list(path, doc["task"], "task", "notes")
-    mpe = None
     K = number(path, doc["task"], "task", "K", 2.0, positive=True)
-    if "mpe" in doc:
-        t = table(path, doc, "mpe")
-        check_keys(path, t, "mpe", {"A_um", "B_mm", "K", "P_mm", "L_max_mm"})
-        longest = float(np.max(np.linalg.norm([p.offset_mm for p in cloud.probes], axis=1)))
-        mpe = MPE(number(path, t, "mpe", "A_um", positive=True), number(path, t, "mpe", "B_mm", positive=True),
-                  number(path, t, "mpe", "K", 2.0, positive=True), number(path, t, "mpe", "P_mm", longest, lo=0.0),
-                  number(path, t, "mpe", "L_max_mm", 1000.0, positive=True))
+    mpe = read_mpe(path, doc, cloud.probes)
+    if mpe is not None:
         K = mpe.K
     index = {lab: i for i, lab in enumerate(cloud.labels)}
     raw = doc.get("distances")
@@ -90,6 +75,7 @@ def load(path: Path, doc: dict) -> Task:
     else:
         if not isinstance(raw, list) or not all(isinstance(d, dict) for d in raw):
             raise InputError("must be a list of {from, to} tables", file=path, where="[[distances]]")
+        listed: dict[frozenset, str] = {}
         for n, d in enumerate(raw, start=1):
             section = f"[[distances]] #{n}"
             check_keys(path, d, section, {"from", "to", "group"})
@@ -105,6 +91,12 @@ def load(path: Path, doc: dict) -> Task:
             for j in targets:
                 if j == index[a]:
                     raise InputError("a distance needs two different points", file=path, where=section)
+                pair = frozenset((index[a], j))
+                if pair in listed:
+                    raise InputError(f"the distance {a}→{cloud.labels[j]} is listed already, at "
+                                     f"{place(path, listed[pair])}; each distance once (a tolerance or "
+                                     "a plot would not know which)", file=path, where=section)
+                listed[pair] = section
                 pairs.append((index[a], j))
                 groups.append(g)
     if not pairs:

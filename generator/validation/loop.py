@@ -50,21 +50,22 @@ def with_parameters(task: Path, params: dict, out: Path, note: str) -> Path:
     return out
 
 
-def prepare(out_dir: Path) -> dict[str, Path]:
+def prepare(out_dir: Path, force: bool = False) -> dict[str, Path]:
     """The loop's inputs into ``out_dir``: the verification recordings (``iso.csv``,
     ``plate.csv``), the validation set (``validation/``: its tasks with the machine's truth,
     ``results.csv``) and the lab's starting tasks with MPE1 (``start_lengths.toml``,
-    ``start_features.toml``)."""
+    ``start_features.toml``); ``force``: files edited since an earlier run wrote them are replaced
+    (kept as ``NAME.bak``)."""
     out_dir = Path(out_dir)
     iso = sm.simulate(sm.iso10360(PROBES), TRUTH, {}, seed=SEEDS["iso"])
     plate = sm.simulate(sm.ballplate(PROBES, passes=4), TRUTH, {}, seed=SEEDS["plate"])
-    with Staging(out_dir) as tmp:
+    with Staging(out_dir, force=force) as tmp:
         write_recordings(iso, tmp / "iso.csv", comments=["cmmwb demo (validation loop): ISO 10360-2 lengths, "
                                                          "three styli, the simulated machine"])
         write_recordings(plate, tmp / "plate.csv", comments=["cmmwb demo (validation loop): ball plate, four "
                                                              "passes, the simulated machine"])
     write_set(out_dir / "validation", WORKPIECES, TRUTH, PROBES, {}, SEEDS["validation"], 2,
-              "the simulated machine of generator/validation/loop.py")
+              "the simulated machine of generator/validation/loop.py", force=force)
     mpe1 = {k: float(getattr(MPE1, k)) for k in in_table("parameters")}
     note = "the lab's starting model: Forbes 2025 Table 3 MPE1 (type B)"
     files = {"iso": out_dir / "iso.csv", "plate": out_dir / "plate.csv",
@@ -76,27 +77,27 @@ def prepare(out_dir: Path) -> dict[str, Path]:
     return files
 
 
-def run_loop(out_dir: Path, *, workbook: bool = True, profiles: str = "no") -> dict:
+def run_loop(out_dir: Path, *, workbook: bool = True, profiles: str = "no", force: bool = False) -> dict:
     """The loop into ``out_dir``: validate the starting model, calibrate on the verification
     recordings, validate the fitted model; returns the three results.  ``profiles``: those of
-    ``cmmwb calibrate`` (``no`` by default here: they take five times the fit, about 60 s)."""
+    ``cmmwb calibrate`` (``no`` by default here: they take five times the fit, about 60 s); ``force``: as :func:`prepare`'s."""
     from ..calibration.run import run_calibrate
     from ..diagnosis.run import load_model
     from .run import run_validate
 
     out_dir = Path(out_dir)
-    f = prepare(out_dir)
+    f = prepare(out_dir, force=force)
     before, _ = run_validate(f["results"], [f["start_lengths"], f["start_features"]], out_dir / "validate_start",
-                             workbook=workbook)
+                             workbook=workbook, force=force)
     model, label = load_model(str(f["start_lengths"]), None)
     cal, _ = run_calibrate([f["iso"], f["plate"]], model, out_dir / "calibrate", task_path=f["start_lengths"],
-                           task_label=label, workbook=workbook, profiles=profiles)
+                           task_label=label, workbook=workbook, profiles=profiles, force=force)
     fitted_lengths = out_dir / "calibrate" / "fitted.toml"
     fitted_features = with_parameters(f["start_features"], cal["fitted_parameters"],
                                       out_dir / "validation" / "fitted_features.toml",
                                       "[parameters] of calibrate/fitted.toml (cmmwb calibrate on iso.csv, plate.csv)")
     after, _ = run_validate(f["results"], [fitted_lengths, fitted_features], out_dir / "validate_fitted",
-                            workbook=workbook)
+                            workbook=workbook, force=force)
     # the truth where it differs from MPE1 (sigma_R_um, sigma_ET_um, lambda_ET_mm)
     summary = {"truth": {k: float(getattr(TRUTH, k)) for k in in_table("parameters")
                          if getattr(TRUTH, k) != getattr(MPE1, k)},
@@ -105,13 +106,16 @@ def run_loop(out_dir: Path, *, workbook: bool = True, profiles: str = "no") -> d
     return {"before": before, "calibration": cal, "after": after}
 
 
-def demo(out_dir: Path) -> None:
-    """``cmmwb demo``: the loop, with what each step says."""
+def demo(out_dir: Path, verbose: bool = True, force: bool = False) -> list[Path]:
+    """``cmmwb demo``: the loop into ``out_dir``, with what each step says when ``verbose``;
+    returns the workbooks written."""
     import time
 
     t = time.perf_counter()
-    print(f"\n[validate] the loop a lab runs: recordings -> calibrate -> fitted task -> validate -> {out_dir}/")
-    r = run_loop(out_dir)
-    print(f"  the starting model (MPE1): {r['before']['summary']}")
-    print(f"  calibrate (iso.csv, plate.csv): {r['calibration']['summary']}")
-    print(f"  the fitted model: {r['after']['summary']}  ({time.perf_counter() - t:.1f} s)")
+    say = print if verbose else (lambda *a, **k: None)
+    say(f"\n[validate] the loop a lab runs: recordings -> calibrate -> fitted task -> validate -> {out_dir}/")
+    r = run_loop(out_dir, force=force)
+    say(f"  the starting model (MPE1): {r['before']['summary']}")
+    say(f"  calibrate (iso.csv, plate.csv): {r['calibration']['summary']}")
+    say(f"  the fitted model: {r['after']['summary']}  ({time.perf_counter() - t:.1f} s)")
+    return sorted(Path(out_dir).rglob("*.xlsx"))

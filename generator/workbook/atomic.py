@@ -111,6 +111,12 @@ def _signals_held():
             signal.raise_signal(pending[0])
 
 
+#: the output folders whose commit completed in this process: a signal that ends the command after
+#: it (held back during the commit, or arriving just after) is then said to have come after the
+#: outputs were written (generator/cli/program.py), not as if nothing had been written
+COMMITTED: list[Path] = []
+
+
 class Staging:
     """A private folder inside DIR; its files move into DIR only when the whole run succeeded.
 
@@ -180,6 +186,7 @@ class Staging:
                     with _locked(self.out_dir):
                         self._commit()
                         ok = True
+                        COMMITTED.append(self.out_dir)
             except OSError as e:         # the commit could not write (full disk, ...)
                 if not self._writing_failed(e):
                     raise

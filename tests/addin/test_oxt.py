@@ -201,3 +201,66 @@ def test_live_addin_of_a_feature_workbook_computes_in_libreoffice(tmp_path, inst
             assert live.get(cell) == e, cell
         else:
             assert close(live.get(cell), float(e), rel=1e-9, floor=floor), f"{cell}: {live.get(cell)!r} != {e!r}"
+
+
+# -- relink: the input checked before LibreOffice starts, one message, nothing left behind ---------
+
+@pytest.fixture(scope="module")
+def large_book(tmp_path_factory):
+    return _small_large_book(tmp_path_factory.mktemp("large"))
+
+
+def _relink_refused(capsys, book: Path, out: Path, *words: str) -> None:
+    import tempfile
+
+    from tests.helpers.files import assert_clear_failure
+
+    before = sorted(p.name for p in book.parent.iterdir())
+    with tempfile.TemporaryDirectory() as profile:          # an empty profile: no extension installed
+        code = main(["addin", "relink", str(book), "--out", str(out), "--profile", profile])
+    assert_clear_failure(code, capsys.readouterr().err.strip(), book.name if "folder" not in words[0] else out.name,
+                         list(words))
+    assert sorted(p.name for p in book.parent.iterdir()) == before      # no .~lock.*#, no output
+    assert not out.exists()
+
+
+def test_relink_runs_the_workbook_guard_first(tmp_path, capsys, large_book):
+    """A macro workbook was relinked by LibreOffice without a word."""
+    book = tmp_path / "plate.xlsx"
+    with zipfile.ZipFile(large_book) as src, zipfile.ZipFile(book, "w", zipfile.ZIP_DEFLATED) as dst:
+        for info in src.infolist():
+            dst.writestr(info, src.read(info))
+        dst.writestr("xl/vbaProject.bin", b"\xd0\xcf\x11\xe0 macros")
+    _relink_refused(capsys, book, tmp_path / "plate.ods", "vbaProject")
+
+
+def test_relink_of_a_csv_named_xlsx(tmp_path, capsys):
+    book = tmp_path / "points.xlsx"
+    book.write_text("id,x,y,z\nA,0,0,0\n", encoding="utf-8")
+    _relink_refused(capsys, book, tmp_path / "points.ods", "not an .xlsx file")
+
+
+def test_relink_of_a_book_without_live_addin(tmp_path, capsys):
+    """A workbook of native size has nothing to relink (was an 11-line UNO traceback)."""
+    from cmmwb.generator.cli import build_task
+
+    from tests.helpers.tasks import write_random_task
+    build_task(write_random_task(tmp_path, seed=3), tmp_path / "out", plots=False)
+    _relink_refused(capsys, tmp_path / "out" / "random_3.xlsx", tmp_path / "r.ods", "has no Live_addin sheet")
+
+
+def test_relink_into_a_folder_that_does_not_exist(tmp_path, capsys, large_book):
+    book = tmp_path / "plate.xlsx"
+    book.write_bytes(large_book.read_bytes())
+    _relink_refused(capsys, book, tmp_path / "missing" / "plate.ods", "folder does not exist")
+
+
+@pytest.mark.libreoffice
+def test_relink_failing_in_libreoffice_leaves_no_lock_file_beside_the_book(tmp_path, capsys, large_book):
+    """LibreOffice works on a private copy: its .~lock.plate.xlsx# never appears beside the user's
+    book, and its failure is one line (the extension is not installed in an empty profile)."""
+    if not _lo_python_ready():
+        pytest.skip("needs LibreOffice's Python with uno and numpy")
+    book = tmp_path / "plate.xlsx"
+    book.write_bytes(large_book.read_bytes())
+    _relink_refused(capsys, book, tmp_path / "plate.ods", "extension is not installed")

@@ -191,4 +191,4 @@ def test_crossed_size_limits_name_the_characteristic(tmp_path):
         c["lsl"], c["usl"] = 10.05, 10.0
     with pytest.raises(InputError, match="must be below") as err:
         build(tmp_path, PLATE, edit)
-    assert "[[characteristics]] dia_H2" in str(err.value)
+    assert "[[characteristics]] #2 lsl (line" in str(err.value) and "dia_H2: the lower limit" in str(err.value)

@@ -11,6 +11,9 @@ Themed helpers live beside this module:
 - ``tests.helpers.budget``: Wojtyła/Płowucha 2023, the steering knuckle and Tables 1-9 as printed;
 - ``tests.helpers.decision``: building a task and comparing its Decision/Summary cells per engine;
 - ``tests.helpers.files``: the one-clear-message check of bad input;
+- ``tests.helpers.documented``: the commands the documents and the ``--help`` texts show, and
+  their check against the command line's parsers;
+- ``tests.helpers.qif``: a small QIF results file with point normals (the ``import`` examples' part);
 - ``tests.helpers.openxml``: the Open XML validator and its documented false positives.
 """
 

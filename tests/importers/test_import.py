@@ -121,6 +121,20 @@ def test_inch_files_are_converted_to_mm(tmp_path):
     assert np.allclose(inch.sets["262"].X_mm, 25.4 * mm.sets["262"].X_mm, rtol=1e-15)
 
 
+def test_the_import_says_a_conversion_only_where_there_is_one(tmp_path):
+    """A file in mm is said to be in mm (not 'converted from mm to mm', issue 37); an inch file is
+    said to be converted, with its factor, in the report and in the recordings' comment."""
+    text = SAMPLE.read_text().replace("<UnitName>mm</UnitName>", "<UnitName>inch</UnitName>", 1) \
+        .replace("<Factor>0.001</Factor>", "<Factor>0.0254</Factor>", 1)
+    (tmp_path / "inch.qif").write_text(text)
+    for src, said in ((SAMPLE, "length unit: mm"), (tmp_path / "inch.qif", "length unit: inch -> mm (x 25.4)")):
+        files, report = run_import(src, tmp_path / f"{src.stem}.csv", features=["CIRCLE1"])
+        assert said in report
+        head = files[0].read_text(encoding="utf-8").splitlines()[0]
+        assert ("converted from inch to mm (x 25.4)" in head) == (src != SAMPLE), head
+        assert not any("mm -> mm" in r or "from mm to mm" in r for r in report) and "from mm" not in head
+
+
 def test_entities_are_refused(tmp_path):
     (tmp_path / "e.qif").write_text('<?xml version="1.0"?><!DOCTYPE q [<!ENTITY a "x">]>'
                                     '<QIFDocument>&a;</QIFDocument>')

@@ -153,8 +153,11 @@ def test_cmmwb_import_to_a_qif_file_writes_the_annotated_copy_and_lists_the_char
     assert "points: none in the file" in report[1]
     assert "combinedUncertainty written on 740 measured values" in report
     assert "not supported: UserDefinedLinear (1 definition)" in report
-    assert any(r.startswith("Cone Angle 3 [Angle]: tolerance 89 .. 91; part 117: 88.953 FAIL; u = ")
-               for r in report)
+    # every printed quantity with its unit: the file's values in mm or deg, u in µm or µrad
+    assert any(r.startswith("Cone Angle 3 [Angle]: tolerance 89 .. 91 deg; part 117: 88.953 deg FAIL; u = ")
+               and r.endswith(" µrad") for r in report)
+    assert any(r.startswith("Flatness Datum A [Flatness]: tolerance zone 0.5 mm; part 117: 0.004 mm PASS; u = ")
+               and r.endswith(" µm") for r in report)
     with pytest.raises(InputError, match="exists"):
         run_import(NIST, out)
 

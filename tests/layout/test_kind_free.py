@@ -21,8 +21,11 @@ ROOT = Path(__file__).resolve().parents[2]
 #: the shared modules: generator/*.py, generator/workbook/, generator/decision/
 SHARED = sorted([*(ROOT / "generator").glob("*.py"), *(ROOT / "generator" / "workbook").rglob("*.py"),
                  *(ROOT / "generator" / "decision").rglob("*.py")])
-#: the two places a kind is registered (the kinds' list itself)
-REGISTRY = {"generator/jobs.py": None, "generator/taskfile.py": "KINDS"}
+#: the two places a kind is registered (the kinds' list itself), and the one that describes the
+#: folders `cmmwb demo` writes, which are named after the kinds (the demo index's headings: a
+#: description of those folders, not a choice between kinds; a kind without one is listed under
+#: its folder's name)
+REGISTRY = {"generator/jobs.py": None, "generator/taskfile.py": "KINDS", "generator/demo_index.py": "GROUPS"}
 #: names of books that are not task kinds but were once selected by name in shared code
 OTHER_BOOKS = ("diagnose", "calibrate", "diagnosis", "calibration")
 WORD = "characteristic"

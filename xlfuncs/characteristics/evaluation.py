@@ -13,7 +13,7 @@ import numpy as np
 
 from .. import features as ft
 from ..datums import AXIS, PLANE, Frame, Geometry, datum_frame, role
-from ..errors import ModelError
+from ..errors import ModelError, about
 from ..minzone import chebyshev_zone
 from .joint import JointFit
 from .specs import FORM_TYPES, ORIENTATION_TYPES, SMOOTH_TYPES, TYPES, CharacteristicSpec, FrameSpec
@@ -54,6 +54,8 @@ class Result:
     s_A_margin: np.ndarray | None = None
     u_margin_um: float | None = None
     zone_iterations: int | None = None
+    #: the value of the task's points; ``value`` is the spec's ``measured`` value when it gives one
+    points_value: float | None = None
 
     @property
     def name(self) -> str:
@@ -101,9 +103,14 @@ class Context:
     def frame(self, name: str) -> Frame:
         if name not in self._frames:
             s = self.frame_specs[name]
-            self._frames[name] = datum_frame(
-                self.geom(s.primary), self.geom(s.secondary) if s.secondary else None,
-                self.geom(s.tertiary) if s.tertiary else None)
+            try:
+                self._frames[name] = datum_frame(
+                    self.geom(s.primary), self.geom(s.secondary) if s.secondary else None,
+                    self.geom(s.tertiary) if s.tertiary else None)
+            except ModelError as err:
+                msg = str(err).removeprefix("datum frame: ")
+                raise about(type(err)(msg), "frames", list(self.frame_specs).index(name),
+                            f"datum frame {name}") from None
         return self._frames[name]
 
     def points(self, name: str) -> np.ndarray:
@@ -404,6 +411,8 @@ def _check(c: CharacteristicSpec, jf: JointFit, frames) -> None:
         raise ModelError(f"characteristic {c.name}: material condition must be RFS, MMC or LMC")
     if c.zone not in ("planar", "diametral"):
         raise ModelError(f"characteristic {c.name}: zone must be planar or diametral")
+    if c.type == "position" and (c.frame is None or c.nominal_position_mm is None):
+        raise ModelError(f"characteristic {c.name}: position needs a datum frame and the nominal position")
 
 
 # ------------------------------------------------------------------------------------------
@@ -475,53 +484,65 @@ def evaluate(jf: JointFit, frames: Sequence[FrameSpec] | Mapping[str, FrameSpec]
     also its u.  Size characteristics are evaluated before the positions that take a bonus
     from them."""
     frames = frames if isinstance(frames, Mapping) else {f.name: f for f in frames}
-    for fs in frames.values():
+    for k, fs in enumerate(frames.values()):
         for nm in (fs.primary, fs.secondary, fs.tertiary):
             if nm is not None and nm not in jf.fits:
-                raise ModelError(f"datum frame {fs.name}: unknown feature {nm!r}")
+                raise about(ModelError(f"datum frame {fs.name}: unknown feature {nm!r}"), "frames", k)
     order = sorted(range(len(chars)), key=lambda i: chars[i].type != "diameter")
     results: dict[int, Result] = {}
     by_name: dict[str, Result] = {}
     for i in order:
-        c = chars[i]
-        _check(c, jf, frames)
-        consts = constants(jf, frames, c)
-        ctx = Context(jf, frames)
-        its = None
-        if c.type in FORM_TYPES and c.method == "MZ":
-            value, frozen = _mz_exact(ctx, c, consts)
-            its = frozen.get("iterations")
-        else:
-            value, frozen = VALUE[c.type](ctx, c, consts, None)
-        value = float(value[0])
-        s_A, s_Xd = _sensitivities(jf, frames, c, consts, frozen)
-        s_X = s_Xd + s_A @ jf.G
-        active = np.array([], int)
-        if frozen is not None and "w" in frozen:
-            active = _point_columns(jf, c.features[0], np.flatnonzero(frozen["w"]))
-        res = Result(spec=c, value=value, unit="deg" if c.type in ("angle", "cone_angle") else "mm",
-                     s_A=s_A,
-                     s_X=s_X, smooth=c.type in SMOOTH_TYPES or (
-                         c.type in ORIENTATION_TYPES and role(ctx.geom(c.features[0])) == AXIS),
-                     active=active, zone_iterations=its)
-        if c.type == "position":
-            res.bonus_mm = 0.0
-            bonus = _bonus(c, by_name)
-            if bonus is not None:
-                res.bonus_mm = bonus[0]
-            if c.tolerance_mm is not None:
-                res.zone_mm = c.tolerance_mm + res.bonus_mm
-                res.margin_mm = res.zone_mm - value
-                sb_X = bonus[1] if bonus else np.zeros_like(s_X)
-                sb_A = bonus[2] if bonus else np.zeros_like(s_A)
-                res.s_X_margin = sb_X - s_X
-                res.s_A_margin = sb_A - s_A
+        try:
+            res = _evaluate_one(jf, frames, chars[i], by_name)
+        except ModelError as err:
+            raise about(err, "characteristics", i, f"characteristic {chars[i].name}") from None
         results[i] = res
-        by_name[c.name] = res
+        by_name[chars[i].name] = res
     out = [results[i] for i in range(len(chars))]
     if V_X_um2 is not None:
         propagate(out, V_X_um2)
     return out
+
+
+def _evaluate_one(jf: JointFit, frames: Mapping[str, FrameSpec], c: CharacteristicSpec,
+                  by_name: dict[str, Result]) -> Result:
+    """One characteristic's value and sensitivities (its size characteristic, for a bonus,
+    already in ``by_name``)."""
+    _check(c, jf, frames)
+    consts = constants(jf, frames, c)
+    ctx = Context(jf, frames)
+    its = None
+    if c.type in FORM_TYPES and c.method == "MZ":
+        value, frozen = _mz_exact(ctx, c, consts)
+        its = frozen.get("iterations")
+    else:
+        value, frozen = VALUE[c.type](ctx, c, consts, None)
+    value = points_value = float(value[0])
+    if c.measured is not None:      # measured elsewhere: these points give only the sensitivities (u)
+        value = float(c.measured)
+    s_A, s_Xd = _sensitivities(jf, frames, c, consts, frozen)
+    s_X = s_Xd + s_A @ jf.G
+    active = np.array([], int)
+    if frozen is not None and "w" in frozen:
+        active = _point_columns(jf, c.features[0], np.flatnonzero(frozen["w"]))
+    res = Result(spec=c, value=value, unit="deg" if c.type in ("angle", "cone_angle") else "mm",
+                 s_A=s_A,
+                 s_X=s_X, smooth=c.type in SMOOTH_TYPES or (
+                     c.type in ORIENTATION_TYPES and role(ctx.geom(c.features[0])) == AXIS),
+                 active=active, zone_iterations=its, points_value=points_value)
+    if c.type == "position":
+        res.bonus_mm = 0.0
+        bonus = _bonus(c, by_name)
+        if bonus is not None:
+            res.bonus_mm = bonus[0]
+        if c.tolerance_mm is not None:
+            res.zone_mm = c.tolerance_mm + res.bonus_mm
+            res.margin_mm = res.zone_mm - value
+            sb_X = bonus[1] if bonus else np.zeros_like(s_X)
+            sb_A = bonus[2] if bonus else np.zeros_like(s_A)
+            res.s_X_margin = sb_X - s_X
+            res.s_A_margin = sb_A - s_A
+    return res
 
 
 def propagate(results: Sequence[Result], V_X_um2) -> None:

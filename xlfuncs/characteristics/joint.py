@@ -11,7 +11,7 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from .. import features as ft
-from ..errors import ModelError
+from ..errors import ModelError, about
 from .specs import FeatureSpec
 
 
@@ -52,17 +52,17 @@ def fit_features(X_mm, normals, specs: Sequence[FeatureSpec]) -> JointFit:
         raise ModelError("feature names must be unique")
     fits, rows, blocks, pnames = {}, {}, [], []
     r0 = 0
-    for s in specs:
+    for k, s in enumerate(specs):
         idx = np.asarray(s.indices, int)
         if idx.size == 0 or idx.min() < 0 or idx.max() >= m:
-            raise ModelError(f"feature {s.name}: point indices out of range")
+            raise about(ModelError(f"feature {s.name}: point indices out of range"), "features", k)
         if len(set(idx.tolist())) != idx.size:
-            raise ModelError(f"feature {s.name}: a point is listed twice")
+            raise about(ModelError(f"feature {s.name}: a point is listed twice"), "features", k)
         try:
             f = ft.fit(s.element, X[idx], normals=N[idx], axis_hint=s.axis_hint,
                        circle_plane=s.circle_plane if s.element == "circle" else "xy")
         except ModelError as err:
-            raise type(err)(f"feature {s.name}: {err}") from None
+            raise about(err, "features", k, f"feature {s.name}") from None
         Gf = ft.G_A_X(f)
         Gj = np.zeros((f.n, 3 * m))
         cols = (3 * idx[:, None] + np.arange(3)).reshape(-1)

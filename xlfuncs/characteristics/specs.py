@@ -60,6 +60,9 @@ class CharacteristicSpec:
     Tolerances are carried here, not decided (the build decides them: generator.decision):
     ``lsl``/``usl`` (size, distance, angle) or ``tolerance_mm`` (zone width of form,
     orientation, position).
+    ``measured``: the value as measured elsewhere (a QIF results file's, in mm or deg): it is the
+    result's value (and a size's value gives the bonus), while the task's points give only the
+    sensitivities and so u -- the points of a stand-in part (generator/importers/qif_simulation.py).
     """
 
     name: str
@@ -78,3 +81,4 @@ class CharacteristicSpec:
     lsl: float | None = None
     usl: float | None = None
     tolerance_mm: float | None = None
+    measured: float | None = None

@@ -150,6 +150,15 @@ def _unique_probings(rec: LengthRecords, k1: np.ndarray, k2: np.ndarray):
             "probings (identical coordinates, normals and probes: one probing each, spec "
             "section 6) but different lengths; give the indicated coordinates of every repeat",
             rec.lines[a], "x1")
+    twice = np.flatnonzero(b_of != np.arange(n))
+    if twice.size:
+        a = int(twice[0])
+        b = int(b_of[a])
+        raise RecordingsError(
+            f"records {rec.ids[b]!r} (line {rec.lines[b]}) and {rec.ids[a]!r} are one measurement: the same "
+            "two probings (identical coordinates, normals and probes, spec section 6) and the same length; "
+            "a line given twice? Each record is a measurement of its own (repeats: give each its own "
+            "indicated coordinates)", rec.lines[a], "x1")
     return X, N, K, idx[0], idx[1]
 
 

@@ -103,8 +103,7 @@ def outlier_report(diag: Diagnosis, S: Search) -> list[dict]:
     out = []
     obs = record_obs(prep)
     for a, row in zip(S.outliers, S.outlier_rows):
-        rows = [q for q, (e, _) in enumerate(diag.sel_labels) if e == "outlier"
-                and diag.sel_labels[q][1].split(".")[0] == prep.rec.ids[a]]
+        rows = [q for q, (e, l) in enumerate(diag.sel_labels) if e == "outlier" and l == prep.rec.ids[a]]
         if prep.design.kind == "point":
             rows = [q for q, (e, l) in enumerate(diag.sel_labels) if e == "outlier" and
                     l.rsplit(".", 1)[0] == prep.rec.ids[a]]
