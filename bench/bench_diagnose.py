@@ -34,6 +34,7 @@ from cmmwb.xlfuncs.locator import diagnose as dg  # noqa: E402
 from cmmwb.xlfuncs.locator import simulate as sm  # noqa: E402
 from cmmwb.xlfuncs.locator.recordings import read_recordings, write_recordings  # noqa: E402
 from cmmwb.xlfuncs.model import MPE1  # noqa: E402  (Forbes 2025 Table 3)
+from cmmwb.xlfuncs.model.hyperparameters import in_table  # noqa: E402
 
 PROBES = (pc.Probe("P1", (0.0, 0.0, -50.0)), pc.Probe("P2", (150.0, 0.0, -50.0)), pc.Probe("P3", (0.0, 150.0, -50.0)))
 
@@ -52,7 +53,7 @@ def main(argv=None) -> int:
         csv = tmp / "records.csv"
         write_recordings(rec, csv)
         task = tmp / "task.toml"
-        lines = ["[parameters]"] + [f"{k} = {getattr(MPE1, k)!r}" for k in pc.Parameters.__dataclass_fields__]
+        lines = ["[parameters]"] + [f"{k} = {getattr(MPE1, k)!r}" for k in in_table("parameters")]
         for p in PROBES:
             lines += ["[[probes]]", f'id = "{p.id}"', f"offset_mm = {list(p.offset_mm)!r}"]
         task.write_text("\n".join(lines) + "\n")

@@ -59,6 +59,16 @@ ITEMS: tuple[DemoItem, ...] = (
              "non-conformity or neither proven) and the rounded statement; the `Decision` sheet shows "
              "how each decision follows from the limits",
              question="Does this part conform to its drawing?"),
+    DemoItem("characteristic/housing_W.xlsx",
+             "an aluminium gearbox housing on the shop floor at 23.5 °C (not from a paper; docs/workpiece.md): "
+             "two bearing bores 400 mm apart, the CMM correcting to 20 °C with the nominal alpha, "
+             "u(alpha) = 1e-6/K and u(T) = 0.3 K in the task's [workpiece]: the seventh factor W, the part's "
+             "own expansion, beside the machine's six",
+             "Characteristics",
+             "u of the 400 mm bore distance, 3.15 µm, most of it the part's temperature (u_W = 3.11 µm: "
+             "1.40 from alpha, 2.77 from T, in the JSON's components and the factor chart), against a few "
+             "tenths of a µm for the diameters' W and none for the flatness; the `Inputs` sheet holds the "
+             "workpiece inputs and u(eps)"),
     DemoItem("pointcloud/stepgauge_I_MPE1.xlsx",
              "Forbes 2025 section 7, Table 4 and Figures 4-7: " + _STEP.format(probes="one probe (scenario I)",
                                                                              mpe="MPE1"),

@@ -18,10 +18,12 @@ import numpy as np
 from cmmwb.xlfuncs.csvtable import TableError
 from cmmwb.xlfuncs.csvtable import read_table as read_csv_table
 from cmmwb.xlfuncs.limits import PLAUSIBLE, coordinate_problem, plausibility_problem
+from cmmwb.xlfuncs.model.hyperparameters import PROBE_OVERRIDES, in_table, of_factor
 from cmmwb.xlfuncs.pointcloud import Parameters, PointCloud, Probe
 
 from .errors import InputError, model_errors_named
 from .taskfile import Names, check_keys, note, number, string, table, vector3
+from .taskworkpiece import apply_workpiece
 from .workbook.guarded import MAX_BYTES, read_text
 
 MAX_CSV_BYTES = MAX_BYTES["points"]
@@ -30,8 +32,8 @@ NORMAL_TOL = 1e-3
 
 # -- the point-cloud model: [parameters], [[probes]], [points] --------------------------------
 
-PARAMETER_KEYS = tuple(Parameters.__dataclass_fields__)
-PROBE_OVERRIDES = ("sigma_PQ_um", "sigma_P0_um", "sigma_P_um", "lambda_P")
+#: the hyper-parameters of [parameters], and those a [[probes]] entry may override (their records)
+PARAMETER_KEYS = in_table("parameters")
 
 
 def read_parameters(path: Path, doc: dict) -> Parameters:
@@ -50,7 +52,7 @@ NO_OFFSET = ("the stylus tip at the ram's reference point: the rotation errors (
 def read_probes(path: Path, doc: dict) -> tuple[Probe, ...]:
     raw = doc.get("probes")
     if raw is None:
-        er = doc.get("parameters", {}).get("sigma_ER_urad", 0) if isinstance(doc.get("parameters"), dict) else 0
+        er = doc.get("parameters", {}).get(of_factor("ER")[0], 0) if isinstance(doc.get("parameters"), dict) else 0
         if isinstance(er, (int, float)) and not isinstance(er, bool) and er > 0:
             note(f"no [[probes]]: one probe P1 with offset [0, 0, 0] mm is assumed, {NO_OFFSET}", file=path,
                  where="[[probes]]")
@@ -276,7 +278,8 @@ def points_source(doc: dict) -> str:
 
 
 def read_point_cloud(path: Path, doc: dict) -> tuple[PointCloud, Parameters, PointTable]:
-    """The point-cloud model of a task: points (``[points] file`` or ``rows``), probes, parameters."""
+    """The point-cloud model of a task: points (``[points] file`` or ``rows``), probes, parameters,
+    and the part's temperature (``[workpiece]``, the factor W: :mod:`generator.taskworkpiece`)."""
     params = read_parameters(path, doc)
     probes = read_probes(path, doc)
     pts = table(path, doc, "points")
@@ -304,6 +307,7 @@ def read_point_cloud(path: Path, doc: dict) -> tuple[PointCloud, Parameters, Poi
             p.resolved(params)
         cloud = PointCloud(tablep.X_mm, tablep.N, np.array([index[p] for p in tablep.probe_ids]),
                            probes, tablep.labels)
+    cloud, params = apply_workpiece(path, doc, cloud, params)
     return cloud, params, tablep
 
 

@@ -25,7 +25,8 @@ from .workbook.guarded import MAX_BYTES, read_text
 KINDS = ("pointcloud", "budget", "feature", "characteristic")
 MAX_TASK_BYTES = MAX_BYTES["task"]
 #: tables every task kind accepts, read by the build itself: conformity decisions and report fields
-COMMON_TABLES = frozenset({"decision", "report"})
+#: the tables every kind accepts: decisions, report fields, the part's temperature (the factor W)
+COMMON_TABLES = frozenset({"decision", "report", "workpiece"})
 
 
 MAX_DEPTH = 16           # tables and arrays nested deeper than this are refused

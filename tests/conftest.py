@@ -50,6 +50,7 @@ NUMERIC_MODULES = {
     "test_model_paths",
     "test_diagnose_effect_formulas",
     "test_validate_core", "test_validate_cli", "test_validate_book", "test_validate_loop",
+    "test_workpiece", "test_hyperparameters",
 }
 
 

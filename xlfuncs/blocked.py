@@ -13,6 +13,7 @@ A scanning probe delivers thousands of points per feature; the dense V_X of eq. 
   R     sigma_R^2 G G^T                                                 eq. (8)
   PQ    sum_k S_k S_k^T,  S_k = sum_{i in probe k} sigma_PQ,k G_i       rank 3 n_P, eq. (9)
   S     A V_B A^T,  A = sum_i G_i G(x_i - p_k(i))                       rank 7, eqs. (11)-(14)
+  W     A A^T,  A = sum_i G_i K_i (K: the columns of V_W)               rank 3, docs/workpiece.md
   ====  ==============================================================  =================
 
   and the Gaussian-process factors are sums over the kernel,
@@ -52,7 +53,7 @@ import numpy as np
 from . import pointcloud as pc
 from .errors import ModelError
 from .execution import ProgressBar, ThreadBackend, run_blocks
-from .model import G_S, check_factors, factor_block, skew, sq_dists
+from .model import G_S, check_factors, factor_block, skew, sq_dists, workpiece_columns
 
 FACTORS = pc.FACTORS
 MILLI = pc.MILLI
@@ -165,6 +166,11 @@ def pair_blocks(cloud: pc.PointCloud, params: pc.Parameters, pairs,
             out[f] = ((s0[i] ** 2 + sp[i] ** 2)[:, None, None] * (ni @ ni.transpose(0, 2, 1))
                       + (s0[j] ** 2 + sp[j] ** 2)[:, None, None] * (nj @ nj.transpose(0, 2, 1))
                       - c * (nij + nij.transpose(0, 2, 1)))
+        elif f == "W":
+            # docs/workpiece.md: (K_i - K_j)(K_i - K_j)^T of V_W = K K^T
+            D = workpiece_columns(cloud, params)
+            D = D[i] - D[j]
+            out[f] = D @ D.transpose(0, 2, 1)
         else:
             raise ModelError(f"unknown influence factor {f!r}; known: {', '.join(FACTORS)}")
     return out
@@ -357,6 +363,10 @@ def V_A_components(G: np.ndarray, cloud: pc.PointCloud, params: pc.Parameters, *
                                  [("P", sp[idx[0]] ** 2, 1.0 / lam[idx[0]] ** 2,
                                    np.ascontiguousarray(gP[idx][:, :, None]))]))
         out["P"] = V
+    if "W" in factors:
+        # docs/workpiece.md: V_W = K K^T is rank three, A = sum_i G_i K_i
+        A = np.einsum("ipa,iak->pk", Wx, workpiece_columns(cloud, params))
+        out["W"] = A @ A.T
     if method == "lowrank":
         from . import lowrank as lr
 

@@ -46,6 +46,13 @@ Conventions (see docs/errata.md, "Wojtyła/Płowucha 2023"):
   So do collinear plane points, parallel lines in line_line and a secondary-datum direction DE
   perpendicular to the primary plane.  A non-finite coordinate is a ModelError.
 
+* The workpiece's temperature (the factor W, docs/workpiece.md): with a ``Part`` the budget gains
+  the rows of alpha, T, the temperature difference across the part and the expansion the CMM
+  leaves uncorrected, with sensitivities -l (T - 20) and -l alpha (x 10^-3 µm per 10^-6/K and per K:
+  the corrected length is l_20 = l (1 - alpha (T - 20)), l the characteristic, which a uniform
+  expansion scales as a whole) in the paper's layout; u_c is the root sum of squares of every row.
+  The position's u_POS combines its two distances' u_l, W included.
+
 The module is numpy only; it knows nothing of spreadsheets.  Each evaluated variant exposes
 its ordered input vectors (label, tail point, head point, role in the formula), the input
 quantities, their values, the closed-form sensitivities, ``u_i`` and contributions, so that a
@@ -55,12 +62,13 @@ workbook writer can lay out the same budget as cell formulas.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Mapping, Sequence
 
 import numpy as np
 
 from .errors import DegenerateGeometryError, ModelError
+from .model.workpiece import REFERENCE_C, Workpiece
 
 #: relative threshold for a vanishing cross product (|a x c| <= EPS_REL |a||c|)
 EPS_REL = 1e-12
@@ -374,10 +382,45 @@ def evaluate_vectors(kind: str, vecs: Mapping[str, np.ndarray], names: Mapping[s
     raise ModelError(f"unknown formula kind {kind!r}")
 
 
+@dataclass(frozen=True)
+class Part:
+    """The workpiece's thermal state and its standard uncertainties u(alpha) (10^-6/K), u(T) (K):
+    the factor W of a budget (docs/workpiece.md)."""
+
+    workpiece: Workpiece
+    u_alpha_ppm_per_K: float
+    u_T_K: float
+
+
+#: the rows of the factor W in a budget: input, unit of its value, distribution
+THERMAL_INPUTS = (("alpha", "ppm/K", "normal"), ("T", "degC", "normal"), ("dT", "K", "rectangular"),
+                  ("b_uncorrected", "ppm", "uncorrected (RSS)"))
+
+
+def thermal_rows(l_mm: float, part: Part) -> list[dict]:
+    """The W rows of a budget of the characteristic l (docs/workpiece.md), each with its value (in
+    ``unit``), sensitivity (µm per unit), u (in ``unit``) and contribution (µm): alpha with
+    -l (T - 20) 10^-3 and u(alpha); T with -l alpha 10^-3 and u(T); the temperature difference dT
+    across the part with -l alpha 10^-3 and dT/sqrt(12); the uncorrected expansion b with l 10^-3 and
+    |b|.  With W switched off every u is 0 (the rows stay, as in the workbook)."""
+    wp = part.workpiece
+    on = 1.0 if wp.enabled else 0.0
+    dt = wp.T_degC - REFERENCE_C
+    b = wp.bias_ppm()
+    vals = (wp.alpha_ppm_per_K, wp.T_degC, wp.dT_K, b)
+    sens = (-l_mm * dt * 1e-3, -l_mm * wp.alpha_ppm_per_K * 1e-3, -l_mm * wp.alpha_ppm_per_K * 1e-3, l_mm * 1e-3)
+    us = (part.u_alpha_ppm_per_K * on, part.u_T_K * on, wp.dT_K / math.sqrt(12.0) * on, abs(b) * on)
+    return [{"input": name, "value": float(v), "unit": unit, "sensitivity": float(s), "u": float(u),
+             "contribution_um": float(s * u), "distribution": dist}
+            for (name, unit, dist), v, s, u in zip(THERMAL_INPUTS, vals, sens, us)]
+
+
 @dataclass
 class VariantBudget:
     """The budget of one variant in the paper's layout (Tables 1-8): per input quantity the
-    value x_i (mm), dl/dx_i, u_i (µm) and the contribution dl/dx_i * u_i (µm); then u_c, U."""
+    value x_i (mm), dl/dx_i, u_i (µm) and the contribution dl/dx_i * u_i (µm); then u_c, U.
+    ``thermal``: the rows of the factor W (:func:`thermal_rows`), in u_c too; ``u_mpe_um``, ``u_W_um``
+    the two parts of u_c."""
 
     spec: VariantSpec
     inputs: tuple[str, ...]
@@ -388,6 +431,9 @@ class VariantBudget:
     value_mm: float
     u_c_um: float
     U_um: float
+    thermal: list[dict] = field(default_factory=list)
+    u_mpe_um: float = 0.0
+    u_W_um: float = 0.0
 
     @property
     def label(self) -> str:
@@ -411,16 +457,22 @@ def input_vectors(spec: VariantSpec, points: Mapping[str, Sequence[float]]) -> d
     return {v.role: _point(points, v.head) - _point(points, v.tail) for v in spec.vectors}
 
 
-def evaluate(spec: VariantSpec, points: Mapping[str, Sequence[float]], mpe: MPE) -> VariantBudget:
-    """Evaluate one variant: value, closed-form sensitivities, u_i = b E(|x_i|) and u_c (eq. (6))."""
+def evaluate(spec: VariantSpec, points: Mapping[str, Sequence[float]], mpe: MPE,
+             part: Part | None = None) -> VariantBudget:
+    """Evaluate one variant: value, closed-form sensitivities, u_i = b E(|x_i|) and u_c (eq. (6)),
+    with the rows of the factor W when the task has a ``part``."""
     vecs = input_vectors(spec, points)
     L, grads = evaluate_vectors(spec.kind, vecs, {v.role: v.label for v in spec.vectors})
     values = np.concatenate([vecs[v.role] for v in spec.vectors])
     sens = np.concatenate([grads[v.role] for v in spec.vectors])
     u = mpe.u_um(values)
     contrib = sens * u
-    u_c = math.sqrt(float(contrib @ contrib))
-    return VariantBudget(spec, spec.inputs, values, sens, u, contrib, float(L), u_c, mpe.k * u_c)
+    thermal = thermal_rows(float(L), part) if part is not None else []
+    tc = np.array([r["contribution_um"] for r in thermal])
+    both = np.concatenate([contrib, tc])
+    u_c = math.sqrt(float(both @ both))
+    return VariantBudget(spec, spec.inputs, values, sens, u, contrib, float(L), u_c, mpe.k * u_c, thermal,
+                         math.sqrt(float(contrib @ contrib)), math.sqrt(float(tc @ tc)))
 
 
 def value_of(spec: VariantSpec, values_mm: np.ndarray) -> float:
@@ -479,9 +531,9 @@ def choose(variants: Sequence[VariantBudget], variant: str = "auto", *, rtol: fl
 
 
 def distance_budget(specs: Sequence[VariantSpec], points: Mapping[str, Sequence[float]],
-                    mpe: MPE, variant: str = "auto") -> DistanceBudget:
+                    mpe: MPE, variant: str = "auto", part: Part | None = None) -> DistanceBudget:
     """Evaluate every variant and pick one (see :func:`choose`)."""
-    budgets = [evaluate(s, points, mpe) for s in specs]
+    budgets = [evaluate(s, points, mpe, part) for s in specs]
     return DistanceBudget(budgets, choose(budgets, variant), str(variant))
 
 
@@ -554,7 +606,7 @@ POSITION_FACTOR = 2.0
 
 def position_budget(point: str, datums: Sequence[str], ted_mm: Sequence[float],
                     ds: DatumSystem, points: Mapping[str, Sequence[float]], mpe: MPE,
-                    variants: Sequence[str] = ("auto", "auto")) -> PositionBudget:
+                    variants: Sequence[str] = ("auto", "auto"), part: Part | None = None) -> PositionBudget:
     """Position deviation of the axis point ``point`` (cylindrical zone, eq. (22)) from the two
     ``datums`` (e.g. ("primary", "tertiary")) with theoretically exact distances ``ted_mm``."""
     datums = tuple(datums)
@@ -568,7 +620,7 @@ def position_budget(point: str, datums: Sequence[str], ted_mm: Sequence[float],
         variants = (variants, variants)
     if len(variants) != 2:
         raise ModelError(f"a position needs one variant per distance, got {list(variants)}")
-    dist = tuple(distance_budget(variants_datum(point, d, ds), points, mpe, v)
+    dist = tuple(distance_budget(variants_datum(point, d, ds), points, mpe, v, part)
                  for d, v in zip(datums, variants))
     dev = np.array([dist[0].value_mm - ted[0], dist[1].value_mm - ted[1]])
     value = 2.0 * math.sqrt(float(dev @ dev))

@@ -28,6 +28,7 @@ import numpy as np
 
 from . import pointcloud as pc
 from .errors import ModelError
+from .model.hyperparameters import GP, HYPER, HYPERPARAMETERS
 from .reml import (
     NAMES,
     PARTNER,
@@ -60,29 +61,8 @@ PEAK_GAIN = 0.01
 #: larger sigma are the classic pair of peaks of a Gaussian process likelihood)
 OTHER_STARTS = (0.25, 4.0)
 
-#: what measurement identifies each hyper-parameter (reported with a non-identifiable one)
-ADVICE = {
-    "sigma_R_um": "repeated records (each length or point measured several times)",
-    "sigma_S_ppm": "one machine shows one draw of its scale error: lengths in many directions and "
-                   "positions give its value (fit 'scale' as an effect and compensate it) rather than "
-                   "its spread; the spread needs several machines or re-verifications",
-    "sigma_Sa_ppm": "lengths along x, y and z (the per-axis scale errors are one draw each per machine: "
-                    "their spread needs several machines or re-verifications)",
-    "sigma_Q_ppm": "lengths along the face and space diagonals (the squareness errors are one draw each per "
-                   "machine: their spread needs several machines or re-verifications)",
-    "sigma_PQ_um": "records with two or more probes (probe changes) measuring the same artefact",
-    "sigma_ET_um": "positions spread over several correlation lengths along each axis (step gauge or "
-                   "ball plate in several places)",
-    "lambda_ET_mm": "positions spread over several correlation lengths lambda_ET along each axis, and "
-                    "closely spaced ones (a step gauge) to see the correlation decay",
-    "sigma_ER_urad": "two or more probe offsets of different direction and length (ISO 10360-2 with "
-                     "offset styli): with one offset a rotation is indistinguishable from a translation",
-    "lambda_ER_mm": "two or more probe offsets, and positions spread over several lambda_ER",
-    "sigma_P0_um": "points probed along many directions with one probe (a sphere, holes; bidirectional "
-                   "lengths)",
-    "sigma_P_um": "many probing directions with one probe (a reference sphere probed at 25 or more points)",
-    "lambda_P": "many probing directions with one probe, some close together (a densely probed sphere)",
-}
+#: what measurement identifies each hyper-parameter (reported with a non-identifiable one): its record's
+ADVICE = {h.name: h.advice for h in HYPERPARAMETERS}
 
 
 # ---------------------------------------------------------------------------------------------
@@ -165,8 +145,8 @@ def _corr(cov: np.ndarray) -> np.ndarray:
 
 def _beyond_travel(name: str, sets: list[RecordSet], values: dict[str, float]) -> str | None:
     """The sentence for a GP factor whose length scale exceeds the travel the records span."""
-    lam = {"sigma_ET_um": "lambda_ET_mm", "lambda_ET_mm": "lambda_ET_mm", "sigma_ER_urad": "lambda_ER_mm",
-           "lambda_ER_mm": "lambda_ER_mm"}.get(name)
+    # the kernels over the ram positions (ET, ER; P's is over the normals)
+    lam = next((lm for _s, lm, f in GP if f == HYPER[name].factor and f in ("ET", "ER")), None)
     if lam is None:
         return None
     travel = max(float(np.max(np.ptp(s.op.cloud.ram_mm, axis=0))) for s in sets)
@@ -181,13 +161,17 @@ def _why_insensitive(name: str, sets: list[RecordSet], values: dict[str, float] 
     probes = {p.offset_mm for s in sets for p in s.op.cloud.probes}
     ids = {p.id for s in sets for p in s.op.cloud.probes}
     kinds = {s.prep.design.kind for s in sets}
-    if name == "sigma_PQ_um" and len(ids) < 2:
+    factor = HYPER[name].factor
+    if factor == "PQ" and len(ids) < 2:
         return ("one probe: its qualification error is common to every probing and "
                 + ("cancels in every length" if kinds == {"length"} else "is absorbed by the alignment"))
-    if name in ("sigma_ER_urad", "lambda_ER_mm") and all(np.allclose(p, 0.0) for p in probes):
+    if factor == "ER" and all(np.allclose(p, 0.0) for p in probes):
         return "every probe offset is zero: a rotation of the ram moves no stylus tip"
-    if name in ("sigma_P0_um", "sigma_P_um", "lambda_P"):
+    if factor == "P":
         return "no normals in the records, or every point probed along one direction per probe"
+    if factor == "W":
+        return ("no record away from 20 °C (temperature_C, or the task's T): the artefact's expansion does not "
+                "act" if name == "u_alpha_ppm_per_K" else "the artefact's alpha is zero: its temperature does not act")
     far = _beyond_travel(name, sets, values) if values else None
     return far or "the records carry no information on it after the fixed effects"
 
@@ -198,12 +182,21 @@ def _why_weak(name: str, sets: list[RecordSet], corr_row: np.ndarray | None, fre
     far = _beyond_travel(name, sets, values)
     if far:
         parts.append(far)
-    if name in ("sigma_ER_urad", "lambda_ER_mm"):
+    factor = HYPER[name].factor
+    if factor == "ER":
         offs = {p.offset_mm for s in sets for p in s.op.cloud.probes}
         if len(offs) == 1:
             parts.append("one probe offset: a rotation moves every tip like a translation of the ram")
-    if name in ("sigma_S_ppm", "sigma_Sa_ppm", "sigma_Q_ppm"):
+    if factor == "S":
         parts.append("one machine shows one draw of each scale/squareness parameter")
+    if factor == "W":
+        temps = {float(t) for s in sets for t in (s.op.cloud.temperature_C if s.op.cloud.temperature_C is not None
+                                                   else [s.op.cloud.workpiece.T_degC])}
+        if len(temps) <= 1:
+            parts.append("every record at one temperature: the artefact's expansion is a scale error, one with "
+                         "the machine's scale (sigma_S)")
+        parts.append("one artefact shows one draw of its alpha error and one thermometer one draw of its error: "
+                     "the 'thermal_expansion' effect estimates the alpha draw (records at several temperatures)")
     if corr_row is not None:
         j = int(np.argmax(np.abs(corr_row)))
         if abs(corr_row[j]) > 0.7:
@@ -317,7 +310,7 @@ def calibrate(sets: list[RecordSet], start: pc.Parameters, *, fixed: tuple[str, 
         phi, t, it = maximize(sets, sv, free, box)
         iterations += it
         values = values_from_log(sv, free, phi)
-        zero = [n for n, x, lo in zip(free, phi, box.lo) if not n.startswith("lambda") and x <= lo + 1e-6]
+        zero = [n for n, x, lo in zip(free, phi, box.lo) if HYPER[n].role != "lambda" and x <= lo + 1e-6]
         if not zero and other_starts and tried != free:
             # 5. the other starts, once per free set
             tried = list(free)

@@ -29,6 +29,8 @@ from .locator import effects as fx
 from .locator.model import Prepared
 from .locator.recordings import Recordings
 from .locator.report import Diagnosis, effect_estimates
+from .model.hyperparameters import in_use
+from .model.workpiece import Workpiece
 
 #: the u(d) grid and the MPE check: the pointcloud workbook's grid (the MPE sheet is shared)
 GRID_POINTS = 101
@@ -128,6 +130,8 @@ class CalibrationRun:
     profiles: list[dict]
     residuals: list[dict]
     indicated: dict | None = None
+    #: the artefact's [workpiece] after a compensated ``thermal_expansion`` (its alpha; None: unchanged)
+    workpiece: Workpiece | None = None
 
     def to_json(self) -> dict:
         return {"records": [{"file": f.set.name, "kind": f.prep.design.kind, "records": int(f.prep.rec.n),
@@ -139,7 +143,7 @@ class CalibrationRun:
                 "changes": [{"parameter": c.parameter, "before": c.before, "after": c.after, "effects": c.effects,
                              "how": c.how} for c in self.changes],
                 "notes": self.notes,
-                "fitted_parameters": {k: float(getattr(self.final, k)) for k in pc.Parameters.__dataclass_fields__},
+                "fitted_parameters": {k: float(getattr(self.final, k)) for k in in_use(self.final)},
                 "chi2": self.chi2,
                 "u_d": self.u_d,
                 "mpe_check": self.mpe_check, "profiles": self.profiles, "indicated": self.indicated}
@@ -199,7 +203,8 @@ def chi2_before_after(files: list[FileFit], task: pc.Parameters, final: pc.Param
 
 
 def u_of_d(files: list[FileFit], task: pc.Parameters, cal: cb.Calibration, final: pc.Parameters,
-           findings: list[cp.Finding], changes: list[cp.Change], feedback: str, mpe: dict | None) -> dict:
+           findings: list[cp.Finding], changes: list[cp.Change], feedback: str, mpe: dict | None,
+           workpiece: Workpiece | None = None) -> dict:
     """u(d) of eq. (33) on the grid 0 .. L_max (the MPE statement's, else 1000 mm) before (the
     task), after (the fitted task) and, for ``compensate``, of the same machine with the effects
     not corrected (carried as a factor); P_mm the MPE statement's or the longest probe offset."""
@@ -212,7 +217,8 @@ def u_of_d(files: list[FileFit], task: pc.Parameters, cal: cb.Calibration, final
     u_uncomp = None
     if feedback == "compensate" and changes and all(f.name in cp.EFFECT_FACTOR for f in findings):
         # the same machine, the effects not corrected: they must be carried as a factor
-        u_uncomp = pc.summary_components_um(d, cp.feed_back(cal.params, findings, "factor")[0], P_mm)["u"].tolist()
+        u_uncomp = pc.summary_components_um(d, cp.feed_back(cal.params, findings, "factor", workpiece=workpiece)[0],
+                                            P_mm)["u"].tolist()
     return {"P_mm": P_mm, "d_mm": d.tolist(), "before_um": u_before.tolist(), "after_um": u_after.tolist(),
             "uncompensated_um": u_uncomp}
 
@@ -278,13 +284,14 @@ def residuals(cal: cb.Calibration) -> list[dict]:
 
 def run(files: list[FileFit], task: pc.Parameters, *, feedback: str = "compensate", mpe: dict | None = None,
         profiles: bool = True, cal: cb.Calibration | None = None, rule: cf.DecisionRule | None = None,
-        indicated: bool = True) -> CalibrationRun:
+        indicated: bool = True, workpiece: Workpiece | None = None) -> CalibrationRun:
     """The calibration of ``files`` (module docstring) starting from the task's ``task``
     parameters; ``mpe``: the MPE statement (``A_um``, ``B_mm``, ``K``, ``P_mm``, ``L_max_mm``)
     or None; ``profiles``: compute the likelihood profiles (about 9 refits per estimate);
     ``cal``: the fit of :func:`fit`, when already done; ``rule``: the decision rule of the MPE
     verdict (default ISO 14253-1); ``indicated``: refit with the effects the locator indicates
-    but does not name (:func:`indicated_effects`)."""
+    but does not name (:func:`indicated_effects`); ``workpiece``: the artefact of the task's
+    [workpiece] (the factor W: ``thermal_expansion`` is fed back into it, docs/workpiece.md)."""
     cal = fit(files, task) if cal is None else cal
     prof: list[dict] = []
     if profiles:     # a profile that reaches a higher peak moves the fit there (checks.profiles_at_maximum)
@@ -296,15 +303,16 @@ def run(files: list[FileFit], task: pc.Parameters, *, feedback: str = "compensat
         final = cal.params
     else:
         try:
-            final, changes, notes = cp.feed_back(cal.params, findings, feedback)
+            final, changes, notes = cp.feed_back(cal.params, findings, feedback, workpiece=workpiece)
         except ModelError as e:
             raise FeedbackError(str(e)) from None
+    part = cp.fed_back_workpiece(workpiece, findings, feedback)
     chi2, compensated = chi2_before_after(files, task, final, feedback)
-    u_d = u_of_d(files, task, cal, final, findings, changes, feedback, mpe)
+    u_d = u_of_d(files, task, cal, final, findings, changes, feedback, mpe, workpiece)
     mpe_json = mpe_checks(task, cal, final, changes, feedback, mpe, u_d["P_mm"], rule) if mpe else None
     ind = indicated_effects(cal, files, task, refit=not any(f.set.structured for f in files)) if indicated else None
     return CalibrationRun(cal, files, feedback, final, findings, effect_rows, changes, notes, chi2, compensated,
-                          u_d, mpe_json, prof, residuals(cal), ind)
+                          u_d, mpe_json, prof, residuals(cal), ind, part)
 
 
 def indicated_effects(cal: cb.Calibration, files: list[FileFit], start: pc.Parameters, refit: bool = True) -> dict:

@@ -20,6 +20,12 @@ uncertainty u(b) enters the task in one of two ways, named in the output:
 Effects outside the six factors (angular motions, drifts, thermal, straightness, ...) can be
 compensated (the coordinates corrected) but their u(b) has no parameter of the six factors to go
 to; they are listed in the notes of the fitted task and ``factor`` refuses them.
+
+``thermal_expansion`` (the artefact's alpha off the alpha_c the CMM corrects with, Delta alpha in
+10^-6/K) belongs to the factor W when the task describes the artefact (``[workpiece]``,
+docs/workpiece.md): ``compensate`` makes the CMM correct with the artefact's alpha = alpha_c +
+Delta alpha and keeps u(alpha) = u(Delta alpha) (:func:`fed_back_workpiece`); ``factor`` adds
+Delta alpha^2 + u^2 to u^2(alpha).  Without ``[workpiece]`` it stays outside the factors, as before.
 """
 
 from __future__ import annotations
@@ -31,6 +37,7 @@ import numpy as np
 
 from . import pointcloud as pc
 from .errors import ModelError
+from .model.workpiece import Workpiece
 
 MODES = ("compensate", "factor")
 
@@ -46,6 +53,8 @@ EFFECT_FACTOR = {
     "probe_radius": ("sigma_P0_um", ("probe_radius",)),
     "probe_qualification": ("sigma_PQ_um", ("probe_qualification",)),
 }
+#: the effect of the factor W, when the task has a [workpiece] (docs/workpiece.md)
+WORKPIECE_EFFECT = {"thermal_expansion": ("u_alpha_ppm_per_K", ("thermal_expansion",))}
 
 
 @dataclass
@@ -74,19 +83,23 @@ def absorbed(names) -> set[str]:
     The effects' estimates are then the machine's draw of that factor, so they are estimated with
     the factor left out of the covariance (else u(b) would count the factor's spread again)."""
     got = set(names)
-    return {EFFECT_FACTOR[n][0] for n in got if n in EFFECT_FACTOR and set(EFFECT_FACTOR[n][1]) <= got}
+    table = EFFECT_FACTOR | WORKPIECE_EFFECT
+    return {table[n][0] for n in got if n in table and set(table[n][1]) <= got}
 
 
-def feed_back(params: pc.Parameters, findings: list[Finding], mode: str) -> tuple[pc.Parameters, list[Change], list[str]]:
+def feed_back(params: pc.Parameters, findings: list[Finding], mode: str, *,
+              workpiece: Workpiece | None = None) -> tuple[pc.Parameters, list[Change], list[str]]:
     """The task's parameters with the findings fed back (module docstring): (parameters, the
-    changes, notes on what could not be represented)."""
+    changes, notes on what could not be represented).  ``workpiece``: the artefact of the task's
+    [workpiece] (``thermal_expansion`` then goes to u(alpha), the factor W)."""
     if mode not in MODES:
         raise ModelError(f"unknown mode {mode!r}: choose one of {', '.join(MODES)}")
+    table = EFFECT_FACTOR | (WORKPIECE_EFFECT if workpiece is not None else {})
     by_param: dict[str, list[Finding]] = {}
     notes: list[str] = []
     for f in findings:
-        if f.name in EFFECT_FACTOR:
-            by_param.setdefault(EFFECT_FACTOR[f.name][0], []).append(f)
+        if f.name in table:
+            by_param.setdefault(table[f.name][0], []).append(f)
         elif mode == "factor":
             raise ModelError(f"{f.name} is not one of the six influence factors' parameters: it cannot be "
                              "added as a factor; compensate it instead")
@@ -97,7 +110,7 @@ def feed_back(params: pc.Parameters, findings: list[Finding], mode: str) -> tupl
     changes = []
     for p, fs in by_param.items():
         before = values[p]
-        group = set(EFFECT_FACTOR[fs[0].name][1])
+        group = set(table[fs[0].name][1])
         got = {f.name for f in fs}
         us = [u for f in fs for u in f.u if u is not None]
         bs = [b for f in fs for b in f.estimate if b is not None]
@@ -116,6 +129,18 @@ def feed_back(params: pc.Parameters, findings: list[Finding], mode: str) -> tupl
         values[p] = after
         changes.append(Change(p, before, after, sorted(got), how))
     return pc.Parameters(**values), changes, notes
+
+
+def fed_back_workpiece(workpiece: Workpiece | None, findings: list[Finding], mode: str) -> Workpiece | None:
+    """The artefact after ``thermal_expansion`` is compensated (module docstring): the CMM corrects
+    with the artefact's own alpha = alpha_c + Delta alpha (None: nothing to change)."""
+    if workpiece is None or mode != "compensate":
+        return None
+    found = [f for f in findings if f.name in WORKPIECE_EFFECT and f.estimate and f.estimate[0] is not None]
+    if not found:
+        return None
+    alpha = workpiece.alpha_c + float(found[0].estimate[0])
+    return replace(workpiece, alpha_ppm_per_K=alpha, alpha_corr_ppm_per_K=alpha, corrected=True)
 
 
 def _fmt(f: Finding) -> str:

@@ -36,6 +36,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .distributions import norm_cdf, norm_pdf, norm_ppf  # noqa: F401  (re-exported)
 from .errors import ModelError
 
 UM_PER_MM = 1000.0
@@ -75,53 +76,6 @@ RULE_OUTCOME = {CONFORMS: ACCEPTED, DOES_NOT_CONFORM: REJECTED, UNDECIDED: UNDEC
 #: a rule's short name, for "accepted (guarded rejection)"
 RULE_NAME = {"simple": "simple acceptance", "iso14253": "ISO 14253-1", "guarded_acceptance": "guarded acceptance",
              "guarded_rejection": "guarded rejection", "specific_risk": "specific risk"}
-
-
-def norm_cdf(z):
-    """Φ(z), the standard normal distribution function (via erfc: accurate in both tails)."""
-    z = np.asarray(z, float)
-    out = 0.5 * np.vectorize(math.erfc, otypes=[float])(-z / math.sqrt(2.0))
-    return float(out) if out.ndim == 0 else out
-
-
-def norm_ppf(p: float) -> float:
-    """Φ⁻¹(p) for 0 < p < 1: Acklam's rational start, refined by Newton steps on Φ (full double
-    precision; numpy-only, no scipy)."""
-    p = float(p)
-    if not 0.0 < p < 1.0:
-        raise ModelError(f"a probability must lie strictly between 0 and 1, got {p!r}")
-    a = (-3.969683028665376e+01, 2.209460984245205e+02, -2.759285104469687e+02,
-         1.383577518672690e+02, -3.066479806614716e+01, 2.506628277459239e+00)
-    b = (-5.447609879822406e+01, 1.615858368580409e+02, -1.556989798598866e+02,
-         6.680131188771972e+01, -1.328068155288572e+01)
-    c = (-7.784894002430293e-03, -3.223964580411365e-01, -2.400758277161838e+00,
-         -2.549732539343734e+00, 4.374664141464968e+00, 2.938163982698783e+00)
-    d = (7.784695709041462e-03, 3.224671290700398e-01, 2.445134137142996e+00, 3.754408661907416e+00)
-    lo = 0.02425
-    if p < lo:
-        q = math.sqrt(-2 * math.log(p))
-        x = (((((c[0] * q + c[1]) * q + c[2]) * q + c[3]) * q + c[4]) * q + c[5]) / \
-            ((((d[0] * q + d[1]) * q + d[2]) * q + d[3]) * q + 1)
-    elif p > 1 - lo:
-        q = math.sqrt(-2 * math.log1p(-p))
-        x = -(((((c[0] * q + c[1]) * q + c[2]) * q + c[3]) * q + c[4]) * q + c[5]) / \
-            ((((d[0] * q + d[1]) * q + d[2]) * q + d[3]) * q + 1)
-    else:
-        q = p - 0.5
-        r = q * q
-        x = (((((a[0] * r + a[1]) * r + a[2]) * r + a[3]) * r + a[4]) * r + a[5]) * q / \
-            (((((b[0] * r + b[1]) * r + b[2]) * r + b[3]) * r + b[4]) * r + 1)
-    for _ in range(3):          # Newton on Φ(x) - p; in the upper tail on the complement
-        pdf = math.exp(-0.5 * x * x) / math.sqrt(2 * math.pi)
-        if pdf == 0.0:
-            break
-        if p > 0.5:
-            err = (1.0 - p) - 0.5 * math.erfc(x / math.sqrt(2.0))
-            x -= err / pdf
-        else:
-            err = 0.5 * math.erfc(-x / math.sqrt(2.0)) - p
-            x -= err / pdf
-    return x
 
 
 @dataclass(frozen=True)
@@ -298,14 +252,10 @@ def specific_risk_iterates(h: float, max_pfa: float, steps: int = NEWTON_STEPS) 
     for _ in range(steps):
         d = math.sqrt(s)
         g = float(norm_cdf(h - d)) + float(norm_cdf(h + d)) - 2.0 + max_pfa
-        dg = -h * _pdf(h) if s == 0.0 else (_pdf(h + d) - _pdf(h - d)) / (2.0 * d)
+        dg = -h * norm_pdf(h) if s == 0.0 else (norm_pdf(h + d) - norm_pdf(h - d)) / (2.0 * d)
         s = max(0.0, s - g / dg)
         out.append(s)
     return out
-
-
-def _pdf(x: float) -> float:
-    return math.exp(-0.5 * x * x) / math.sqrt(2.0 * math.pi)
 
 
 def specific_risk_guard_band_um(tolerance: Tolerance, u_um: float, max_pfa: float) -> float:

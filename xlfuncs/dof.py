@@ -3,9 +3,7 @@
 
 * :func:`nu_eff`: ν_eff = u_c⁴ / Σ (c_i u_i)⁴ / ν_i (GUM G.4.1, eq. (G.2b)); ν_i = inf for inputs
   known exactly enough (type B inputs, GUM G.4.3) contribute nothing to the sum.
-* :func:`t_cdf`, :func:`t_quantile`: Student's t by the regularized incomplete beta function
-  (``xlfuncs.locator.stats.betainc``, the one behind the locator's F tails) and its inverse
-  (bisection refined by Newton steps).
+* :func:`t_cdf`, :func:`t_quantile`: Student's t (:mod:`xlfuncs.distributions`, re-exported).
 * :func:`coverage_factor`: k_p = t_p(ν_eff) with ν_eff truncated to the next lower integer
   (GUM G.6.4), p = 0.9545 by default (k = 2 for ν = ∞, GUM G.1.3, G.6.6).
 * :func:`coverage_probability`: the other way, the coverage probability of a coverage factor k:
@@ -17,8 +15,8 @@ from __future__ import annotations
 
 import math
 
+from .distributions import norm_ppf, t_cdf, t_quantile  # noqa: F401  (t_cdf re-exported)
 from .errors import ModelError
-from .locator.stats import betainc
 
 P_K2 = 0.9545          #: the coverage probability of k = 2 for a normal distribution (GUM G.1.3)
 
@@ -40,46 +38,10 @@ def nu_eff(u_contributions, nus) -> float:
     return uc2 * uc2 / den
 
 
-def t_cdf(t: float, nu: float) -> float:
-    """Pr(T <= t) for Student's t with ν degrees of freedom."""
-    if not nu > 0:
-        raise ModelError(f"degrees of freedom must be positive, got {nu!r}")
-    if math.isinf(nu):
-        return 0.5 * math.erfc(-t / math.sqrt(2.0))
-    tail = 0.5 * betainc(nu / 2.0, 0.5, nu / (nu + t * t))
-    return 1.0 - tail if t > 0 else tail
-
-
-def t_quantile(p: float, nu: float) -> float:
-    """The t with Pr(T <= t) = p (0 < p < 1)."""
-    if not 0.0 < p < 1.0:
-        raise ModelError(f"a probability must lie strictly between 0 and 1, got {p!r}")
-    if p < 0.5:
-        return -t_quantile(1.0 - p, nu)
-    if p == 0.5:
-        return 0.0
-    lo, hi = 0.0, 1.0
-    while t_cdf(hi, nu) < p:
-        hi *= 2.0
-        if hi > 1e12:
-            break
-    for _ in range(200):
-        mid = 0.5 * (lo + hi)
-        if t_cdf(mid, nu) < p:
-            lo = mid
-        else:
-            hi = mid
-        if hi - lo <= 1e-15 * hi:
-            break
-    return 0.5 * (lo + hi)
-
-
 def coverage_factor(nu: float, p: float = P_K2) -> float:
     """k_p = t_p(ν) of the two-sided interval of probability ``p`` (GUM G.3.4), ν truncated to
     the next lower integer (GUM G.6.4); ν = inf gives the normal value (2.000 for p = 0.9545)."""
     if math.isinf(nu):
-        from .conformity import norm_ppf
-
         return norm_ppf(0.5 + p / 2.0)
     n = math.floor(nu)
     if n < 1:

@@ -23,7 +23,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .conformity import UM_PER_MM, Tolerance, norm_cdf
+from .conformity import UM_PER_MM, Tolerance
+from .distributions import norm_cdf, norm_pdf
 from .errors import ModelError
 
 # -- global risks with a prior PDF of the production process (JCGM 106:2012, 9.5) ----------------
@@ -210,10 +211,6 @@ def _gl(f, a: float, b: float) -> float:
     return float(np.sum(np.asarray(GL_WEIGHTS) * f(x)) * h)
 
 
-def _phi(x):
-    return np.exp(-0.5 * np.asarray(x) ** 2) / math.sqrt(2.0 * math.pi)
-
-
 def global_risks_normal(mean_mm: float, sd_um: float, u_um: float, tolerance: Tolerance,
                         acceptance_mm: tuple[float | None, float | None]) -> GlobalRisks:
     """Global consumer's and producer's risks (JCGM 106:2012, 9.5) of a normal process
@@ -251,20 +248,20 @@ def global_risks_normal(mean_mm: float, sd_um: float, u_um: float, tolerance: To
 
         v1, v2, v3, v4 = (a_l - t_l) / u, (a_u - t_u) / u, (a_u - t_l) / u, (a_l - t_u) / u
         V = GL_RANGE
-        r_c = (_gl(lambda v: _phi(v) * (Q0(a_l - u * v) - Q0(a_u - u * v)), -V, v4)
-               + _gl(lambda v: _phi(v) * (Q0(t_u) - Q0(a_u - u * v)), v4, v2)
-               + _gl(lambda v: _phi(v) * (P0(t_l) - P0(a_l - u * v)), v1, v3)
-               + _gl(lambda v: _phi(v) * (P0(a_u - u * v) - P0(a_l - u * v)), v3, V))
-        r_p = (_gl(lambda v: _phi(v) * (Q0(a_u - u * v) - Q0(t_u)), v2, v3)
-               + _gl(lambda v: _phi(v) * (Q0(t_l) - Q0(t_u)), v3, V)
-               + _gl(lambda v: _phi(v) * (P0(t_u) - P0(t_l)), -V, v4)
-               + _gl(lambda v: _phi(v) * (P0(a_l - u * v) - P0(t_l)), v4, v1))
+        r_c = (_gl(lambda v: norm_pdf(v) * (Q0(a_l - u * v) - Q0(a_u - u * v)), -V, v4)
+               + _gl(lambda v: norm_pdf(v) * (Q0(t_u) - Q0(a_u - u * v)), v4, v2)
+               + _gl(lambda v: norm_pdf(v) * (P0(t_l) - P0(a_l - u * v)), v1, v3)
+               + _gl(lambda v: norm_pdf(v) * (P0(a_u - u * v) - P0(a_l - u * v)), v3, V))
+        r_p = (_gl(lambda v: norm_pdf(v) * (Q0(a_u - u * v) - Q0(t_u)), v2, v3)
+               + _gl(lambda v: norm_pdf(v) * (Q0(t_l) - Q0(t_u)), v3, V)
+               + _gl(lambda v: norm_pdf(v) * (P0(t_u) - P0(t_l)), -V, v4)
+               + _gl(lambda v: norm_pdf(v) * (P0(a_l - u * v) - P0(t_l)), v4, v1))
     else:
         def eta(x):
             return mean_mm + s0 * np.asarray(x)
 
         V = GL_RANGE
-        r_c = (_gl(lambda x: _phi(x) * (norm_cdf((eta(x) - a_l) / u) - norm_cdf((eta(x) - a_u) / u)), -V, x_l)
-               + _gl(lambda x: _phi(x) * (norm_cdf((a_u - eta(x)) / u) - norm_cdf((a_l - eta(x)) / u)), x_u, V))
-        r_p = _gl(lambda x: _phi(x) * (norm_cdf((a_l - eta(x)) / u) + norm_cdf((eta(x) - a_u) / u)), x_l, x_u)
+        r_c = (_gl(lambda x: norm_pdf(x) * (norm_cdf((eta(x) - a_l) / u) - norm_cdf((eta(x) - a_u) / u)), -V, x_l)
+               + _gl(lambda x: norm_pdf(x) * (norm_cdf((a_u - eta(x)) / u) - norm_cdf((a_l - eta(x)) / u)), x_u, V))
+        r_p = _gl(lambda x: norm_pdf(x) * (norm_cdf((a_l - eta(x)) / u) + norm_cdf((eta(x) - a_u) / u)), x_l, x_u)
     return GlobalRisks(consumer=r_c, producer=r_p, nonconforming=nonconforming)

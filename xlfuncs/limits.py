@@ -14,6 +14,8 @@ import math
 
 import numpy as np
 
+from .model.hyperparameters import HYPERPARAMETERS
+
 #: largest accepted |coordinate| in mm (100 m)
 MAX_COORDINATE_MM = 1e5
 #: the resolution every accepted coordinate keeps (mm): 1 nm
@@ -39,20 +41,10 @@ def coordinate_problem(value_mm: float) -> str | None:
 #: may study an extreme machine) but warned about, because the usual cause is a unit mix-up
 #: (µm for mm, m for mm) that would otherwise give wrong uncertainties silently.  Zero is never
 #: warned about: it switches a factor off.  Typical values (Forbes 2025 Table 3, MPE1): sigmas
-#: 0.1-0.3 µm, 0.7 ppm, 4 µrad; length scales 200-400 mm; lambda_P 0.5.
+#: 0.1-0.3 µm, 0.7 ppm, 4 µrad; length scales 200-400 mm; lambda_P 0.5.  The hyper-parameters'
+#: ranges are their records' (:data:`xlfuncs.model.hyperparameters.HYPERPARAMETERS`).
 PLAUSIBLE = {
-    "sigma_R_um": (0.001, 50.0, "µm"),
-    "sigma_PQ_um": (0.001, 50.0, "µm"),
-    "sigma_ET_um": (0.001, 50.0, "µm"),
-    "sigma_P0_um": (0.001, 50.0, "µm"),
-    "sigma_P_um": (0.001, 50.0, "µm"),
-    "sigma_S_ppm": (0.001, 100.0, "ppm"),
-    "sigma_Sa_ppm": (0.001, 100.0, "ppm"),
-    "sigma_Q_ppm": (0.001, 100.0, "ppm"),
-    "sigma_ER_urad": (0.01, 1000.0, "µrad"),
-    "lambda_ET_mm": (1.0, MAX_COORDINATE_MM, "mm"),
-    "lambda_ER_mm": (1.0, MAX_COORDINATE_MM, "mm"),
-    "lambda_P": (0.01, 10.0, "(unit normals)"),
+    **{h.name: (*h.plausible, h.range_unit or h.unit) for h in HYPERPARAMETERS},
     "A_um": (0.05, 500.0, "µm"),
     "B_mm": (10.0, 1e6, "mm"),
     "offset_mm": (0.0, 2000.0, "mm"),      # the length of a probe's stylus offset

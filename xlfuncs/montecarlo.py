@@ -12,6 +12,8 @@ S     b ~ N(0, V_B), delta_i = G(x_i - p_k(i)) b                                
 ET    e(u_i) per axis, a Gaussian-process draw L z with L L^T = exp(-D^2/lambda^2)       eq. (21)
 ER    alpha(u_i) per axis drawn likewise, delta_i = G_k(i) alpha_i                       eqs. (22)-(25)
 P     per probe: e_P0 (radius) + a GP draw over the normals, delta_i = (e_P0 + e_P,i) n_i  eqs. (26)-(27)
+W     alpha ~ N(alpha, u^2(alpha)), T ~ N(T, u^2(T)) + U(-dT/2, dT/2): the part expands by    docs/workpiece.md
+      alpha (T - 20) - alpha_c (T_est - 20) about x0 (the physical model, not linearised)
 ====  =================================================================================  ===========
 
 (L from the eigen-decomposition of the kernel matrix, eigenvalues below ``rank_tol`` times the
@@ -35,7 +37,7 @@ import numpy as np
 
 from . import pointcloud as pc
 from .errors import ModelError
-from .model import G_S, skew, sq_dists
+from .model import G_S, REFERENCE_C, skew, sq_dists, workpiece_columns
 
 FACTORS = pc.FACTORS
 MILLI = pc.MILLI
@@ -133,6 +135,10 @@ class PointCloudSampler:
             C = np.hstack(cols) if cols else np.zeros((m, 0))
             maps["P"] = np.einsum("ia,ir->iar", N, C).reshape(3 * m, -1)
             inputs["P"] = segs
+        if "W" in factors:
+            # the linear map of V_W = K K^T (its covariance); the draws perturb alpha and T (draw)
+            maps["W"] = workpiece_columns(cloud, params).reshape(3 * m, 3)
+            inputs["W"] = [(3, 1, None)]
         self.maps, self.inputs = maps, inputs
 
     def covariance(self, f: str) -> np.ndarray:
@@ -148,13 +154,33 @@ class PointCloudSampler:
         out = {}
         for f in self.factors:
             A = self.maps[f]
-            if isinstance(A, float):
+            if f == "W":
+                out[f] = self._workpiece(M, rng)
+            elif isinstance(A, float):
                 out[f] = A * rng.standard_normal((M, m, 3))
             elif A.shape[1] == 0:
                 out[f] = np.zeros((M, m, 3))
             else:
                 out[f] = (self._coefficients(f, M, rng) @ A.T).reshape(M, m, 3)
         return out
+
+    def _workpiece(self, M: int, rng: np.random.Generator) -> np.ndarray:
+        """M draws of the part's thermal error (M, m, 3), µm: alpha and the part's temperature drawn
+        (normal alpha and thermometer error, a uniform spread over the temperature difference dT
+        across the part), the part expanded by alpha_q (t_i + dT_q - 20) about the fixture point and
+        corrected by the CMM with alpha_c at the estimated t_i: e_i = eps_q,i (x_i - x0)."""
+        cloud, p = self.cloud, self.params
+        m = cloud.m
+        if not cloud.W_on:
+            return np.zeros((M, m, 3))
+        wp = cloud.workpiece
+        t = np.full(m, wp.T_degC) if cloud.temperature_C is None else cloud.temperature_C
+        z = rng.standard_normal((M, 2))
+        spread = rng.uniform(-0.5, 0.5, M) * wp.dT_K
+        alpha = wp.alpha_ppm_per_K + p.u_alpha_ppm_per_K * z[:, 0]
+        dT = p.u_T_K * z[:, 1] + spread
+        eps = alpha[:, None] * (t[None, :] + dT[:, None] - REFERENCE_C) - wp.alpha_c * (t[None, :] - REFERENCE_C)
+        return eps[:, :, None] * ((cloud.X_mm - np.asarray(wp.fixture_mm)) * MILLI)[None]
 
     def _coefficients(self, f: str, M: int, rng: np.random.Generator) -> np.ndarray:
         """z_f (M x r_f) of every draw, segment by segment (see ``inputs``)."""

@@ -37,6 +37,7 @@ from .model import (  # noqa: F401
     probe_arrays,
     scale_rows,
     sq_dists,
+    workpiece_columns,
 )
 
 # ---------------------------------------------------------------------------------------------
@@ -134,12 +135,22 @@ def _distance_block(cloud: PointCloud, params: Parameters, pa: dict, i: np.ndarr
     cross = s0[i] * s0[j] + sp[i] * sp[j] * kern
     var["P"] = ((s0[i] ** 2 + sp[i] ** 2) * oi**2 + (s0[j] ** 2 + sp[j] ** 2) * oj**2
                 - 2.0 * np.where(same, cross, 0.0) * oi * oj)
+
+    # W (docs/workpiece.md): n^T (K_j - K_i), the rank-3 columns of V_W; d u(eps) for one temperature
+    if cloud.W_on:
+        K = workpiece_columns(cloud, params)
+        g = np.einsum("pa,pak->pk", n, K[j] - K[i])
+        var["W"] = np.einsum("pk,pk->p", g, g)
+    else:
+        var["W"] = np.zeros_like(d)
     return d, var
 
 
-def pair_arrays(cloud: PointCloud, pa: dict) -> dict:
+def pair_arrays(cloud: PointCloud, pa: dict, params: Parameters | None = None) -> dict:
     """Per-point arrays of the all-pairs kernel :func:`rect_variances`, coordinate-major and
     contiguous (row slices broadcast without strided gathers); ``pa``: :func:`probe_arrays`.
+    With ``params`` and the factor W on: ``W2`` = u^2(eps) (µm/mm)² of one temperature, or ``Kt``
+    (3 x 3 x m: coordinate, column, point) the columns of V_W with a temperature per point.
 
     The terms that are constant per probe pair (k(i), k(j)) come as K x m tables ``T[k, j]`` =
     value for a point of probe k against point j: a block's rows are copied out of them
@@ -155,7 +166,14 @@ def pair_arrays(cloud: PointCloud, pa: dict) -> dict:
     Pk = P[first] if cloud.m else np.zeros((K, 3))
     ilam = 1.0 / np.where(lam > 0, lam, 1.0)
     M = cloud.N * ilam[:, None]
-    return {"Xt": np.ascontiguousarray(cloud.X_mm.T), "Nt": np.ascontiguousarray(cloud.N.T),
+    W: dict = {}
+    if params is not None and cloud.W_on:
+        wp = cloud.workpiece
+        if cloud.temperature_C is None:
+            W["W2"] = (wp.u_eps_ppm(params.u_alpha_ppm_per_K, params.u_T_K) * MILLI) ** 2
+        else:
+            W["Kt"] = np.ascontiguousarray(workpiece_columns(cloud, params).transpose(1, 2, 0))
+    return W | {"Xt": np.ascontiguousarray(cloud.X_mm.T), "Nt": np.ascontiguousarray(cloud.N.T),
             "Ut": np.ascontiguousarray(cloud.ram_mm.T),
             "Pt": np.ascontiguousarray(P.T), "p2": np.einsum("ij,ij->i", P, P),
             "any_offset": bool(np.any(P != 0)),
@@ -216,7 +234,7 @@ def rect_variances(cloud: PointCloud, params: Parameters, pa: dict, I: slice, J:
     ``pa``: :func:`probe_arrays`, with :func:`pair_arrays` merged in (else computed here).
     """
     if "T_PQ" not in pa:
-        pa = {**pa, **pair_arrays(cloud, pa)}
+        pa = {**pa, **pair_arrays(cloud, pa, params)}
     ws = ws if ws is not None else PairWorkspace()
     X, N, P = pa["Xt"], pa["Nt"], pa["Pt"]
     shape = (I.stop - I.start, J.stop - J.start)
@@ -314,6 +332,23 @@ def rect_variances(cloud: PointCloud, params: Parameters, pa: dict, I: slice, J:
     cross *= oj
     Pv -= cross
     var["P"] = Pv
+    # W (docs/workpiece.md): one temperature for every point (a task): u_W^2 = d^2 u^2(eps) exactly;
+    # a temperature per point (records): the rank-3 columns, n^T (K_j - K_i)
+    if "W2" in pa:
+        W = mul(d, d, out=ws("W", shape))
+        W *= pa["W2"]
+        var["W"] = W
+    elif "Kt" in pa:
+        W = ws("W", shape)
+        W.fill(0.0)
+        for k in range(3):
+            g = np.einsum("kij,kj->ij", n3, pa["Kt"][:, k, J], out=ws("gW", shape))
+            g -= np.einsum("kij,ki->ij", n3, pa["Kt"][:, k, I], out=t)
+            g *= g
+            W += g
+        var["W"] = W
+    else:
+        var["W"] = np.broadcast_to(np.float64(0.0), shape)
     return d, var
 
 
@@ -358,7 +393,8 @@ def _all_pairs_block(cloud, params, pa, b, out, base=0, ws=None):
                 np.maximum(var[f], 0.0, out=var[f])
         total = np.add(var["R"], var["PQ"], out=ws("total", d.shape))
         for f in FACTORS[2:]:
-            total += var[f]
+            if var[f].flags.writeable:       # (a read-only broadcast here is the 0 of a factor that is off)
+                total += var[f]
     start = pos - base
     p = start
     w = m - 1 - i0
@@ -398,7 +434,7 @@ def iter_distance_components(cloud: PointCloud, params: Parameters, *, block: in
     (default one: on the 2-core machine a second thread made it slower, GIL hand-offs at every
     numpy call; bench/results/pairs.md), at most two blocks ahead of the consumer per thread."""
     pa = probe_arrays(cloud, params)
-    pa.update(pair_arrays(cloud, pa))
+    pa.update(pair_arrays(cloud, pa, params))
 
     local = threading.local()         # one PairWorkspace per thread
 
@@ -456,7 +492,7 @@ def distance_components(cloud: PointCloud, params: Parameters, pairs: np.ndarray
         out = {"d_mm": np.empty(total), "u_um": np.empty(total)}
         for f in FACTORS:
             out[f"u_{f}_um"] = np.empty(total)
-        pa.update(pair_arrays(cloud, pa))
+        pa.update(pair_arrays(cloud, pa, params))
 
         local = threading.local()         # one PairWorkspace per thread
 

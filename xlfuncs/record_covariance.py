@@ -20,7 +20,7 @@ from . import pointcloud as pc
 from .blocked import BLOCK_ENTRIES
 from .errors import ModelError
 from .execution import run_blocks
-from .model import gauss_kernel, scale_rows, sq_dists
+from .model import gauss_kernel, scale_rows, sq_dists, workpiece_columns
 
 FACTORS = pc.FACTORS
 MILLI = pc.MILLI
@@ -141,7 +141,7 @@ def _record_sums(item, shared) -> dict[str, np.ndarray]:
     with the point kernel k_f of the factor and its direction term w: n_a for R (eq. 8, one
     probing, one repeatability draw), PQ (eq. 9, same probe) and ET (eq. 21, independent axes);
     w = G_k^T n_a = n_a x p_k for ER (eqs. 24-25); w = n_a . n_point for P (eqs. 26-27).  S is rank
-    7 at the ram positions (eq. 11).  A factor that is zero at these parameters is left out (the
+    7 at the ram positions (eq. 11), W rank 3 at the points (docs/workpiece.md).  A factor that is zero at these parameters is left out (the
     caller's zeros)."""
     a0, a1 = item
     cloud, params, pa = shared["cloud"], shared["params"], shared["pa"]
@@ -191,6 +191,9 @@ def _record_sums(item, shared) -> dict[str, np.ndarray]:
     if np.any(V_S > 0):
         g7 = shared["g7"]
         out["S"] = (g7[rows] * V_S) @ g7.T
+    gW = shared.get("gW")
+    if gW is not None:           # W (docs/workpiece.md): rank 3, g_a^T K = n_a^T (K_J - K_I)
+        out["W"] = gW[rows] @ gW.T
     return out
 
 
@@ -246,6 +249,9 @@ def record_covariance(cloud: pc.PointCloud, params: pc.Parameters, I, J, *, comp
     pa = pc.probe_arrays(cloud, params)
     shared = {"cloud": cloud, "params": params, "pa": pa, "I": I, "J": J, "na": na,
               "g7": scale_rows(na, cloud.ram_mm[J] - cloud.ram_mm[I])}
+    if cloud.W_on:
+        K = workpiece_columns(cloud, params)
+        shared["gW"] = np.einsum("pa,pak->pk", na, K[J] - K[I])
     if backend is None and block is None and 3 * 8 * cloud.m**2 <= POINT_KERNEL_BYTES:
         shared["kernels"] = _GatheredKernels(cloud, params, pa, d_log_lambda)
         out = _record_sums((0, n), shared)

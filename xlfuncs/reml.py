@@ -51,30 +51,14 @@ from . import pointcloud as pc
 from .errors import ModelError, about
 from .locator.model import Prepared, is_structured, length_covariance
 from .model import sq_dists
+from .model.hyperparameters import GP, HYPERPARAMETERS, LINEAR, NAMES, PARTNER, UNITS  # noqa: F401
 
-#: the hyper-parameters: (task-file name, factor, kind, unit)
-HYPERS: tuple[tuple[str, str, str, str], ...] = (
-    ("sigma_R_um", "R", "sigma", "µm"),
-    ("sigma_S_ppm", "S", "sigma", "ppm"),
-    ("sigma_Sa_ppm", "S", "sigma", "ppm"),
-    ("sigma_Q_ppm", "S", "sigma", "ppm"),
-    ("sigma_PQ_um", "PQ", "sigma", "µm"),
-    ("sigma_ET_um", "ET", "sigma", "µm"),
-    ("lambda_ET_mm", "ET", "lambda", "mm"),
-    ("sigma_ER_urad", "ER", "sigma", "µrad"),
-    ("lambda_ER_mm", "ER", "lambda", "mm"),
-    ("sigma_P0_um", "P", "sigma", "µm"),
-    ("sigma_P_um", "P", "sigma", "µm"),
-    ("lambda_P", "P", "lambda", "1"),
-)
-NAMES = tuple(h[0] for h in HYPERS)
-UNIT = {h[0]: h[3] for h in HYPERS}
-#: the standard deviation whose kernel a length scale shapes
-PARTNER = {"lambda_ET_mm": "sigma_ET_um", "lambda_ER_mm": "sigma_ER_urad", "lambda_P": "sigma_P_um"}
-#: standard deviations entering C linearly in sigma^2 (their B is fixed)
-LINEAR = ("sigma_R_um", "sigma_S_ppm", "sigma_Sa_ppm", "sigma_Q_ppm", "sigma_PQ_um", "sigma_P0_um")
-#: factor of the record covariance each linear standard deviation is found in
-FACTOR = {h[0]: h[1] for h in HYPERS}
+#: the hyper-parameters' tables, derived from their records (xlfuncs.model.hyperparameters):
+#: NAMES, UNIT (name -> unit), PARTNER (length scale -> its standard deviation), LINEAR (standard
+#: deviations entering C as sigma^2 B, B fixed), GP ((sigma, lambda, factor) of the kernels),
+#: FACTOR (name -> the factor of the record covariance it is found in)
+UNIT = UNITS
+FACTOR = {h.name: h.factor for h in HYPERPARAMETERS}
 
 #: a sigma below this share of its start is at zero (the records show none of the factor)
 ZERO_SHARE = 1e-3
@@ -113,9 +97,13 @@ class DenseRecordCovariance:
             dims = 2 if prep.design.dims == 2 else 3
             self.keep = np.array([3 * i + a for i in range(prep.rec.n) for a in range(dims)])
         self.basis = {}
+        # what C holds at every hyper-parameter zero: nothing but the part's temperature difference and
+        # uncorrected expansion (the factor W, docs/workpiece.md), known, not fitted
+        zero = self.components(pc.Parameters())
+        self.const = sum(zero.values())
         for name in LINEAR:
             comps = self.components(pc.Parameters(**{name: 1.0}))
-            self.basis[name] = comps[FACTOR[name]]
+            self.basis[name] = comps[FACTOR[name]] - zero[FACTOR[name]]
 
     def components(self, params: pc.Parameters, d_log_lambda: bool = False) -> dict[str, np.ndarray]:
         """The factors' record covariances (the same functions as ``diagnose``)."""
@@ -129,7 +117,7 @@ class DenseRecordCovariance:
 
     def evaluate(self, values: dict[str, float], free: list[str]) -> tuple[np.ndarray, list[np.ndarray]]:
         """C at ``values`` and dC/dphi_k for every name in ``free`` (phi = log value)."""
-        C = np.zeros((self.n, self.n))
+        C = np.array(self.const, dtype=float) if np.ndim(self.const) else np.zeros((self.n, self.n))
         d: dict[str, np.ndarray] = {}
         for name in LINEAR:
             v = values[name]
@@ -137,14 +125,13 @@ class DenseRecordCovariance:
                 term = v * v * self.basis[name]
                 C += term
                 d[name] = 2.0 * term
-        gp = {s: values[s] for s in ("sigma_ET_um", "sigma_ER_urad", "sigma_P_um")}
+        gp = {s: values[s] for s, _lm, _f in GP}
         if any(v > 0 for v in gp.values()):
             lam = {lm: values[lm] if values[PARTNER[lm]] > 0 else 0.0 for lm in PARTNER}
             params = pc.Parameters(**gp, **lam)
             comps = self.components(params)
             dl = None
-            for s, f, lm in (("sigma_ET_um", "ET", "lambda_ET_mm"), ("sigma_ER_urad", "ER", "lambda_ER_mm"),
-                             ("sigma_P_um", "P", "lambda_P")):
+            for s, lm, f in GP:
                 if gp[s] > 0:
                     C += comps[f]
                     d[s] = 2.0 * comps[f]

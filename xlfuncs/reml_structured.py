@@ -60,14 +60,13 @@ from .locator.model import Prepared
 from .locator.structured import StructuredCovariance
 from .locator.structured_lengths import LengthCovariance
 from .model import sq_dists
+from .model.hyperparameters import GP, S_COLUMNS, SIGMAS
 
 #: records (length) or points per block of the pass over U
 BLOCK = 2048
-#: the S columns (eq. 13, V_B diagonal) and the standard deviation each belongs to
-S_COLUMNS = ("sigma_S_ppm", "sigma_Sa_ppm", "sigma_Sa_ppm", "sigma_Sa_ppm", "sigma_Q_ppm", "sigma_Q_ppm",
-             "sigma_Q_ppm")
-#: the GP factors: (standard deviation, length scale, factor)
-GP = (("sigma_ET_um", "lambda_ET_mm", "ET"), ("sigma_ER_urad", "lambda_ER_mm", "ER"), ("sigma_P_um", "lambda_P", "P"))
+# S_COLUMNS: the S columns (eq. 13, V_B diagonal) and the standard deviation each belongs to;
+# GP: the GP factors (standard deviation, length scale, factor); both from the records
+# (xlfuncs.model.hyperparameters)
 
 
 class DerivativeFactor:
@@ -154,8 +153,7 @@ class StructuredRecordCovariance:
         lengths = isinstance(op, LengthCovariance)
         nP = len(self.cloud.probes)
         dims = 3 if lengths else self.dims
-        cols = {n: [] for n in ("sigma_R_um", "sigma_PQ_um", "sigma_S_ppm", "sigma_Sa_ppm", "sigma_Q_ppm",
-                                "sigma_ET_um", "sigma_ER_urad", "sigma_P0_um", "sigma_P_um")}
+        cols: dict[str, list] = {n: [] for n in SIGMAS}
         cols["sigma_PQ_um"] = list(range(nP * dims))
         for j, s in enumerate(S_COLUMNS):
             cols[s].append(op.off_S + j)

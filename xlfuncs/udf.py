@@ -13,11 +13,13 @@ Arguments are cell ranges in the layout of the generated workbooks:
              probe`` (the probe id; may be left out, 7 columns, when there is one probe);
 ``probes``   the probes table of ``Inputs`` -- ``probe, px_mm, py_mm, pz_mm, sigma_PQ_um,
              sigma_P0_um, sigma_P_um, lambda_P`` (per-probe values as the cells show them);
-``params``   the hyper-parameters of ``Inputs``: either the 12 values in the order of
-             :class:`xlfuncs.pointcloud.Parameters` (column B) or the two columns name, value
-             (A:B), in any order, unknown names ignored;
+``params``   the hyper-parameters of ``Inputs``: either the 12 values of the machine's (or the 14
+             of :class:`xlfuncs.pointcloud.Parameters`, with u(alpha) and u(T) of the part) in
+             their order (column B) or the two columns name, value (A:B), in any order, unknown
+             names ignored; name/value rows may carry the part's thermal state
+             (``workpiece_alpha_ppm_per_K`` ..., docs/workpiece.md): the factor W then acts;
 ``ids``      a column of point ids (e.g. the ``from`` column of ``Budget``);
-``factor``   ``"R"``, ``"PQ"``, ``"S"``, ``"ET"``, ``"ER"``, ``"P"`` or ``"X"`` (their sum).
+``factor``   ``"R"``, ``"PQ"``, ``"S"``, ``"ET"``, ``"ER"``, ``"P"``, ``"W"`` or ``"X"`` (their sum).
 
 Results in µm² (variance blocks), µm (uncertainties), mm (distances); fitted features in their
 parameters' units (mm, rad).  Every function cites the equation it evaluates.
@@ -26,6 +28,7 @@ parameters' units (mm, rad).  Every function cites the equation it evaluates.
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 from typing import Any, Sequence
 
 import numpy as np
@@ -50,6 +53,8 @@ from . import blocked as bl
 from . import features as ft
 from . import pointcloud as pc
 from .errors import ModelError
+from .model import workpiece as wpc
+from .model.hyperparameters import HYPER, NAMES, PROBE_OVERRIDES, in_table
 
 __all__ = [
     "cmm_v_block", "cmm_v_et", "cmm_v_er", "cmm_v_p", "cmm_pair_block", "cmm_pair_blocks",
@@ -57,7 +62,8 @@ __all__ = [
     "UDFS", "parse_points", "parse_probes", "parse_params",
 ]
 
-PARAM_NAMES = tuple(pc.Parameters.__dataclass_fields__)
+#: the hyper-parameters every params range gives (the machine's); the part's u(alpha), u(T) are optional
+PARAM_NAMES = in_table("parameters")
 DISTANCE_COLUMNS = ("d_mm", "u_um", *(f"u_{f}_um" for f in pc.FACTORS))
 #: row-major order of the 3 x 3 pair blocks when laid out in one row
 BLOCK_COLUMNS = ("xx", "xy", "xz", "yx", "yy", "yz", "zx", "zy", "zz")
@@ -96,24 +102,50 @@ def _text(v: Any) -> str:
     return str(v).strip()
 
 
-def parse_params(params: Any) -> pc.Parameters:
-    """Hyper-parameters from 12 values (Parameters order) or from name/value rows."""
+def _named_rows(params: Any) -> dict[str, Any] | None:
+    """name -> value of name/value rows (None when ``params`` is a column of values)."""
     rows = [r for r in _rows(params, "params") if any(c not in (None, "") for c in r)]
     if rows and len(rows[0]) >= 2 and isinstance(rows[0][0], str):
+        return {_text(r[0]): r[1] for r in rows}
+    return None
+
+
+def parse_params(params: Any) -> pc.Parameters:
+    """Hyper-parameters from 12 or 14 values (Parameters order) or from name/value rows (the part's
+    u(alpha), u(T) as ``u_alpha_ppm_per_K`` or ``workpiece_u_alpha_ppm_per_K``, optional)."""
+    named = _named_rows(params)
+    if named is not None:
         vals = {}
-        for r in rows:
-            name = _text(r[0])
-            if name in PARAM_NAMES:
-                vals[name] = _number(r[1], name)
+        for name, v in named.items():
+            key = name.removeprefix(wpc.PREFIX)      # the workbook names the part's u's workpiece_<name>
+            if key in NAMES and (key == name or HYPER[key].table == "workpiece"):
+                vals[key] = _number(v, name)
         missing = [n for n in PARAM_NAMES if n not in vals]
         if missing:
             raise ModelError(f"params: missing {', '.join(missing)}")
         return pc.Parameters(**vals)
-    flat = [c for r in rows for c in r]
-    if len(flat) != len(PARAM_NAMES):
+    flat = [c for r in _rows(params, "params") if any(c not in (None, "") for c in r) for c in r]
+    if len(flat) not in (len(PARAM_NAMES), len(NAMES)):
         raise ModelError(f"params: expected the {len(PARAM_NAMES)} hyper-parameters "
                          f"({', '.join(PARAM_NAMES)}), got {len(flat)} cells")
-    return pc.Parameters(**{n: _number(v, n) for n, v in zip(PARAM_NAMES, flat)})
+    return pc.Parameters(**{n: _number(v, n) for n, v in zip(NAMES, flat)})
+
+
+def parse_workpiece(params: Any):
+    """The part's thermal state from the name/value rows of ``params`` (``workpiece_...``,
+    docs/workpiece.md), or None (no such rows: no factor W)."""
+    named = _named_rows(params)
+    if named is None:
+        return None
+    cells = {k: _number(v, k) for k, v in named.items()
+             if k.startswith(wpc.PREFIX) and k[len(wpc.PREFIX):] in wpc.STATE_CELLS}
+    return wpc.from_cells(cells)
+
+
+def _with_part(cloud: pc.PointCloud, params: Any) -> pc.PointCloud:
+    """The cloud with the part's thermal state of ``params`` (the factor W), if it has one."""
+    wp = parse_workpiece(params)
+    return cloud if wp is None else replace(cloud, workpiece=wp)
 
 
 def parse_probes(probes: Any) -> tuple[pc.Probe, ...]:
@@ -127,8 +159,7 @@ def parse_probes(probes: Any) -> tuple[pc.Probe, ...]:
                              f"sigma_P0_um, sigma_P_um, lambda_P), got {len(r)}")
         pid = _text(r[0])
         off = tuple(_number(r[1 + a], f"probe {pid} p{'xyz'[a]}_mm") for a in range(3))
-        sig = [_number(r[4 + q], f"probe {pid} {n}") for q, n in
-               enumerate(("sigma_PQ_um", "sigma_P0_um", "sigma_P_um", "lambda_P"))]
+        sig = [_number(r[4 + q], f"probe {pid} {n}") for q, n in enumerate(PROBE_OVERRIDES)]
         out.append(pc.Probe(pid, off, *sig))
     if not out:
         raise ModelError("probes: no probe given")
@@ -216,8 +247,8 @@ def cmm_v_block(factor, points_rows, points_cols, probes, params):
     prb = parse_probes(probes)
     P = parse_params(params)
     A, B = parse_points(points_rows, prb), parse_points(points_cols, prb)
-    both = pc.PointCloud(np.vstack([A.X_mm, B.X_mm]), np.vstack([A.N, B.N]),
-                         np.concatenate([A.probe_index, B.probe_index]), prb)
+    both = _with_part(pc.PointCloud(np.vstack([A.X_mm, B.X_mm]), np.vstack([A.N, B.N]),
+                                    np.concatenate([A.probe_index, B.probe_index]), prb), params)
     blk = bl.V_X_block(both, P, np.arange(A.m), np.arange(A.m, A.m + B.m))
     return blk[f]
 
@@ -266,8 +297,8 @@ def cmm_pair_block(factor, point_i, point_j, probes, params):
     A, B = parse_points(point_i, prb), parse_points(point_j, prb)
     if A.m != 1 or B.m != 1:
         raise ModelError("point_i and point_j must be one row each")
-    both = pc.PointCloud(np.vstack([A.X_mm, B.X_mm]), np.vstack([A.N, B.N]),
-                         np.concatenate([A.probe_index, B.probe_index]), prb)
+    both = _with_part(pc.PointCloud(np.vstack([A.X_mm, B.X_mm]), np.vstack([A.N, B.N]),
+                                    np.concatenate([A.probe_index, B.probe_index]), prb), params)
     blocks = bl.pair_blocks(both, P, [[0, 1]])
     return (sum(blocks.values()) if f == "X" else blocks[f])[0]
 
@@ -282,7 +313,7 @@ def cmm_pair_blocks(factor, points, from_ids, to_ids, probes, params):
     """One row per distance: the 3 x 3 block V_ii + V_jj - V_ij - V_ji of V_X,factor (µm²) in
     row-major order (xx, xy, xz, yx, ..., zz), Forbes 2025 eq. (29)."""
     f = _factor(factor)
-    cloud = _cloud_of(points, probes)
+    cloud = _with_part(_cloud_of(points, probes), params)
     P = parse_params(params)
     pairs = _pairs(cloud, from_ids, to_ids)
     blocks = bl.pair_blocks(cloud, P, pairs)
@@ -296,16 +327,16 @@ def cmm_pair_blocks(factor, points, from_ids, to_ids, probes, params):
 @xw.arg("probes", ndim=2)
 @xw.arg("params", ndim=2)
 def cmm_distance(point_i, point_j, probes, params):
-    """One row: d_mm, u_um and the six components u_R_um ... u_P_um of the distance between
-    two points, Forbes 2025 eqs. (29)-(30)."""
+    """One row: d_mm, u_um and the components u_R_um ... u_P_um, u_W_um of the distance between
+    two points, Forbes 2025 eqs. (29)-(30) (W: docs/workpiece.md)."""
     prb = parse_probes(probes)
     P = parse_params(params)
     A, B = parse_points(point_i, prb), parse_points(point_j, prb)
     if A.m != 1 or B.m != 1:
         raise ModelError("point_i and point_j must be one row each")
-    both = pc.PointCloud(np.vstack([A.X_mm, B.X_mm]), np.vstack([A.N, B.N]),
-                         np.concatenate([A.probe_index, B.probe_index]), prb,
-                         (A.labels[0], B.labels[0]))
+    both = _with_part(pc.PointCloud(np.vstack([A.X_mm, B.X_mm]), np.vstack([A.N, B.N]),
+                                    np.concatenate([A.probe_index, B.probe_index]), prb,
+                                    (A.labels[0], B.labels[0])), params)
     r = pc.distance_components(both, P, np.array([[0, 1]]))
     return np.array([[r[k][0] for k in DISTANCE_COLUMNS]])
 
@@ -318,8 +349,8 @@ def cmm_distance(point_i, point_j, probes, params):
 @xw.arg("params", ndim=2)
 def cmm_distances(points, from_ids, to_ids, probes, params):
     """One row per distance (from, to): d_mm, u_um, u_R_um, u_PQ_um, u_S_um, u_ET_um, u_ER_um,
-    u_P_um, Forbes 2025 eqs. (29)-(30), evaluated without forming V_X."""
-    cloud = _cloud_of(points, probes)
+    u_P_um, u_W_um, Forbes 2025 eqs. (29)-(30), evaluated without forming V_X."""
+    cloud = _with_part(_cloud_of(points, probes), params)
     P = parse_params(params)
     r = pc.distance_components(cloud, P, _pairs(cloud, from_ids, to_ids))
     return np.column_stack([r[k] for k in DISTANCE_COLUMNS])
@@ -360,11 +391,11 @@ def cmm_feature(element, points, probes, params, circle_plane=None, weights=None
                 reference_mm=None):
     """Least-squares element (line, plane, circle, sphere, cylinder, cone) fitted to the points
     (Forbes 2022) with its uncertainty under the point-cloud model (Forbes 2025 section 5.6):
-    one row per reported parameter -- name, value, u, u_R, u_PQ, u_S, u_ET, u_ER, u_P (the
+    one row per reported parameter -- name, value, u, u_R, u_PQ, u_S, u_ET, u_ER, u_P, u_W (the
     parameter's unit: mm, rad or 1).  Optional: circle_plane (xy, yz, zx, space), weights (one
     per point), axis_hint and reference_mm (3 cells each), as in the feature task file.
     V_X is never formed (xlfuncs.blocked)."""
-    cloud = _cloud_of(points, probes)
+    cloud = _with_part(_cloud_of(points, probes), params)
     P = parse_params(params)
     f = _fit(element, cloud, circle_plane, weights, axis_hint, reference_mm)
     unc = bl.propagate_cloud(f, cloud, P)
@@ -386,7 +417,7 @@ def cmm_feature_va(element, points, probes, params, factor="X", circle_plane=Non
     (Forbes 2025 section 5.6; Forbes 2022 eqs. (8), (12)), computed in blocks.  Optional
     arguments as :func:`cmm_feature`."""
     f_ = _factor(factor)
-    cloud = _cloud_of(points, probes)
+    cloud = _with_part(_cloud_of(points, probes), params)
     P = parse_params(params)
     f = _fit(element, cloud, circle_plane, weights, axis_hint, reference_mm)
     unc = bl.propagate_cloud(f, cloud, P)

@@ -45,12 +45,12 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from . import pointcloud as pc
+from .distributions import chi2_logsf
 from .errors import ModelError
 from .locator import diagnose as dg
 from .locator import effects as fx
 from .locator.model import Model, length_covariance, prepare, resolve_probes
 from .locator.recordings import LengthRecords
-from .locator.stats import chi2_logsf
 
 #: the significance level of the verdict: alpha/2 for the count, alpha/2 for the structure
 ALPHA = 0.01

@@ -12,6 +12,7 @@ from openpyxl.styles import Alignment
 
 from cmmwb.xlfuncs import budget as bd
 from cmmwb.xlfuncs import dof
+from cmmwb.xlfuncs.model.workpiece import REFERENCE_C
 
 from ..workbook.book import Book
 from ..workbook.styles import FMT_SCI, HEADER_FONT
@@ -86,6 +87,7 @@ class BudgetCells:
     U: str
     nu_eff: str = ""             #: ν_eff of u_c (or of u_with_A when type_a)
     type_a: dict | None = None   #: {"u", "nu", "u_with", "k", "U_with"} cells of the type A row
+    thermal: list[dict] = field(default_factory=list)   #: the rows of the factor W, as ``rows``
 
 
 @dataclass
@@ -295,6 +297,12 @@ def write_variant(book: Book, ws, r0: int, title: str, vb: bd.VariantBudget, *,
         for f in sens[v.role]:
             book.formula(ws, r, C_S, f"={f}", fmt=FMT_S)
             r += 1
+    # the factor W (docs/workpiece.md): rows of alpha, T, dT and the uncorrected expansion, in u_c
+    thermal = []
+    if vb.thermal:
+        value_row = r + len(vb.thermal) + (1 if type_a is not None else 0)
+        thermal = _thermal_rows(book, ws, r, cell(value_row, C_C), notes)
+        r += len(thermal)
     last_input = r - 1
     nu_rows = list(range(r0 + 2, r))
     a_cells = None
@@ -304,7 +312,9 @@ def write_variant(book: Book, ws, r0: int, title: str, vb: bd.VariantBudget, *,
                  note=f"{KIND_TEXT[kind]}: {spec.label} ({spec.equation})" if notes else None)
     book.text(ws, r + 1, C_U, "u_c_um")
     book.formula(ws, r + 1, C_C, f"=SQRT(SUMSQ({block(r0 + 2, C_C, last_input - r0 - 1, 1)}))",
-                 fmt=FMT_U, note="u_c = sqrt(sum((dl/dx_i u_i)^2)), eq. (6)" if notes else None)
+                 fmt=FMT_U, note=("u_c = sqrt(sum((dl/dx_i u_i)^2)), eq. (6)"
+                                  + (", with the rows of the part's temperature (W)" if thermal else ""))
+                 if notes else None)
     book.text(ws, r + 2, C_U, "U_um")
     book.formula(ws, r + 2, C_C, f"=k*{cell(r + 1, C_C)}", fmt=FMT_U,
                  note="U = k u_c" if notes else None)
@@ -326,8 +336,48 @@ def write_variant(book: Book, ws, r0: int, title: str, vb: bd.VariantBudget, *,
         bottom = max(r + 9, w.qrow)
     cells = BudgetCells(ws.title, spec.label, rows, coord(cell(*value_cell)),
                         coord(cell(r + 1, C_C)), coord(cell(r + 2, C_C)), nu_eff,
-                        {k: coord(v) for k, v in a_cells.items()} if a_cells else None)
+                        {k: coord(v) for k, v in a_cells.items()} if a_cells else None, thermal)
     return cells, bottom + 1
+
+
+#: the W rows of a budget (docs/workpiece.md): label, value, sensitivity (l the characteristic's cell),
+#: u, distribution; every u times workpiece_enabled
+_W = "workpiece_"
+THERMAL_ROWS = (
+    ("alpha_ppm_per_K (W)", f"={_W}alpha_ppm_per_K", f"=-{{l}}*({_W}T_degC-{REFERENCE_C:g})*0.001",
+     f"={_W}u_alpha_ppm_per_K*{_W}enabled", "normal",
+     "alpha of the part (1e-6/K); dl/dalpha = -l (T - 20) x 0.001 µm per 1e-6/K; u = u(alpha)"),
+    ("T_degC (W)", f"={_W}T_degC", f"=-{{l}}*{_W}alpha_ppm_per_K*0.001", f"={_W}u_T_K*{_W}enabled", "normal",
+     "the part's temperature (°C); dl/dT = -l alpha x 0.001 µm per K; u = u(T)"),
+    ("dT_K across the part (W)", f"={_W}dT_K", f"=-{{l}}*{_W}alpha_ppm_per_K*0.001",
+     f"={_W}dT_K/SQRT(12)*{_W}enabled", "rectangular",
+     "temperature difference across the part (K): a rectangular spread of T, u = dT/sqrt(12)"),
+    ("b_uncorrected_ppm (W)", f"={_W}bias_ppm", "={l}*0.001", f"=ABS({_W}bias_ppm)*{_W}enabled",
+     "uncorrected (RSS)",
+     "the expansion the CMM leaves uncorrected, b = (alpha - alpha_c)(T - 20) (1e-6): a known systematic "
+     "error carried in quadrature (RSSu, docs/workpiece.md); 0 when the CMM corrects with the part's alpha"),
+)
+
+
+def _thermal_rows(book: Book, ws, r: int, l_cell: str, notes: bool) -> list[dict]:
+    """The rows of the factor W from row ``r`` (Wojtyła/Płowucha layout: input, value, dl/dx_i, u_i,
+    contribution; the units are in the input's label), l the characteristic (``l_cell``)."""
+    out = []
+    for label, value, sens, u, dist, meaning in THERMAL_ROWS:
+        c = book.text(ws, r, C_INPUT, label)
+        if notes:
+            book.note(c, meaning)
+        book.formula(ws, r, C_X, value, fmt="0.00##")
+        book.formula(ws, r, C_S, sens.format(l=l_cell), fmt=FMT_S)
+        book.formula(ws, r, C_U, u, fmt=FMT_U)
+        book.formula(ws, r, C_C, f"={cell(r, C_S)}*{cell(r, C_U)}", fmt=FMT_U)
+        book.text(ws, r, C_DIST, dist)
+        book.text(ws, r, C_NU, NU_INF).alignment = Alignment(horizontal="right")
+        out.append({"input": label, "value": coord(cell(r, C_X)), "sensitivity": coord(cell(r, C_S)),
+                    "u": coord(cell(r, C_U)), "contribution": coord(cell(r, C_C)),
+                    "distribution": coord(cell(r, C_DIST)), "nu": coord(cell(r, C_NU))})
+        r += 1
+    return out
 
 
 def _type_a_row(book: Book, ws, r: int, a: dict) -> dict:

@@ -27,6 +27,7 @@ from cmmwb.xlfuncs import budget as bd
 
 from ..workbook.book import Book, BookAdditions, Formula
 from ..workbook.styles import HEADER_FONT
+from ..workbook.workpiece import write_workpiece_inputs
 from ..workbook.xlref import block, cell
 from .block import (
     C_INPUT,
@@ -158,6 +159,8 @@ def _write_distance_sheet(book: Book, task, c, d: bd.DistanceBudget, type_a: dic
     keep = [(1, r - 1)]
     pareto = [(inp, 1.0, row["contribution"], float(x))
               for inp, row, x in zip(d.chosen.inputs, cc.rows, d.chosen.contributions_um)]
+    pareto += [(row["input"], 1.0, row["contribution"], float(t["contribution_um"]))
+               for row, t in zip(cc.chosen.thermal, d.chosen.thermal)]
     r = _others_and_table(book, ws, r, [(c.name, d, cc, others)], keep=keep, pareto=pareto,
                           pareto_u=cc.u, what=f"u_c of {c.name}")
     ws.freeze_panes = "B1"
@@ -232,7 +235,9 @@ def _write_position_sheet(book: Book, task, c, pb: bd.PositionBudget, type_a: di
     # u_POS^2 = sum over both distance budgets of (2 * contribution)^2 (Table 9 convention)
     pareto = [(f"{distance_name(c, i)}: {inp}", bd.POSITION_FACTOR, row["contribution"], float(x))
               for i, (d, cc) in enumerate(zip(pb.distances, dist_cells))
-              for inp, row, x in zip(d.chosen.inputs, cc.rows, d.chosen.contributions_um)]
+              for inp, row, x in [*zip(d.chosen.inputs, cc.rows, d.chosen.contributions_um),
+                                  *((row["input"], row, t["contribution_um"])
+                                    for row, t in zip(cc.chosen.thermal, d.chosen.thermal))]]
     _others_and_table(book, ws, r, sections, keep=keep, pareto=pareto, pareto_u="E9",
                       what=f"u_POS of {c.name}")
     rows = []
@@ -326,6 +331,15 @@ def _write_inputs(book: Book, task) -> None:
         book.text(ws, r, 3, unit)
         book.text(ws, r, 5, meaning)
         r += 1
+    if task.part is not None:
+        # the part's temperature (the factor W, docs/workpiece.md): its rows in every budget
+        r += 1
+        book.text(ws, r, 1, "The part's temperature, factor W (docs/workpiece.md); not in the MPE statement",
+                  font=HEADER_FONT)
+        p = task.part
+        r = write_workpiece_inputs(book, ws, r + 1, p.workpiece,
+                                   {"u_alpha_ppm_per_K": p.u_alpha_ppm_per_K, "u_T_K": p.u_T_K},
+                                   columns=(1, 2, 3, 5))
     r += 1
     book.text(ws, r, 1, "Essential points (mm); defined names <point>_x_mm, <point>_y_mm, "
               "<point>_z_mm", font=HEADER_FONT)

@@ -26,6 +26,7 @@ from ..errors import InputError, model_errors_named
 from ..quantities import Cells, Quantity, ToleranceKeys
 from ..taskfile import COMMON_TABLES, check_keys, number, place, table, task_kind_and_name, text_list
 from ..taskkind import always_exact, no_verdicts
+from ..taskworkpiece import read_workpiece
 from ..workbook.book import RESULTS, BookAdditions
 from ..workbook.xlref import cell, check_name
 from .task import MODEL_KEYS, TYPE_A_INPUT, Characteristic, Task, distance_name
@@ -224,7 +225,9 @@ def load(path: Path, doc: dict) -> Task:
                        "names are sheet names: letter case aside, each is another)")
         seen[c.name.lower()] = n
         chars.append(c)
-    task = Task(path, name, mpe, points, ds, chars, list(notes))
+    wp = read_workpiece(path, doc)
+    part = None if wp is None else bd.Part(wp.workpiece, **wp.u)
+    task = Task(path, name, mpe, points, ds, chars, list(notes), part)
     for c in chars:
         _evaluate(task, c)      # degenerate geometry, unknown variants -> InputError here
     return task
@@ -247,8 +250,8 @@ def _evaluate(task: Task, c: Characteristic):
     try:
         if c.model == "position":
             return bd.position_budget(c.points["point"], c.datums, c.ted_mm, task.datum_system,
-                                      task.points, task.mpe, c.variant)
-        return bd.distance_budget(specs(task, c), task.points, task.mpe, c.variant)
+                                      task.points, task.mpe, c.variant, task.part)
+        return bd.distance_budget(specs(task, c), task.points, task.mpe, c.variant, task.part)
     except ModelError as e:
         where = f"{c.where} key 'variant'" if "unknown variant" in str(e) else c.where
         raise InputError(f"{c.name}: {e}", file=task.path, where=where) from None
@@ -266,13 +269,24 @@ def _mpe_rows(v: bd.VariantBudget, b: float) -> list[dict]:
     return [dict(row, distribution=dist, nu=None) for row in v.rows()]
 
 
+def _thermal(v: bd.VariantBudget) -> dict:
+    """The factor W of a budget (docs/workpiece.md; only with [workpiece]): its rows (value in
+    ``unit``, sensitivity µm per unit, u in ``unit``, contribution µm, distribution, ν = ∞) and the
+    two parts of u: ``u_mpe_um`` (the MPE inputs, eq. (6)) and ``u_W_um``."""
+    if not v.thermal:
+        return {}
+    return {"workpiece_rows": [dict(row, nu=None) for row in v.thermal], "u_mpe_um": v.u_mpe_um,
+            "u_W_um": v.u_W_um}
+
+
 def _distance_entry(name: str, model: str, d: bd.DistanceBudget, b: float) -> dict:
     ch = d.chosen
     return {
         "name": name, "model": model, "variant": ch.label, "equation": ch.spec.equation,
         "value_mm": ch.value_mm, "u_um": ch.u_c_um, "U_um": ch.U_um, "rows": _mpe_rows(ch, b),
+        **_thermal(ch),
         "variants": [{"variant": v.label, "equation": v.spec.equation, "value_mm": v.value_mm,
-                      "u_um": v.u_c_um, "U_um": v.U_um, "rows": _mpe_rows(v, b), "nu_eff": None}
+                      "u_um": v.u_c_um, "U_um": v.U_um, "rows": _mpe_rows(v, b), **_thermal(v), "nu_eff": None}
                      for v in d.variants],
         "nu_eff": None,
     }
@@ -335,6 +349,9 @@ def compute(task: Task) -> dict:
                 "value_mm": r.value_mm, "u_um": r.u_um, "U_um": r.U_um,
                 "rows": [dict(row, distribution=POSITION_INPUT_DISTRIBUTION, nu=None) for row in r.rows()],
                 "u_eq26_um": r.u_eq26_um,
+                **({"u_mpe_um": 2.0 * math.hypot(*(d.chosen.u_mpe_um for d in r.distances)),
+                    "u_W_um": 2.0 * math.hypot(*(d.chosen.u_W_um for d in r.distances))}
+                   if task.part is not None else {}),
                 "distances": [dict(_distance_entry(distance_name(c, i), "datum_distance", d,
                                                    task.mpe.b), datum=r.datums[i])
                               for i, d in enumerate(r.distances)],

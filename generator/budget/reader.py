@@ -1,11 +1,12 @@
-"""``cmmwb read`` of a ``budget`` workbook: the MPE (named cells), the points table and the
-theoretical dimensions of position characteristics."""
+"""``cmmwb read`` of a ``budget`` workbook: the MPE (named cells), the part's temperature
+(``[workpiece]``), the points table and the theoretical dimensions of position characteristics."""
 
 from __future__ import annotations
 
 from ..errors import InputError
 from ..workbook.readback import MAX_TABLE_ROWS, Cells, ReadTask, Section
 from ..workbook.tasksheet import TASK_SHEET
+from ..workbook.workpiece import read_workpiece_cells
 
 
 def read_budget(cells: Cells, rt: ReadTask) -> None:
@@ -13,6 +14,7 @@ def read_budget(cells: Cells, rt: ReadTask) -> None:
     sec = Section(cells, rt, doc, "mpe")
     for key in ("A_um", "B_mm", "b", "k"):
         sec.scalar(key)
+    read_workpiece_cells(cells, rt)          # [workpiece], when the task has it (the factor W)
     stored = doc.get("points")
     if not isinstance(stored, dict) or not stored:
         raise InputError("the task information has no points", file=cells.path, where=f"sheet {TASK_SHEET}")

@@ -56,6 +56,8 @@ class Task:
     datum_system: bd.DatumSystem | None
     characteristics: list[Characteristic]
     notes: list[str] = field(default_factory=list)
+    #: the part's temperature ([workpiece], the factor W: docs/workpiece.md), or None
+    part: bd.Part | None = None
 
 
 def distance_name(c: Characteristic, i: int) -> str:

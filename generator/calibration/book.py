@@ -10,6 +10,7 @@ import textwrap
 from pathlib import Path
 
 from cmmwb.xlfuncs import pointcloud as pc
+from cmmwb.xlfuncs.model.hyperparameters import UNITS, in_use
 
 from ..pointcloud.book import MPE_GRID_POINTS, write_mpe
 from ..workbook.book import Book, ChartSeries, Formula
@@ -110,13 +111,12 @@ def _model(book: Book, result: dict, final: pc.Parameters, mpe: dict | None) -> 
     ws = book.sheet("Model")
     book.header(ws, 1, 1, ["parameter", "value", "unit"])
     r = 2
-    units = {"lambda_P": "1"}
-    for k in pc.Parameters.__dataclass_fields__:
+    for k in in_use(final):
         book.text(ws, r, 1, k)
         book.input(ws, r, 2, k, float(getattr(final, k)), lo=0.0, fmt="0.0000",
                    note="fitted task (calibration.json fitted_parameters): REML estimate, or the task's value "
                         "where not identifiable, after the effects were fed back")
-        book.text(ws, r, 3, units.get(k, k.rsplit("_", 1)[-1].replace("um", "µm").replace("urad", "µrad")))
+        book.text(ws, r, 3, UNITS[k])
         r += 1
     if mpe:
         for k, unit in (("A_um", "µm"), ("B_mm", "mm"), ("K", "1"), ("P_mm", "mm"), ("L_max_mm", "mm")):

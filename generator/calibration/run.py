@@ -27,6 +27,7 @@ from cmmwb.xlfuncs.errors import ModelError
 from cmmwb.xlfuncs.limits import plausibility_problem
 from cmmwb.xlfuncs.locator import diagnose as dg
 from cmmwb.xlfuncs.locator.recordings import RecordingsError, write_recordings
+from cmmwb.xlfuncs.model.hyperparameters import PROBE_OVERRIDES, in_table
 
 from .. import __version__
 from ..diagnosis.run import read_recordings
@@ -140,7 +141,7 @@ def run_calibrate(paths: list[Path], model: dg.Model, out_dir: Path, *, task_pat
                          "profile point is a large refit (--profiles yes computes them)")
     try:
         run = cr.run(files, model.params, feedback=feedback, mpe=mpe, profiles=profiles_note is None, cal=cal,
-                     rule=rule)
+                     rule=rule, workpiece=model.workpiece)
     except cr.FeedbackError as e:
         raise InputError(str(e), where="--feedback") from None
     by_stem = {Path(p).stem: Path(p) for p in paths}
@@ -156,7 +157,7 @@ def run_calibrate(paths: list[Path], model: dg.Model, out_dir: Path, *, task_pat
         (tmp / "calibration.json").write_text(json.dumps(result, indent=1, ensure_ascii=False, allow_nan=False)
                                               + "\n", encoding="utf-8")
         made = [tmp / "calibration.json"]
-        (tmp / "fitted.toml").write_text(fitted_toml(doc, run.final, result), encoding="utf-8")
+        (tmp / "fitted.toml").write_text(fitted_toml(doc, run.final, result, run.workpiece), encoding="utf-8")
         made.append(tmp / "fitted.toml")
         pts = (doc or {}).get("points")
         if task_path is not None and isinstance(pts, dict) and isinstance(pts.get("file"), str):
@@ -252,16 +253,24 @@ def indicated_text(result: dict) -> str:
     return text + "."
 
 
-def fitted_toml(doc: dict | None, params: pc.Parameters, result: dict) -> str:
+def fitted_toml(doc: dict | None, params: pc.Parameters, result: dict, workpiece=None) -> str:
     """The task with the fitted [parameters] (probe overrides of the fitted sigmas removed: the fit
-    is task-wide), the calibration stated in comments and in [task] notes."""
+    is task-wide) and, with a [workpiece], its u(alpha), u(T) and the artefact's alpha a compensated
+    ``thermal_expansion`` gives (``workpiece``), the calibration stated in comments and in [task]
+    notes."""
     import tomli_w
 
     doc = json.loads(json.dumps(doc)) if doc else {}
-    doc["parameters"] = {k: float(getattr(params, k)) for k in pc.Parameters.__dataclass_fields__}
+    doc["parameters"] = {k: float(getattr(params, k)) for k in in_table("parameters")}
+    if isinstance(doc.get("workpiece"), dict):      # the artefact's u(alpha), u(T) (the factor W)
+        doc["workpiece"].update({k: float(getattr(params, k)) for k in in_table("workpiece")})
+        if workpiece is not None and workpiece.alpha_corr_ppm_per_K is not None:
+            doc["workpiece"].pop("material", None)   # thermal_expansion compensated: the fitted alpha
+            doc["workpiece"]["alpha_ppm_per_K"] = workpiece.alpha_ppm_per_K
+            doc["workpiece"]["alpha_corr_ppm_per_K"] = workpiece.alpha_corr_ppm_per_K
     dropped = []
     for p in doc.get("probes", []) or []:
-        for k in ("sigma_PQ_um", "sigma_P0_um", "sigma_P_um", "lambda_P"):
+        for k in PROBE_OVERRIDES:
             if k in p:
                 dropped.append(f"{p.get('id', '?')}.{k}")
                 del p[k]

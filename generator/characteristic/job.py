@@ -45,7 +45,7 @@ from ..workbook.book import RESULTS, BookAdditions
 from ..workbook.xlref import cell
 
 KIND = "characteristic"
-EXAMPLES = ["characteristic_plate.toml"]
+EXAMPLES = ["characteristic_plate.toml", "housing_W.toml"]
 #: the task-kind contract's hooks (generator.taskkind): exact at every size, no type A inputs
 force_exact = always_exact
 add_type_a = no_type_a
@@ -600,6 +600,16 @@ type = "perpendicularity"
 features = ["B"]
 frame = "AB"
 tolerance_mm = 0.02
+
+# Optional: the part's temperature, the factor W (docs/workpiece.md); without the table W is off.
+# [workpiece]
+# material = "aluminium"        # or alpha_ppm_per_K = 23.1 (1e-6/K); aluminium 23.1, steel 11.5
+# u_alpha_ppm_per_K = 1.0       # u(alpha)
+# T_degC = 23.5                 # the part's temperature, or T_readings_degC = [23.3, 23.7]
+# u_T_K = 0.3                   # u(T) of the thermometer
+# corrected = true              # the CMM corrects to 20 °C (with alpha_corr_ppm_per_K, default alpha)
+# fixture_mm = [0, 0, 0]        # where the part is held (it expands about this point)
+# enabled = true                # W on/off
 
 # Every characteristic with a tolerance gets a conformity decision (sheet 'Decision'), by default
 # under ISO 14253-1 with U = 2u. Uncomment the table below to choose (docs/conformity.md):

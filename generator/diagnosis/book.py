@@ -25,6 +25,7 @@ from pathlib import Path
 
 from cmmwb.xlfuncs.locator import effects as fx
 from cmmwb.xlfuncs.locator.diagnose import Diagnosis, effect_estimates
+from cmmwb.xlfuncs.model.hyperparameters import in_use
 from cmmwb.xlfuncs.pointcloud import Parameters
 
 from ..workbook.book import Book, ChartSeries, Formula
@@ -138,7 +139,7 @@ def inputs_sheet(book: Book, diag: Diagnosis, params: Parameters | None) -> dict
     book.text(ws, 2, 4, "significance level of the chi-square test and of the effect search")
     r = 3
     if params is not None:
-        for key in Parameters.__dataclass_fields__:
+        for key in in_use(params):
             book.text(ws, r, 1, key)
             book.number(ws, r, 2, getattr(params, key), fmt=FMT_PARAM, computed=True)
             book.text(ws, r, 3, param_unit(key))

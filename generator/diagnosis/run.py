@@ -10,6 +10,7 @@ from __future__ import annotations
 import json
 import math
 import time
+from dataclasses import replace
 from pathlib import Path
 
 from cmmwb.xlfuncs import pointcloud as pc
@@ -19,6 +20,7 @@ from cmmwb.xlfuncs.locator import simulate as sm
 from cmmwb.xlfuncs.locator.recordings import RecordingsError, parse_recordings, write_recordings
 from cmmwb.xlfuncs.memory import ResourceError, check_diagnose_fits, check_records_fit
 from cmmwb.xlfuncs.model import MPE1  # Forbes 2025 Table 3, MPE1: the model of the demonstrations
+from cmmwb.xlfuncs.model.hyperparameters import in_table
 
 from .. import __version__
 from ..errors import InputError, model_errors_named
@@ -30,6 +32,7 @@ from ..workbook.provenance import provenance
 def load_model(task: str | None, sigma_um: float | None, *, default_mpe1: bool = False) -> tuple[dg.Model, str]:
     from ..taskcloud import read_parameters, read_probes
     from ..taskfile import naming_lines, read_toml
+    from ..taskworkpiece import read_workpiece
 
     if task is not None and sigma_um is not None:
         raise InputError("give either --task or --sigma-um, not both")
@@ -46,13 +49,16 @@ def load_model(task: str | None, sigma_um: float | None, *, default_mpe1: bool =
     with naming_lines(path):
         params = read_parameters(path, doc)
         probes = read_probes(path, doc)
+        part = read_workpiece(path, doc)        # the artefact's temperature (the factor W)
     with model_errors_named(path, "[[probes]]"):
         for p in probes:
             p.resolved(params)
     if all(getattr(params, k) == 0 for k in params.SIGMAS):
         raise InputError("every standard deviation is zero: the simulation predicts the records exactly; "
                          "set sigma_R_um (at least)", file=path, where="[parameters]")
-    return dg.Model(params, probes, "probes" in doc), str(path)
+    if part is None:
+        return dg.Model(params, probes, "probes" in doc), str(path)
+    return dg.Model(replace(params, **part.u), probes, "probes" in doc, part.workpiece), str(path)
 
 
 def read_recordings(path: Path):
@@ -130,7 +136,7 @@ DEMO_PROBES = (pc.Probe("P1", (0.0, 0.0, -50.0)),)
 
 def task_toml(params: pc.Parameters, probes, name: str, note: str) -> str:
     lines = [f"# {note}", "[task]", 'kind = "pointcloud"', f'name = "{name}"', "", "[parameters]"]
-    for k in pc.Parameters.__dataclass_fields__:
+    for k in in_table("parameters"):
         lines.append(f"{k} = {getattr(params, k)!r}")
     for p in probes:
         lines += ["", "[[probes]]", f'id = "{p.id}"',

@@ -357,6 +357,16 @@ lambda_P = 0.5
 id = "P1"
 offset_mm = [0.0, 0.0, -50.0]
 
+# Optional: the part's temperature, the factor W (docs/workpiece.md); without the table W is off.
+# [workpiece]
+# material = "aluminium"        # or alpha_ppm_per_K = 23.1 (1e-6/K); aluminium 23.1, steel 11.5
+# u_alpha_ppm_per_K = 1.0       # u(alpha)
+# T_degC = 23.5                 # the part's temperature, or T_readings_degC = [23.3, 23.7]
+# u_T_K = 0.3                   # u(T) of the thermometer
+# corrected = true              # the CMM corrects to 20 °C (with alpha_corr_ppm_per_K, default alpha)
+# fixture_mm = [0, 0, 0]        # where the part is held (it expands about this point)
+# enabled = true                # W on/off
+
 # Optional: conformity decisions (docs/conformity.md) and report fields for the Summary sheet.
 # [decision]
 # rule = "iso14253"             # iso14253 | simple | guarded_acceptance (r) | guarded_rejection (r) | specific_risk (max_pfa)

@@ -21,6 +21,7 @@ from cmmwb.xlfuncs.limits import MAX_COORDINATE_MM, coordinate_problem
 from ..errors import InputError, model_errors_named
 from ..taskcloud import points_source, read_parameters, read_point_cloud, read_probes
 from ..taskfile import COMMON_TABLES, check_keys, number, string, table, task_kind_and_name, text_list, vector3
+from ..taskworkpiece import apply_workpiece
 from .task import Planning, Task
 
 CIRCLE_PLANE_CHOICES = ("xy", "yz", "zx", "space")
@@ -158,6 +159,7 @@ def load(path: Path, doc: dict) -> Task:
         params = read_parameters(path, doc)
         probes = read_probes(path, doc)
         sampling, cloud = _read_sampling(path, doc, element, circle_plane, params, probes)
+        cloud, params = apply_workpiece(path, doc, cloud, params)
         source = "[sampling]"
         far = float(np.max(np.abs(cloud.X_mm))) if cloud.m else 0.0
         if coordinate_problem(far) is not None:   # sizes so large that float64 loses the nanometre

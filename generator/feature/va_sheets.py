@@ -79,7 +79,7 @@ def write_V_A(book: Book, f, unc, G: Block, V, method: str) -> dict:
         top = L.row
         blocks.append((top - 2, top + max(n, g) - 1))     # a factor's caption and its matrices, on one page
         book.text(ws, top - 2, 1, f"{fac}: V_A,{fac} paper parameters (left), reported T V_A T^T (right)"
-                  if fac != "total" else "total: sum of the six contributions (Forbes 2025 section 5.6)")
+                  if fac != "total" else "total: sum of the contributions (Forbes 2025 section 5.6; W the part's, docs/workpiece.md)")
         matrix_labels(book, ws, top, 2, lnames, lnames)
         matrix_labels(book, ws, top, 2 + n + 2, names, names)
         if fac == "total":

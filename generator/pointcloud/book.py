@@ -6,14 +6,14 @@ named inputs beside the hyper-parameters, the Results rows, the MPE sheet and th
 from __future__ import annotations
 
 from cmmwb.xlfuncs import pointcloud as pc
+from cmmwb.xlfuncs.model.hyperparameters import in_table
 
 from ..workbook.book import Book, ChartSeries, Formula
 from ..workbook.xlref import block, cell
 
 KIND = "pointcloud"
 MPE_GRID_POINTS = 101
-RESULT_COLUMNS = ["from", "to", "d_mm", "u_um", "U_um", "u_R_um", "u_PQ_um", "u_S_um",
-                  "u_ET_um", "u_ER_um", "u_P_um"]
+RESULT_COLUMNS = ["from", "to", "d_mm", "u_um", "U_um", *(f"u_{f}_um" for f in pc.FACTORS)]
 
 
 def extra_inputs(task) -> list[tuple]:
@@ -29,13 +29,13 @@ def extra_inputs(task) -> list[tuple]:
 
 
 def results_rows(task, first: int, results: dict) -> list[list]:
-    """The contract's Results rows: from, to, then references to Budget columns D..L
-    (d, u, U, u_R ... u_P) of the distance in row ``first + q``, each with the core's value
+    """The contract's Results rows: from, to, then references to Budget columns D.. (d, u, U,
+    u_R ... u_P, u_W) of the distance in row ``first + q``, each with the core's value
     (``results``, the JSON) to cache."""
     labels = task.cloud.labels
     return [[labels[i], labels[j]] + [Formula(f"={cell(first + q, c, 'Budget')}", v) for c, v in
-                                      zip(range(4, 13), (d["d_mm"], d["u_um"], d["U_um"],
-                                                         *(d["components_um"][f] for f in pc.FACTORS)))]
+                                      enumerate((d["d_mm"], d["u_um"], d["U_um"],
+                                                 *(d["components_um"][f] for f in pc.FACTORS)), start=4)]
             for q, ((i, j), d) in enumerate(zip(task.pairs, results["distances"]))]
 
 
@@ -104,7 +104,7 @@ def write_mpe(book: Book, task) -> None:
     book.note(book.text(ws, 4, 10, "conforming parameters"),
               "every standard deviation divided by C_max when C_max > 1 (Forbes 2025 section 6.8)")
     r = 5
-    for key in pc.Parameters.__dataclass_fields__:
+    for key in in_table("parameters"):     # the machine's (the part's W is not in the MPE statement)
         book.text(ws, r, 10, key)
         scaled = key in pc.Parameters.SIGMAS
         book.formula(ws, r, 11, f"={key}/MAX(1,C_max)" if scaled else f"={key}", fmt="0.0000")

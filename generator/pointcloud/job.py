@@ -14,6 +14,7 @@ import numpy as np
 from cmmwb.xlfuncs import blocked as bl
 from cmmwb.xlfuncs import pointcloud as pc
 from cmmwb.xlfuncs.distributed import get_backend
+from cmmwb.xlfuncs.model.hyperparameters import in_table
 
 from .. import __version__
 from ..errors import InputError, model_errors_named
@@ -129,7 +130,7 @@ def compute(task: Task) -> dict:
             "K": m.K, "C_max": chk.C_max, "d_at_max_mm": chk.d_at_max_mm, "conforms": chk.conforms,
             "A_um": m.A_um, "B_mm": m.B_mm, "P_mm": m.P_mm, "L_max_mm": m.L_max_mm,
             "grid_points": MPE_GRID_POINTS,
-            "conforming_parameters": {k: getattr(scaled, k) for k in pc.Parameters.__dataclass_fields__},
+            "conforming_parameters": {k: getattr(scaled, k) for k in in_table("parameters")},
         }
     return out
 
@@ -178,7 +179,8 @@ def _instructions(book: Book, task: Task) -> None:
         "Inputs — hyper-parameters (named cells), probes, V_B of eq. (13).",
         "Points — coordinates x_i (mm), outward unit normals n_i, probe; derived offset p_k(i) and ram position x_i - p_k(i).",
         "Coords — one row per coordinate: the vectors the V blocks are built from, the rows of G_X|S (eq. 11) and G_k (eq. 24).",
-        "V_R, V_PQ, V_S, V_ET, V_ER, V_P — the six 3m x 3m contributions (µm²); V_X their sum (eq. 28).",
+        "V_R, V_PQ, V_S, V_ET, V_ER, V_P — the six 3m x 3m contributions (µm²) of the machine; V_W the part's "
+        "thermal expansion (docs/workpiece.md; zero while workpiece_enabled = 0); V_X their sum (eq. 28).",
         "Budget — d, u, U and u per factor for each distance (µm).",
         "MPE — C(d) = K u(d)/(A + d/B) from the summary formula (33)-(34), its maximum, 'conforms' (yes when "
         "C_max <= 1) and the conforming rescaling (section 6.8).",
@@ -198,12 +200,14 @@ def _instructions(book: Book, task: Task) -> None:
 
 def _write_budget(book: Book, task: Task, layout) -> int:
     ws = book.sheet("Budget")
-    cols = ["from", "to", "group", "d_mm", "u_um", "U_um", "u_R_um", "u_PQ_um", "u_S_um", "u_ET_um",
-            "u_ER_um", "u_P_um", "dx_mm", "dy_mm", "dz_mm", "nx_mm/mm", "ny_mm/mm", "nz_mm/mm"]
+    nf = len(pc.FACTORS)
+    cols = ["from", "to", "group", "d_mm", "u_um", "U_um", *(f"u_{f}_um" for f in pc.FACTORS),
+            "dx_mm", "dy_mm", "dz_mm", "nx_mm/mm", "ny_mm/mm", "nz_mm/mm"]
     notes = [None, None, "free label (e.g. LL, RR, LR, FF of Forbes 2025 Figures 6/7)",
              "d_ij = ||x_j - x_i||", "u(d_ij), eq. (30): root sum of squares of the components",
-             "U = K u", *["u_F(d_ij) = sqrt(n^T (V_ii + V_jj - V_ij - V_ji) n), eq. (29) on V_F"] * 6,
+             "U = K u", *["u_F(d_ij) = sqrt(n^T (V_ii + V_jj - V_ij - V_ji) n), eq. (29) on V_F"] * nf,
              "x_j - x_i", None, None, "n_ij = (x_j - x_i)/d_ij", None, None]
+    cd, cn = 7 + nf, 10 + nf           # the columns of x_j - x_i and of n_ij
     book.header(ws, 1, 1, cols, notes)
     X = layout.X
     first = 2
@@ -213,18 +217,18 @@ def _write_budget(book: Book, task: Task, layout) -> int:
         book.text(ws, r, 2, task.cloud.labels[j])
         book.text(ws, r, 3, task.groups[q])
         for a in range(3):
-            book.formula(ws, r, 13 + a, f"={X.cell(j, a)}-{X.cell(i, a)}")
-        dvec = block(r, 13, 1, 3)
+            book.formula(ws, r, cd + a, f"={X.cell(j, a)}-{X.cell(i, a)}")
+        dvec = block(r, cd, 1, 3)
         book.formula(ws, r, 4, f"=SQRT(SUMSQ({dvec}))", fmt="0.0000")
         for a in range(3):
-            book.formula(ws, r, 16 + a, f"={cell(r, 13 + a)}/{cell(r, 4)}")
-        n = block(r, 16, 1, 3)
+            book.formula(ws, r, cn + a, f"={cell(r, cd + a)}/{cell(r, 4)}")
+        n = block(r, cn, 1, 3)
         for k, f in enumerate(pc.FACTORS):
             V = layout.V[f]
             s = f"{point_block(V, i, i).ref}+{point_block(V, j, j).ref}-{point_block(V, i, j).ref}-{point_block(V, j, i).ref}"
             book.array(Block("Budget", r, 7 + k, 1, 1),
                        f"=SQRT(MAX(0,SUMPRODUCT(({s})*MMULT(TRANSPOSE({n}),{n}))))", fmt="0.0000")
-        book.formula(ws, r, 5, f"=SQRT(SUMSQ({block(r, 7, 1, 6)}))", fmt="0.0000")
+        book.formula(ws, r, 5, f"=SQRT(SUMSQ({block(r, 7, 1, nf)}))", fmt="0.0000")
         book.formula(ws, r, 6, f"=K*{cell(r, 5)}", fmt="0.0000")
     ws.freeze_panes = "D2"
     for c, w in zip("ABC", (8, 8, 7)):
@@ -361,6 +365,16 @@ file = "points.csv"             # id,x,y,z,nx,ny,nz,probe  (mm; n = outward unit
 # from = "F1"
 # to = "F2"
 # group = "LR"                  # free label used in the charts
+
+# Optional: the part's temperature, the factor W (docs/workpiece.md); without the table W is off.
+# [workpiece]
+# material = "aluminium"        # or alpha_ppm_per_K = 23.1 (1e-6/K); aluminium 23.1, steel 11.5
+# u_alpha_ppm_per_K = 1.0       # u(alpha)
+# T_degC = 23.5                 # the part's temperature, or T_readings_degC = [23.3, 23.7]
+# u_T_K = 0.3                   # u(T) of the thermometer
+# corrected = true              # the CMM corrects to 20 °C (with alpha_corr_ppm_per_K, default alpha)
+# fixture_mm = [0, 0, 0]        # where the part is held (it expands about this point)
+# enabled = true                # W on/off
 
 # Optional: conformity decisions (docs/conformity.md) and report fields for the Summary sheet.
 # [decision]

@@ -33,11 +33,14 @@ import numpy as np
 
 from cmmwb.xlfuncs import blocked as bl
 from cmmwb.xlfuncs import pointcloud as pc
+from cmmwb.xlfuncs.model.hyperparameters import HYPER, PROBE_OVERRIDES, in_table, of_factor
 
 from .. import __version__
 from ..errors import InputError
 from ..workbook.book import Book, BookAdditions
 from ..workbook.styles import FMT_SCI, VALUE_FILL
+from ..workbook.workpiece import N_ROWS as WORKPIECE_ROWS
+from ..workbook.workpiece import U_EPS
 from ..workbook.xlref import Block, block, cell
 from .book import KIND, RESULT_COLUMNS, budget_chart, extra_inputs, results_rows, write_mpe
 from .vx_sheets import NATIVE_MAX_POINTS, explain_inputs, write_inputs, write_points
@@ -52,9 +55,8 @@ LIVE = "Live_addin"
 GP = "GP_blocks"
 SMALL = FMT_SCI
 
-BUDGET_COLUMNS = ["from", "to", "group", "d_mm", "u_um", "U_um", "u_R_um", "u_PQ_um", "u_S_um",
-                  "u_ET_um", "u_ER_um", "u_P_um", "dx_mm", "dy_mm", "dz_mm", "nx", "ny", "nz",
-                  "dux_mm", "duy_mm", "duz_mm"]
+BUDGET_COLUMNS = ["from", "to", "group", "d_mm", "u_um", "U_um", *(f"u_{f}_um" for f in pc.FACTORS),
+                  "dx_mm", "dy_mm", "dz_mm", "nx", "ny", "nz", "dux_mm", "duy_mm", "duz_mm"]
 C = {name: k + 1 for k, name in enumerate(BUDGET_COLUMNS)}
 
 
@@ -90,11 +92,12 @@ def addin_ranges(m: int, probe_rows: dict) -> tuple[str, str, str]:
     """The ranges every add-in formula reads (``cmmwb.xlfuncs.udf`` argument layout): ``points`` =
     Points!A:H of the m points, ``probes`` = the probes table on Inputs (rows ``probe_rows``
     of :func:`generator.pointcloud.vx_sheets.write_inputs`), ``params`` = names and values of the 12
-    hyper-parameters on Inputs.  Shared by the pointcloud and the feature workbooks."""
+    hyper-parameters on Inputs and the part's rows after them (the factor W, docs/workpiece.md).
+    Shared by the pointcloud and the feature workbooks."""
     rows = sorted(probe_rows.values())
     return (block(2, 1, m, 8, "Points"),
             block(rows[0], 1, rows[-1] - rows[0] + 1, 8, "Inputs"),
-            block(2, 1, len(pc.Parameters.__dataclass_fields__), 2, "Inputs"))
+            block(2, 1, len(in_table("parameters")) + WORKPIECE_ROWS, 2, "Inputs"))
 
 
 def write_xlwings_conf(book: Book) -> None:
@@ -135,6 +138,8 @@ def _instructions(book: Book, task) -> None:
         "positions x - p), u = root sum of squares (eq. 30), U = K u.",
         "Budget u_ET, u_ER, u_P — native formulas sqrt(n^T B n) (eq. 29) of n and the pair blocks "
         "B = V_ii + V_jj - V_ij - V_ji on 'GP_blocks'.",
+        "Budget u_W — the part's thermal expansion, a native formula d u(eps) of the workpiece inputs on "
+        "'Inputs' (docs/workpiece.md; zero while workpiece_enabled = 0).",
         f"GP_blocks — grey cells are VALUES, not formulas: the Gaussian-process blocks of V_ET (eq. 21), "
         f"V_ER (eqs. 24-25) and V_P (eqs. 26-27), computed when the workbook was built by "
         f"xlfuncs.blocked.pair_blocks (cmmwb {__version__}). Beside them: the inputs they were computed "
@@ -236,13 +241,13 @@ def _write_snapshot(book: Book, ws, task, c0: int) -> None:
                  "largest rounding difference accepted", "|now - build| <= tolerance"])
     rows: list[tuple[str, float, str, float]] = []
     p = task.params
-    for key in ("sigma_ET_um", "lambda_ET_mm", "sigma_ER_urad", "lambda_ER_mm"):
+    for key in (*of_factor("ET"), *of_factor("ER")):
         v = getattr(p, key)
         rows.append((key, v, key, 1e-12 * abs(v)))
     for k, probe in enumerate(task.cloud.probes):
         res = probe.resolved(p)
         vals = [(f"p{'xyz'[a]}_mm", res.offset_mm[a]) for a in range(3)] + \
-               [(key, getattr(res, key)) for key in ("sigma_P0_um", "sigma_P_um", "lambda_P")]
+               [(key, getattr(res, key)) for key in PROBE_OVERRIDES if HYPER[key].factor == "P"]
         for key, v in vals:
             rows.append((f"probe {probe.id} {key}", float(v), f"probe{k + 1}_{key}", 1e-12 * abs(v)))
     m = task.cloud.m
@@ -279,6 +284,7 @@ def _write_budget(book: Book, task, X: Block, U: Block, probe_rows: dict, gp_col
              "sigma_S^2 (n.du)^2 + sigma_Sa^2 sum (n_a du_a)^2 + sigma_Q^2 ((n_x du_y)^2 + (n_x du_z)^2 + (n_y du_z)^2)",
              *[f"u_{f} = sqrt(n^T B_{f} n), eq. (29), B_{f} = the pair block of V_{f} on GP_blocks (values; "
                f"live on {LIVE})" for f in GP_FACTORS],
+             "u_W = d u(eps): the part's thermal expansion is a scale about the fixture point (docs/workpiece.md)",
              "x_j - x_i", None, None, "n_ij = (x_j - x_i)/d_ij", None, None,
              "du = u_j - u_i, ram positions u = x - p (Points)", None, None]
     book.header(ws, 1, 1, BUDGET_COLUMNS, notes)
@@ -315,7 +321,8 @@ def _write_budget(book: Book, task, X: Block, U: Block, probe_rows: dict, gp_col
             B = [[cell(r, c0 + 3 * a + b, GP) for b in range(3)] for a in range(3)]
             quad = "+".join(f"{nvec[a]}*({'+'.join(f'{B[a][b]}*{nvec[b]}' for b in range(3))})" for a in range(3))
             book.formula(ws, r, C[f"u_{f}_um"], f"=SQRT(MAX(0,{quad}))", fmt="0.0000")
-        book.formula(ws, r, C["u_um"], f"=SQRT(SUMSQ({block(r, C['u_R_um'], 1, 6)}))", fmt="0.0000")
+        book.formula(ws, r, C["u_W_um"], f"={cell(r, C['d_mm'])}*{U_EPS}*0.001", fmt="0.0000")
+        book.formula(ws, r, C["u_um"], f"=SQRT(SUMSQ({block(r, C['u_R_um'], 1, len(pc.FACTORS))}))", fmt="0.0000")
         book.formula(ws, r, C["U_um"], f"=K*{cell(r, C['u_um'])}", fmt="0.0000")
     ws.freeze_panes = "D2"
     for col, w in zip("ABC", (8, 8, 7)):
@@ -337,8 +344,9 @@ def _write_live(book: Book, task, refs: _Refs) -> None:
                 [f"cmm_pair_blocks(\"{f}\", points, from, to, probes, params): the pair block B_{f} "
                  "of the same cells on GP_blocks, computed live by the Excel add-in"
                  if ab == "xx" else None for f in GP_FACTORS for ab in BLOCK_COLUMNS] +
-                ["cmm_distances(points, from, to, probes, params): d, u and the six components of "
-                 "eqs. (29)-(30) as on Budget, computed live by the Excel add-in"] + [None] * 7)
+                ["cmm_distances(points, from, to, probes, params): d, u and the components of "
+                 "eqs. (29)-(30) as on Budget (W with the part's inputs in params), computed live by the Excel "
+                 "add-in"] + [None] * (len(dist_cols) - 1))
     for q, (i, j) in enumerate(task.pairs):
         book.text(ws, 2 + q, 1, labels[i])
         book.text(ws, 2 + q, 2, labels[j])

@@ -14,12 +14,15 @@ from typing import Any
 from ..errors import InputError
 from ..taskcloud import PARAMETER_KEYS, PROBE_OVERRIDES
 from ..workbook.readback import CSV_HEADER, MAX_TABLE_ROWS, POINT_HEADER, Cells, ReadTask, Section
+from ..workbook.workpiece import read_workpiece_cells
 
 
 def read_parameters(cells: Cells, rt: ReadTask) -> None:
+    """[parameters] and the part's [workpiece] (the factor W) from their named cells on 'Inputs'."""
     sec = Section(cells, rt, rt.doc, "parameters")
     for key in PARAMETER_KEYS:
         sec.scalar(key)
+    read_workpiece_cells(cells, rt)
 
 
 def read_probes(cells: Cells, rt: ReadTask) -> list[str]:

@@ -9,48 +9,31 @@ Sheets written:
 ``Points``  id, x, y, z (mm), outward normal, probe; derived probe offset p and ram position x - p
 ``Coords``  one row per coordinate (x1, y1, z1, x2, ...): the columns the V blocks broadcast over,
             the rows of G_X|S (eq. 11) and of the rotation sensitivity G_k (eq. 24)
-``V_R`` ... ``V_P`` and ``V_X``  the contributions and their sum (µm²)
+``V_R`` ... ``V_P``, ``V_W`` and ``V_X``  the contributions and their sum (µm²); V_W is the part's
+            thermal expansion (docs/workpiece.md), from the workpiece inputs on Inputs
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 
+from cmmwb.xlfuncs.model.hyperparameters import FACTOR_RECORDS, HYPERPARAMETERS, PROBE_OVERRIDES, S_COLUMNS, in_table
+from cmmwb.xlfuncs.model.workpiece import PREFIX
 from cmmwb.xlfuncs.pointcloud import FACTORS, Parameters, PointCloud
 
 from ..workbook.book import Book
 from ..workbook.styles import FMT_COORD
+from ..workbook.workpiece import U_EPS, write_workpiece_inputs
 from ..workbook.xlref import Block, cell
 
 # Workbook limit for native V_X formulas: 3m x 3m array formulas per factor.  Measured:
 # m = 52 (156 x 156) recalculates in ~1 s per matrix in `formulas`; see bench/.
 NATIVE_MAX_POINTS = 120
 
-PARAM_NOTES = {
-    "sigma_R_um": "Repeatability, Forbes 2025 eq. (8)",
-    "sigma_S_ppm": "Global scale, eq. (13) (1e-6)",
-    "sigma_Sa_ppm": "Per-axis scale sigma_S,a, eq. (13) (1e-6)",
-    "sigma_Q_ppm": "Squareness sigma_Q, eq. (13) (1e-6 = µrad)",
-    "sigma_PQ_um": "Probe qualification, eq. (9); default for every probe",
-    "sigma_ET_um": "Location errors GP, eq. (21)",
-    "lambda_ET_mm": "Length scale of the location-error GP, eq. (21)",
-    "sigma_ER_urad": "Rotation errors GP, eq. (25)",
-    "lambda_ER_mm": "Length scale of the rotation-error GP, eq. (25)",
-    "sigma_P0_um": "Probe radius uncertainty, eq. (27); default for every probe",
-    "sigma_P_um": "Direction-correlated probing GP, eq. (27); default for every probe",
-    "lambda_P": "Length scale (chordal, unit sphere) of the probing GP, eq. (27)",
-}
-PARAM_UNITS = {"sigma_S_ppm": "ppm", "sigma_Sa_ppm": "ppm", "sigma_Q_ppm": "ppm", "sigma_ER_urad": "µrad",
-               "lambda_ET_mm": "mm", "lambda_ER_mm": "mm", "lambda_P": "1"}
-
-FACTOR_TITLES = {
-    "R": "repeatability, Forbes 2025 eq. (8): sigma_R^2 I",
-    "PQ": "probe qualification, eq. (9): sigma_PQ,k^2 I_3 between points of the same probe",
-    "S": "scale and squareness, eqs. (11)-(14): G_X|S V_B G_X|S^T with G at x_i - p_k(i)",
-    "ET": "location errors, eq. (21): sigma_ET^2 exp(-||u_i - u_j||^2/lambda_ET^2), per axis, u = x - p",
-    "ER": "rotation errors, eq. (25): sigma_ER^2 exp(-||u_i - u_j||^2/lambda_ER^2) G_k(i) G_k(j)^T",
-    "P": "probing, eq. (27): n_i n_j^T (sigma_P0^2 + sigma_P^2 exp(-||n_i - n_j||^2/lambda_P^2)), same probe",
-}
+# the notes, units and factor titles of the Inputs and V sheets: the records' (xlfuncs.model.hyperparameters)
+PARAM_NOTES = {h.name: h.note for h in HYPERPARAMETERS}
+PARAM_UNITS = {h.name: h.unit for h in HYPERPARAMETERS}
+FACTOR_TITLES = {f.label: f.title for f in FACTOR_RECORDS}
 
 
 @dataclass
@@ -68,10 +51,11 @@ def explain_inputs(book: Book) -> None:
     """The instruction sheet's paragraphs on cell colours (inherited defaults) and printing."""
     book.gap()
     book.para("Cell colours and printing", bold=True)
+    inherits = ", ".join(PROBE_OVERRIDES[:-1]) + f" and {PROBE_OVERRIDES[-1]}"
     book.para(
-        "Yellow: an input you type. Green: an input that inherits a default by formula (a probe's "
-        "sigma_PQ_um, sigma_P0_um, sigma_P_um and lambda_P on 'Inputs' are =sigma_PQ_um ... of the "
-        "task-wide values); its note says what it inherits. Typing a number there overrides the default "
+        f"Yellow: an input you type. Green: an input that inherits a default by formula (a probe's {inherits} "
+        f"on 'Inputs' are ={PROBE_OVERRIDES[0]} ... of the task-wide values); its note says what it inherits. "
+        "Typing a number there overrides the default "
         "for that probe only and cuts the link. White: formulas. Grey: values computed by the core.",
         "Printing: every sheet is set up for A4, scaled to the page width, with the header row repeated; "
         "large matrix sheets (V_R ... V_X, GP_blocks) print their top-left corner only (the whole matrix "
@@ -88,12 +72,14 @@ def write_inputs(book: Book, params: Parameters, cloud: PointCloud, extra: list[
     ws = book.sheet("Inputs")
     book.header(ws, 1, 1, ["parameter", "value", "unit", "meaning"])
     r = 2
-    for key in Parameters.__dataclass_fields__:
+    for key in in_table("parameters"):
         book.text(ws, r, 1, key)
         book.input(ws, r, 2, key, getattr(params, key), lo=0.0, note=PARAM_NOTES[key])
-        book.text(ws, r, 3, PARAM_UNITS.get(key, "µm"))
+        book.text(ws, r, 3, PARAM_UNITS[key])
         book.text(ws, r, 4, PARAM_NOTES[key])
         r += 1
+    # the part's temperature, the factor W (its rows follow the hyper-parameters: one name/value range)
+    r = write_workpiece_inputs(book, ws, r, cloud.workpiece, {k: getattr(params, k) for k in in_table("workpiece")})
     for key, value, unit, meaning, lo in extra:
         book.text(ws, r, 1, key)
         book.input(ws, r, 2, key, value, lo=lo, note=meaning)
@@ -106,7 +92,7 @@ def write_inputs(book: Book, params: Parameters, cloud: PointCloud, extra: list[
     book.text(ws, r, 1, "Probes (offset p_k = stylus tip centre from the probe-head reference point)",
               font=None)
     r += 1
-    cols = ["probe", "px_mm", "py_mm", "pz_mm", "sigma_PQ_um", "sigma_P0_um", "sigma_P_um", "lambda_P"]
+    cols = ["probe", "px_mm", "py_mm", "pz_mm", *PROBE_OVERRIDES]
     book.header(ws, r, 1, cols)
     probe_rows = {}
     for k, p in enumerate(cloud.probes):
@@ -115,7 +101,7 @@ def write_inputs(book: Book, params: Parameters, cloud: PointCloud, extra: list[
         book.text(ws, r, 1, p.id)
         for c, v in enumerate(p.offset_mm):
             book.input(ws, r, 2 + c, f"{_name_safe(k)}_p{'xyz'[c]}_mm", v)
-        for c, key in enumerate(("sigma_PQ_um", "sigma_P0_um", "sigma_P_um", "lambda_P")):
+        for c, key in enumerate(PROBE_OVERRIDES):
             own = getattr(p, key)
             name = f"{_name_safe(k)}_{key}"
             if own is None:
@@ -153,7 +139,7 @@ def write_points(book: Book, cloud: PointCloud, probe_rows: dict) -> tuple[Block
 COORD_COLS = ["coordinate", "point", "axis", "index", "probe_no", "ux_mm", "uy_mm", "uz_mm",
               "n_axis", "nx", "ny", "nz",
               "GS_aa", "GS_xx", "GS_yy", "GS_zz", "GS_xy", "GS_xz", "GS_yz",
-              "GR_x", "GR_y", "GR_z", "sigma_PQ_um", "sigma_P0_um", "sigma_P_um", "lambda_P"]
+              "GR_x", "GR_y", "GR_z", *PROBE_OVERRIDES, "w_mm"]
 
 
 def write_coords(book: Book, cloud: PointCloud, probe_rows: dict) -> dict[str, Block]:
@@ -188,8 +174,11 @@ def write_coords(book: Book, cloud: PointCloud, probe_rows: dict) -> dict[str, B
             gr = [["0", pz, f"-{py}"], [f"-{pz}", "0", px], [py, f"-{px}", "0"]][a]
             for c, v in enumerate(gr):
                 _ref_or_zero(book, ws, r, ci["GR_x"] + c, v)
-            for c, key in enumerate(("sigma_PQ_um", "sigma_P0_um", "sigma_P_um", "lambda_P")):
+            for c, key in enumerate(PROBE_OVERRIDES):
                 book.formula(ws, r, ci[key], f"={cell(pr, 5 + c, 'Inputs')}", fmt="General")
+            # x_i - x0 of this coordinate: the part expands about the fixture point (docs/workpiece.md)
+            book.formula(ws, r, ci["w_mm"], f"={cell(prow, 2 + a, 'Points')}-{PREFIX}fixture_{'xyz'[a]}_mm",
+                         fmt="General")
     n3 = 3 * cloud.m
     ws.freeze_panes = "C2"
     return {name: Block("Coords", 2, ci[name], n3, 1) for name in COORD_COLS} | {
@@ -213,7 +202,7 @@ def _sqdist(cols: list[Block]) -> str:
 
 
 def v_formulas(c: dict[str, Block], vb: Block) -> dict[str, str]:
-    """Array formulas (3m x 3m, µm²) of the six contributions of eq. (28)."""
+    """Array formulas (3m x 3m, µm²) of the six contributions of eq. (28) and the part's W."""
     same_probe = f"({c['probe_no'].ref}={_t(c['probe_no'])})"
     same_axis = f"({c['axis'].ref}={_t(c['axis'])})"
     D2 = _sqdist([c["ux_mm"], c["uy_mm"], c["uz_mm"]])
@@ -229,6 +218,8 @@ def v_formulas(c: dict[str, Block], vb: Block) -> dict[str, str]:
               f"*MMULT({c['GR'].ref},TRANSPOSE({c['GR'].ref}))",
         "P": f"={same_probe}*{c['n_axis'].ref}*{_t(c['n_axis'])}*({c['sigma_P0_um'].ref}*{_t(c['sigma_P0_um'])}"
              f"+{c['sigma_P_um'].ref}*{_t(c['sigma_P_um'])}*EXP(-({DN2})/({lam2}+({lam2}=0))))",
+        # docs/workpiece.md: u^2(eps) (x_i - x0)(x_j - x0)^T, u(eps) in ppm (1 ppm x 1 mm = 0.001 µm)
+        "W": f"=({U_EPS}*0.001)^2*({c['w_mm'].ref}*{_t(c['w_mm'])})",
     }
 
 
@@ -238,7 +229,7 @@ def write_VB(book: Book) -> Block:
     r0, c0 = 1, 7
     book.text(ws, r0, c0, "V_B, Forbes 2025 eq. (13), in (µm/mm)²: 1 µm/mm = 1000 ppm, so an entry "
               "is (sigma_ppm x 0.001)²")
-    names = ["sigma_S_ppm"] + ["sigma_Sa_ppm"] * 3 + ["sigma_Q_ppm"] * 3
+    names = S_COLUMNS
     labels = ["b_aa", "b_xx", "b_yy", "b_zz", "b_xy", "b_xz", "b_yz"]
     for k, lab in enumerate(labels):
         book.text(ws, r0 + 1, c0 + 1 + k, lab)
@@ -267,7 +258,7 @@ def write_V_sheets(book: Book, cloud: PointCloud, coords: dict[str, Block], vb: 
         target = Block(ws.title, 2, 2, n3, n3)
         if f == "X":
             formula = "=" + "+".join(out[g].ref for g in FACTORS)
-            note = "V_X = sum of the six contributions, Forbes 2025 eq. (28)"
+            note = "V_X = sum of the contributions, Forbes 2025 eq. (28), and the part's V_W (docs/workpiece.md)"
         else:
             formula = formulas[f]
             note = f"V_{f}: {FACTOR_TITLES[f]}"

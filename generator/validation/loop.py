@@ -25,6 +25,7 @@ from cmmwb.xlfuncs import pointcloud as pc
 from cmmwb.xlfuncs.locator import simulate as sm
 from cmmwb.xlfuncs.locator.recordings import write_recordings
 from cmmwb.xlfuncs.model import MPE1
+from cmmwb.xlfuncs.model.hyperparameters import in_table
 
 from ..workbook.atomic import Staging
 from .sets import FEATURES, LENGTHS, write_set
@@ -43,7 +44,7 @@ def with_parameters(task: Path, params: dict, out: Path, note: str) -> Path:
     import tomli_w
 
     doc = tomllib.loads(task.read_text(encoding="utf-8"))
-    doc["parameters"] = {k: float(params[k]) for k in pc.Parameters.__dataclass_fields__}
+    doc["parameters"] = {k: float(params[k]) for k in in_table("parameters")}
     doc["task"]["notes"] = list(doc["task"].get("notes", [])) + [note]
     out.write_text(tomli_w.dumps(doc), encoding="utf-8")
     return out
@@ -65,7 +66,7 @@ def prepare(out_dir: Path, force: bool = False) -> dict[str, Path]:
                                                              "passes, the simulated machine"])
     write_set(out_dir / "validation", WORKPIECES, TRUTH, PROBES, {}, SEEDS["validation"], 2,
               "the simulated machine of generator/validation/loop.py", force=force)
-    mpe1 = {k: float(getattr(MPE1, k)) for k in pc.Parameters.__dataclass_fields__}
+    mpe1 = {k: float(getattr(MPE1, k)) for k in in_table("parameters")}
     note = "the lab's starting model: Forbes 2025 Table 3 MPE1 (type B)"
     files = {"iso": out_dir / "iso.csv", "plate": out_dir / "plate.csv",
              "results": out_dir / "validation" / "results.csv",
@@ -97,7 +98,9 @@ def run_loop(out_dir: Path, *, workbook: bool = True, profiles: str = "no", forc
                                       "[parameters] of calibrate/fitted.toml (cmmwb calibrate on iso.csv, plate.csv)")
     after, _ = run_validate(f["results"], [fitted_lengths, fitted_features], out_dir / "validate_fitted",
                             workbook=workbook, force=force)
-    summary = {"truth": {k: float(getattr(TRUTH, k)) for k in ("sigma_R_um", "sigma_ET_um", "lambda_ET_mm")},
+    # the truth where it differs from MPE1 (sigma_R_um, sigma_ET_um, lambda_ET_mm)
+    summary = {"truth": {k: float(getattr(TRUTH, k)) for k in in_table("parameters")
+                         if getattr(TRUTH, k) != getattr(MPE1, k)},
                "before": before["verdict"], "calibration": cal["summary"], "after": after["verdict"]}
     (out_dir / "loop.json").write_text(json.dumps(summary, indent=1, ensure_ascii=False) + "\n", encoding="utf-8")
     return {"before": before, "calibration": cal, "after": after}

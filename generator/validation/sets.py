@@ -26,6 +26,7 @@ import numpy as np
 
 from cmmwb.xlfuncs import pointcloud as pc
 from cmmwb.xlfuncs import validation_sets as vsm
+from cmmwb.xlfuncs.model.hyperparameters import in_table
 
 from .. import __version__
 from ..workbook.atomic import Staging
@@ -36,7 +37,7 @@ FEATURES = "validation_features"
 
 def _task_head(kind: str, name: str, params: pc.Parameters, probes, note: str) -> dict:
     return {"task": {"kind": kind, "name": name, "notes": [note]},
-            "parameters": {k: float(getattr(params, k)) for k in pc.Parameters.__dataclass_fields__},
+            "parameters": {k: float(getattr(params, k)) for k in in_table("parameters")},
             "probes": [{"id": p.id, "offset_mm": [float(v) for v in p.offset_mm]} for p in probes],
             "points": {"file": f"{name}_points.csv"}}
 
@@ -110,7 +111,7 @@ def write_set(out_dir: Path, workpieces: list[str], params: pc.Parameters, probe
     files["results.csv"] = results_csv(vs, meas, [note, "calibrated values: the true value plus a draw of the "
                                                   "certificate's u_cal = U_cal/k_cal (one per characteristic)"])
     files["truth.json"] = json.dumps({
-        "machine": {k: float(getattr(params, k)) for k in pc.Parameters.__dataclass_fields__},
+        "machine": {k: float(getattr(params, k)) for k in in_table("parameters")},
         "probes": [{"id": p.id, "offset_mm": list(p.offset_mm)} for p in probes], "planted": _jsonable(planted),
         "seed": seed, "runs": runs, "workpieces": list(workpieces), "true_values_mm": meas.truth}, indent=1) + "\n"
     with Staging(out_dir, force=force) as tmp:

@@ -134,7 +134,7 @@ def factor_share_plot(labels, shares: dict, title: str, path: Path, *, width: fl
         ax.invert_yaxis()
     ax.set_xlabel("share of u^2 per influence factor")
     ax.set_title(title)
-    ax.legend(fontsize=8, ncol=6, loc="lower center", bbox_to_anchor=(0.5, legend_y))
+    ax.legend(fontsize=8, ncol=len(shares), loc="lower center", bbox_to_anchor=(0.5, legend_y))
     fig.tight_layout()
     fig.savefig(path)
     plt.close(fig)

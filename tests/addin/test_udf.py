@@ -39,8 +39,9 @@ def param_values(params) -> list[list]:
 
 
 def param_names_and_values(params) -> list[list]:
-    """Inputs!A2:B13, here in reverse order: the name column makes the order irrelevant."""
-    return [[n, getattr(params, n)] for n in reversed(list(pc.Parameters.__dataclass_fields__))]
+    """Inputs!A2:B13 (the machine's 12), here in reverse order: the name column makes the order
+    irrelevant."""
+    return [[n, getattr(params, n)] for n in reversed(udf.PARAM_NAMES)]
 
 
 CLOUD = random_cloud(20)

@@ -11,6 +11,7 @@ replayed: a coordinate, A_um and a TED changed with openpyxl, recalculated, comp
 from __future__ import annotations
 
 import json
+import math
 import tomllib
 from pathlib import Path
 
@@ -56,10 +57,19 @@ def budget_pairs(values, results: dict, layout: dict):
                 out.append((f"{sheet}!{c[key]} {where} {r['input']} {json_key}",
                             values[sheet].get(c[key]), r[json_key]))
 
+    def thermal(sheet, where, cells, json_rows):
+        assert len(cells) == len(json_rows), where
+        for c, r in zip(cells, json_rows):
+            for key, json_key in (("value", "value"), ("sensitivity", "sensitivity"), ("u", "u"),
+                                  ("contribution", "contribution_um")):
+                out.append((f"{sheet}!{c[key]} {where} {r['input']} {json_key}",
+                            values[sheet].get(c[key]), r[json_key]))
+
     def distance(cc, entry, where):
         for v in entry["variants"]:
             bc = cc.variants[v["variant"]]
             rows(bc.sheet, f"{where} [{v['variant']}]", bc.rows, v["rows"])
+            thermal(bc.sheet, f"{where} [{v['variant']}] W", bc.thermal, v.get("workpiece_rows", []))
             for key, json_key in (("value", "value_mm"), ("u", "u_um"), ("U", "U_um")):
                 out.append((f"{bc.sheet}!{getattr(bc, key)} {where} [{v['variant']}] {json_key}",
                             values[bc.sheet].get(getattr(bc, key)), v[json_key]))
@@ -406,3 +416,39 @@ def test_cli_exit_status_2_names_file_and_characteristic(tmp_path):
 def test_datum_models_need_a_datum_system():
     bad(lambda d: d.pop("datum_system"), "needs a \\[datum_system\\]",
         "[[characteristics]] #1 key 'model'")
+
+
+#: the part's temperature with every row (docs/workpiece.md): aluminium, two readings 0.4 K apart, a CMM
+#: that does not correct (the expansion left in the result, carried in quadrature)
+WORKPIECE = {"material": "aluminium", "u_alpha_ppm_per_K": 1.0, "T_readings_degC": [23.3, 23.7], "u_T_K": 0.3,
+             "corrected": False}
+
+
+@pytest.mark.parametrize("engine", ENGINES)
+def test_the_part_temperature_rows_are_live_in_every_engine(tmp_path, engine):
+    """With [workpiece] every budget (chosen and other variants, a position's two distances) gains the
+    rows alpha, T, dT, b in the paper's layout; every cell agrees with the JSON, and the W part of a
+    distance's u is l u(eps) (sensitivities -l (T - 20), -l alpha)."""
+    doc = knuckle_doc()
+    doc["workpiece"] = dict(WORKPIECE)
+    task, results, layout = build(doc, tmp_path / "knuckle_W.xlsx")
+    u_eps = math.sqrt((3.5 * 1.0) ** 2 + 23.1**2 * (0.3**2 + 0.4**2 / 12) + (23.1 * 3.5) ** 2)
+    n = 0
+    for ch in results["characteristics"]:
+        for d in ([ch] if ch["model"] != "position" else ch["distances"]):
+            assert d["u_W_um"] == pytest.approx(d["value_mm"] * u_eps * 1e-3, rel=1e-12), d["name"]
+            assert [r["input"] for r in d["workpiece_rows"]] == ["alpha", "T", "dT", "b_uncorrected"]
+            n += 1
+    assert n >= 8
+    assert assert_workbook_matches(recalc(tmp_path / "knuckle_W.xlsx", engine), results, layout) > 400
+
+
+def test_W_off_is_one_key_and_the_paper_tables_stay(tmp_path):
+    """enabled = false keeps the inputs and rows (u = 0): u, U of every characteristic are the
+    paper's, as without the table."""
+    plain = budget_job.compute(budget_job.load(KNUCKLE, knuckle_doc()))
+    doc = knuckle_doc()
+    doc["workpiece"] = dict(WORKPIECE, enabled=False)
+    off = budget_job.compute(budget_job.load(KNUCKLE, doc))
+    for a, b in zip(plain["characteristics"], off["characteristics"]):
+        assert (a["u_um"], a["U_um"], a["value_mm"]) == (b["u_um"], b["U_um"], b["value_mm"]), a["name"]

@@ -15,6 +15,7 @@ import pytest
 
 from cmmwb.xlfuncs import features, partial, pointcloud
 from cmmwb.xlfuncs.errors import ConvergenceError, DegenerateGeometryError, ModelError
+from cmmwb.xlfuncs.model import Workpiece
 
 
 def random_rotation(rng):
@@ -79,19 +80,23 @@ def random_points(element, rng, m, space=False):
     return X, N @ Q.T, truth, kw
 
 
+#: the part's temperature (the factor W): aluminium at 23.5 °C, held 150-200 mm away from the features
+PART = Workpiece(23.1, 23.5, fixture_mm=(-150.0, 80.0, -40.0))
+
+
 def cloud_for(X, N, rng):
-    """Two probes with offsets, points assigned at random."""
+    """Two probes with offsets, points assigned at random; the part's W."""
     probes = (pointcloud.Probe("P1", (0.0, 0.0, -60.0)),
               pointcloud.Probe("P2", (40.0, -10.0, -45.0), sigma_PQ_um=0.4))
     k = rng.integers(0, 2, size=X.shape[0])
-    return pointcloud.PointCloud(X, N, k, probes)
+    return pointcloud.PointCloud(X, N, k, probes, workpiece=PART)
 
 
 #: every factor contributes visibly on 10-100 mm features
 PARAMS = pointcloud.Parameters(
     sigma_R_um=0.6, sigma_S_ppm=8.0, sigma_Sa_ppm=6.0, sigma_Q_ppm=6.0, sigma_PQ_um=0.5,
     sigma_ET_um=1.0, lambda_ET_mm=60.0, sigma_ER_urad=15.0, lambda_ER_mm=150.0,
-    sigma_P0_um=0.3, sigma_P_um=0.5, lambda_P=0.8)
+    sigma_P0_um=0.3, sigma_P_um=0.5, lambda_P=0.8, u_alpha_ppm_per_K=1.0, u_T_K=0.3)
 
 
 # ---- an independent refit for the Monte Carlo -----------------------------------------------

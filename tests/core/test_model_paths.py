@@ -1,4 +1,5 @@
-"""Every evaluation path of the six-factor model against its one definition (xlfuncs.model).
+"""Every evaluation path of the six-factor model and the workpiece's W against its one definition
+(xlfuncs.model).
 
 The six factor covariances of Forbes 2025 eq. (28) are defined once, in block form
 (:func:`xlfuncs.model.factor_block`, points I x points J) and diagonal form
@@ -16,6 +17,7 @@ the search finds them).
 from __future__ import annotations
 
 import re
+from dataclasses import replace
 from fnmatch import fnmatch
 from pathlib import Path
 
@@ -30,27 +32,45 @@ from cmmwb.xlfuncs.locator import model as lm
 from cmmwb.xlfuncs.locator import simulate as sm
 from cmmwb.xlfuncs.locator.structured import StructuredCovariance
 from cmmwb.xlfuncs.locator.structured_lengths import LengthCovariance, structure_check
-from cmmwb.xlfuncs.model import FACTORS, MPE1, TABLE3, factor_block, factor_diagonal, gauss_kernel, sq_dists
+from cmmwb.xlfuncs.model import (
+    FACTORS,
+    MPE1,
+    TABLE3,
+    Workpiece,
+    factor_block,
+    factor_diagonal,
+    gauss_kernel,
+    sq_dists,
+)
+from cmmwb.xlfuncs.model.hyperparameters import in_table
 
 ROOT = Path(__file__).resolve().parents[2]
 
 PARAMS = pc.Parameters(sigma_R_um=0.2, sigma_S_ppm=0.7, sigma_Sa_ppm=0.5, sigma_Q_ppm=0.9, sigma_PQ_um=0.2,
                        sigma_ET_um=0.3, lambda_ET_mm=150, sigma_ER_urad=4.0, lambda_ER_mm=350,
-                       sigma_P0_um=0.1, sigma_P_um=0.15, lambda_P=0.5)
+                       sigma_P0_um=0.1, sigma_P_um=0.15, lambda_P=0.5, u_alpha_ppm_per_K=1.0, u_T_K=0.3)
+#: the factor W with every term: a part at 23.5 °C corrected with a nominal alpha off by 1e-6/K (the
+#: uncorrected expansion), 0.4 K across it, held away from the origin
+PART = Workpiece(23.0, 23.5, alpha_corr_ppm_per_K=22.0, fixture_mm=(10.0, -20.0, 5.0), dT_K=0.4)
 PROBES = (pc.Probe("P1", (0.0, 0.0, -50.0)),
           pc.Probe("P2", (10.0, 40.0, -30.0), sigma_PQ_um=0.3, sigma_P0_um=0.05, lambda_P=0.7),
           pc.Probe("P3", (-20.0, 5.0, -10.0), sigma_P_um=0.0))
 
 
-def make_cloud(m: int, seed: int = 1, probes=PROBES) -> pc.PointCloud:
+def make_cloud(m: int, seed: int = 1, probes=PROBES, part=PART, temperatures: bool = True) -> pc.PointCloud:
+    """m random points; with the part PART and (``temperatures``) a temperature per point (records at
+    several temperatures: the general rank-3 W), or the part's one temperature."""
     rng = np.random.default_rng(seed)
     X = rng.uniform(-300.0, 300.0, (m, 3))
     N = rng.normal(size=(m, 3))
     N /= np.linalg.norm(N, axis=1)[:, None]
-    return pc.PointCloud(X, N, rng.integers(0, len(probes), m), probes)
+    t = part.T_degC + rng.uniform(-2.0, 2.0, m) if part is not None and temperatures else None
+    return pc.PointCloud(X, N, rng.integers(0, len(probes), m), probes, workpiece=part, temperature_C=t)
 
 
 CLOUD = make_cloud(40)
+#: the paths of large recordings refuse the factor W (xlfuncs.locator.structured.NO_WORKPIECE)
+MACHINE_CLOUD = replace(CLOUD, workpiece=None, temperature_C=None)
 
 
 def rel_err(a, b) -> float:
@@ -118,20 +138,25 @@ def test_pair_blocks_are_V_ii_plus_V_jj_minus_the_cross_blocks(dense):
             assert np.max(np.abs(pb[f][q] - ref)) <= 1e-12 * max(np.max(np.abs(dense[f])), 1e-300), f
 
 
-def test_distance_components_are_the_quadratic_form_of_eq_29(dense):
+@pytest.mark.parametrize("temperatures", [True, False])
+def test_distance_components_are_the_quadratic_form_of_eq_29(temperatures):
     """Both the all-pairs kernel and the given-pairs path; u = sqrt(g^T V g) cancels, so the
-    dense reference holds about 9 digits."""
-    pairs = pc.all_pairs(CLOUD.m)[::37]
-    every = pc.distance_components(CLOUD, PARAMS)
-    given = pc.distance_components(CLOUD, PARAMS, pairs)
+    dense reference holds about 9 digits.  W with a temperature per point (its columns) and with the
+    part's one temperature (d u(eps))."""
+    cloud = make_cloud(40, temperatures=temperatures)
+    dense = factor_block(cloud, PARAMS)
+    pairs = pc.all_pairs(cloud.m)[::37]
+    every = pc.distance_components(cloud, PARAMS)
+    given = pc.distance_components(cloud, PARAMS, pairs)
     for q, (i, j) in enumerate(pairs):
-        n = (CLOUD.X_mm[j] - CLOUD.X_mm[i]) / np.linalg.norm(CLOUD.X_mm[j] - CLOUD.X_mm[i])
-        g = np.zeros(3 * CLOUD.m)
+        n = (cloud.X_mm[j] - cloud.X_mm[i]) / np.linalg.norm(cloud.X_mm[j] - cloud.X_mm[i])
+        g = np.zeros(3 * cloud.m)
         g[3 * i:3 * i + 3], g[3 * j:3 * j + 3] = -n, n
         for f in FACTORS:
             ref = np.sqrt(max(g @ dense[f] @ g, 0.0))
             assert every[f"u_{f}_um"][37 * q] == pytest.approx(ref, rel=1e-9, abs=1e-12), f
             assert given[f"u_{f}_um"][q] == pytest.approx(ref, rel=1e-9, abs=1e-12), f
+        assert given["u_W_um"][q] > 0.1
 
 
 # ---- the paths that never form V_X -----------------------------------------------------------
@@ -158,9 +183,9 @@ def test_the_low_rank_unit_kernel_is_the_model_kernel():
 
 @pytest.mark.parametrize("dims", [3, 2])
 def test_the_structured_point_covariance_applies_the_dense_C_within_eps_C(dims):
-    S = StructuredCovariance(CLOUD, PARAMS, dims)
+    S = StructuredCovariance(MACHINE_CLOUD, PARAMS, dims)
     keep = np.array([3 * i + a for i in range(CLOUD.m) for a in range(dims)])
-    C = pc.V_X(CLOUD, PARAMS)[np.ix_(keep, keep)]
+    C = pc.V_X(MACHINE_CLOUD, PARAMS)[np.ix_(keep, keep)]
     U = np.vstack([blk for _i0, _i1, blk in S.blocks()])
     v = np.random.default_rng(2).normal(size=(C.shape[0], 3))
     Cv = S.d * v + U @ (U.T @ v)
@@ -172,13 +197,20 @@ def test_the_structured_point_covariance_applies_the_dense_C_within_eps_C(dims):
 def test_the_structured_length_covariance_applies_the_dense_C_within_eps_C():
     m = 30
     I, J = np.zeros(m - 1, dtype=int), np.arange(1, m)      # one shared start, own ends
-    cloud = make_cloud(m, seed=6)
+    cloud = make_cloud(m, seed=6, part=None)
     assert structure_check(I, J, m) is None
     L = LengthCovariance(cloud, PARAMS, I, J)
     C = lm.length_covariance(cloud, PARAMS, I, J)
     v = np.random.default_rng(3).normal(size=(len(I), 2))
     slack = L.eps_C + 1e-12 * np.max(np.abs(C))
     assert np.all(np.linalg.norm(L.matvec(v) - C @ v, axis=0) <= slack * np.linalg.norm(v, axis=0))
+
+
+def test_the_structured_operators_refuse_the_factor_W_with_the_way_out():
+    with pytest.raises(pc.ModelError, match=r"\[workpiece\].*dense"):
+        StructuredCovariance(CLOUD, PARAMS, 3)
+    with pytest.raises(pc.ModelError, match=r"\[workpiece\].*dense"):
+        LengthCovariance(make_cloud(30, seed=6), PARAMS, np.zeros(29, dtype=int), np.arange(1, 30))
 
 
 def test_the_locator_length_covariance_is_G_V_X_G_T_also_its_derivative():
@@ -221,7 +253,9 @@ def test_the_monte_carlo_sampler_draws_the_model():
 
 
 def test_the_simulator_draws_the_model():
-    cloud = make_cloud(5, seed=10)
+    """The simulator draws the machine's six factors (the part's expansion is its planted
+    thermal_expansion effect)."""
+    cloud = make_cloud(5, seed=10, part=None)
     V = pc.V_X(cloud, PARAMS)
     rng = np.random.default_rng(11)
     M = 4000
@@ -289,7 +323,7 @@ def test_table3_is_not_typed_out_again():
 # same). Sets made up for a test (tests.helpers.tasks.ALL_FACTORS, PARAMS above: about six values
 # of twelve differ) are not retypings.
 
-TABLE3_KEYS = tuple(MPE1.__dataclass_fields__)
+TABLE3_KEYS = in_table("parameters")      # the machine's (Table 3 has no workpiece)
 ASSIGNMENT = re.compile(r"""(^[ \t]*)?["']?\b(%s)["']?[ \t]*[=:][ \t]*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)"""
                         % "|".join(TABLE3_KEYS), re.M)
 #: where Table 3 may be typed as TOML lines (test_table3_is_not_typed_out_as_text_again says why)

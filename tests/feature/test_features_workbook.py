@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 import openpyxl
 import pytest
+from openpyxl.utils import get_column_letter
 
 from cmmwb.generator.cli import build_task, main
 from cmmwb.generator.errors import InputError
@@ -82,12 +83,12 @@ def test_workbook_agrees_with_the_json(built, case, engine):
         n = r["parameter"]
         assert agree(r["value"], fe["parameters"][n]), f"{engine} {n} value {r['value']}"
         assert agree(r["u"], fe["u"][n]), f"{engine} {n} u {r['u']} vs {fe['u'][n]}"
-    # Budget: the six components per parameter (Forbes 2025 section 5.6)
+    # Budget: the components per parameter, the six factors and W (Forbes 2025 section 5.6)
     cells = values["Budget"]
     for p, n in enumerate(names):
         scale, _ = feature_book.u_display(n)            # Budget shows u in µm, µrad or 1e-6
         for q, fac in enumerate(FACTORS):
-            got = cells[f"{'FGHIJK'[q]}{2 + p}"] / scale
+            got = cells[f"{get_column_letter(va_sheets.U_COLUMN + 1 + q)}{2 + p}"] / scale
             # compared as variances u_f^2: a component that is exactly zero (e.g. a rigid probe
             # offset on a radius) is sqrt(rounding) in both engines, ~1e-8 u, not 0
             ref = fe["components"][fac][n]

@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from cmmwb.generator.feature import book as feature_book
+from cmmwb.xlfuncs.model.hyperparameters import in_table
 
 from tests.helpers import EXAMPLES
 
@@ -20,7 +21,7 @@ ALL_FACTORS = dict(sigma_R_um=0.2, sigma_S_ppm=0.7, sigma_Sa_ppm=0.8, sigma_Q_pp
 def parameters_toml(params) -> str:
     """The ``[parameters]`` table of a task file holding ``params`` (a core ``Parameters``, e.g.
     Forbes 2025 Table 3 MPE1 from ``cmmwb.xlfuncs.model``), so that tests do not type it out."""
-    return "[parameters]\n" + "".join(f"{k} = {getattr(params, k)!r}\n" for k in params.__dataclass_fields__)
+    return "[parameters]\n" + "".join(f"{k} = {getattr(params, k)!r}\n" for k in in_table("parameters"))
 
 
 def machine_task_toml(params, probes, *, name: str = "cmm", extra: str = "") -> str:
@@ -33,8 +34,21 @@ def machine_task_toml(params, probes, *, name: str = "cmm", extra: str = "") -> 
     return text
 
 
+#: a [workpiece] table with every term of the factor W (docs/workpiece.md): an aluminium part at 23.5 °C,
+#: 0.4 K across it, corrected with a nominal alpha 1e-6/K off the part's, held at (10, -20, 5) mm
+WORKPIECE_ALL_TERMS = """[workpiece]
+alpha_ppm_per_K = 23.1
+u_alpha_ppm_per_K = 1.0
+T_degC = 23.5
+u_T_K = 0.3
+dT_K = 0.4
+alpha_corr_ppm_per_K = 22.1
+fixture_mm = [10.0, -20.0, 5.0]
+"""
+
+
 def write_random_task(folder: Path, seed: int, m: int = 8, probes: int = 2, name: str | None = None,
-                      labels: list[str] | None = None, mpe: bool = True) -> Path:
+                      labels: list[str] | None = None, mpe: bool = True, workpiece: str = "") -> Path:
     rng = np.random.default_rng(seed)
     X = rng.uniform(-300, 300, (m, 3))
     N = rng.normal(size=(m, 3))
@@ -57,7 +71,7 @@ def write_random_task(folder: Path, seed: int, m: int = 8, probes: int = 2, name
     mpe_txt = '[mpe]\nA_um = 1.5\nB_mm = 400\nK = 2\n' if mpe else ""
     path = folder / f"{name}.toml"
     path.write_text(f'[task]\nkind = "pointcloud"\nname = "{name}"\n\n{mpe_txt}\n[parameters]\n{params}\n\n'
-                    f'{probe_txt}[points]\nfile = "{name}.csv"\n')
+                    f'{probe_txt}[points]\nfile = "{name}.csv"\n' + (f"\n{workpiece}" if workpiece else ""))
     return path
 
 

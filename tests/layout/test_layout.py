@@ -329,3 +329,75 @@ def test_the_command_line_starts_without_the_locator_and_scipy():
     p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT)
     assert p.returncode == 0, p.stderr
     assert p.stdout.strip() == "[]"
+
+
+#: the GUM modules: decisions, statements, risks, degrees of freedom and the distributions they use
+GUM_MODULES = ("xlfuncs.conformity", "xlfuncs.dof", "xlfuncs.statement", "xlfuncs.global_risk",
+               "xlfuncs.distributions")
+
+
+def _reachable(graph: dict[str, set[str]], start: str) -> dict[str, str]:
+    """Every module ``start`` imports, directly or through others: module -> the one it came from."""
+    seen = {start: ""}
+    todo = [start]
+    while todo:
+        m = todo.pop()
+        for t in sorted(graph.get(m, ())):
+            if t not in seen:
+                seen[t] = m
+                todo.append(t)
+    return seen
+
+
+def test_the_gum_modules_do_not_import_the_locator():
+    """The JCGM 100/106 modules take their distributions from xlfuncs.distributions, not from the
+    mismatch locator (issue 35: dof took Student's t from xlfuncs.locator.stats)."""
+    graph = _graph()
+    bad = []
+    for gum in GUM_MODULES:
+        assert gum in graph, gum
+        reach = _reachable(graph, gum)
+        for m in reach:
+            if m == "xlfuncs.locator" or m.startswith("xlfuncs.locator."):
+                chain = [m]
+                while reach[chain[-1]]:
+                    chain.append(reach[chain[-1]])
+                bad.append(" <- ".join(chain))
+    assert not bad, bad
+
+
+def test_build_and_the_core_it_uses_do_not_import_the_locator():
+    """`cmmwb build` (every kind: the model records, V_X, budgets, features, characteristics,
+    decisions, the workpiece's W) reaches no module of the mismatch locator, directly or through
+    others: the locator is for diagnose and calibrate (issue 35)."""
+    graph = _graph()
+    reach = _reachable(graph, "generator.build")
+    core = {m for m in reach if m.startswith("xlfuncs.")}
+    assert {"xlfuncs.model.hyperparameters", "xlfuncs.model.workpiece", "xlfuncs.pointcloud", "xlfuncs.budget",
+            "xlfuncs.conformity", "xlfuncs.dof", "xlfuncs.distributions"} <= core
+    bad = []
+    for m in sorted(reach):
+        if m == "xlfuncs.locator" or m.startswith("xlfuncs.locator."):
+            chain = [m]
+            while reach[chain[-1]]:
+                chain.append(reach[chain[-1]])
+            bad.append(" <- ".join(chain))
+    assert not bad, bad
+
+
+def test_scipy_is_declared_where_the_core_imports_it():
+    """A module of xlfuncs or generator that imports scipy needs scipy in [project] dependencies
+    (issue 35: five core modules imported it, only the test extra had it)."""
+    import tomllib
+
+    deps = tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))["project"]["dependencies"]
+    declared = any(d.replace(" ", "").lower().startswith("scipy") for d in deps)
+    users = []
+    for name, path in _project_modules().items():
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            mods = ([a.name for a in node.names] if isinstance(node, ast.Import)
+                    else [node.module or ""] if isinstance(node, ast.ImportFrom) and not node.level else [])
+            if any(m.partition(".")[0] == "scipy" for m in mods):
+                users.append(name)
+    assert users, "no module imports scipy: drop it from the dependencies"
+    assert declared, f"scipy is imported by {sorted(set(users))} but not in [project] dependencies"

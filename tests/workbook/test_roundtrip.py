@@ -374,3 +374,46 @@ def test_labels_that_look_like_formulas_come_back_in_the_task_file_not_a_csv(tmp
     doc = tomllib.loads((tmp_path / "read" / "read" / "task.toml").read_text(encoding="utf-8"))
     assert [r["id"] for r in doc["points"]["rows"]] == ["=SUM(A1)", "+1", "-2", "@x", "Q5"]
     assert not list((tmp_path / "read" / "read").glob("*.csv"))
+
+
+# -- the part's temperature (the factor W, docs/workpiece.md) -------------------------------------------
+
+def test_switching_W_on_in_a_workbook_reads_back_as_a_workpiece_table(tmp_path):
+    """A point-cloud book built without [workpiece] has the part's inputs with W off; typing the
+    part's values and workpiece_enabled = 1 reads back as [workpiece] (enabled = true) and rebuilds
+    to the results of that task file."""
+    kind, source = SOURCES["examples/stepgauge_I_MPE1.xlsx"]
+    task = source_task(kind, source, tmp_path / "task")
+    _, book = build(task, tmp_path / "built")
+    wb = openpyxl.load_workbook(book)
+    edits = {"workpiece_enabled": 1, "workpiece_alpha_ppm_per_K": 11.5, "workpiece_u_alpha_ppm_per_K": 1.0,
+             "workpiece_T_degC": 22.0, "workpiece_u_T_K": 0.2}
+    for name, value in edits.items():
+        named_cell(wb, name).value = value
+    wb.save(tmp_path / "edited.xlsx")
+    back = tmp_path / "read" / "task.toml"
+    read_to_files(tmp_path / "edited.xlsx", back)
+    doc = tomllib.loads(back.read_text(encoding="utf-8"))
+    assert doc["workpiece"] == {"enabled": True, "alpha_ppm_per_K": 11.5, "T_degC": 22.0,
+                                "u_alpha_ppm_per_K": 1.0, "u_T_K": 0.2}
+    direct = tomllib.loads(task.read_text(encoding="utf-8"))
+    direct["workpiece"] = {"alpha_ppm_per_K": 11.5, "u_alpha_ppm_per_K": 1.0, "T_degC": 22.0, "u_T_K": 0.2}
+    shutil.copy(task.parent / direct["points"]["file"], tmp_path / direct["points"]["file"])
+    want, _ = build(write_task(direct, tmp_path), tmp_path / "direct")
+    got, _ = build(back, tmp_path / "rebuilt")
+    assert without_provenance(got) == without_provenance(want)
+    assert got["distances"][-1]["components_um"]["W"] > 0
+
+
+def test_a_budget_with_the_part_temperature_reads_back_to_itself(tmp_path):
+    source = EXAMPLES / "knuckle.toml"
+    doc = tomllib.loads(source.read_text(encoding="utf-8"))
+    doc["workpiece"] = {"material": "aluminium", "u_alpha_ppm_per_K": 1.0, "T_readings_degC": [23.3, 23.7],
+                        "u_T_K": 0.3, "corrected": False}
+    first, book = build(write_task(doc, tmp_path / "task", "knuckle.toml"), tmp_path / "built")
+    again = read_and_build(book, tmp_path)
+    # the same warning (the uncorrected expansion), naming the task file it was read from
+    assert [w.split(", ", 1)[1] for w in again.pop("warnings")] == [w.split(", ", 1)[1] for w in first.pop("warnings")]
+    assert without_provenance(again) == without_provenance(first)
+    back = tomllib.loads((tmp_path / "read" / "task.toml").read_text(encoding="utf-8"))
+    assert back["workpiece"] == doc["workpiece"]

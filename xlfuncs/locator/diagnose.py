@@ -45,6 +45,7 @@ import math
 
 import numpy as np
 
+from ..distributions import chi2_logsf, chi2_sf, f_logcdf, f_logsf
 from ..errors import ModelError
 from . import effects as fx
 from .linalg import Whitener, cancorr, gls, orth, project_out, structured_whitener
@@ -87,7 +88,6 @@ from .search import (
     search,
     why_zero,
 )
-from .stats import chi2_logsf, chi2_sf, f_logcdf, f_logsf
 
 __all__ = ["diagnose", "diagnose_prepared", "effect_covariance", "check_alphas", "NAME_SHARE",
            "Model", "Prepared", "prepare", "resolve_probes", "kabsch", "uses_structured", "is_structured",

@@ -15,6 +15,7 @@ from .. import memory
 from .. import pointcloud as pc
 from .. import record_covariance as rc
 from ..errors import ModelError
+from ..model.workpiece import Workpiece
 from . import effects as fx
 from . import structured_lengths as sl
 from .recordings import LengthRecords, PointRecords, RecordingsError
@@ -27,11 +28,14 @@ from .recordings import LengthRecords, PointRecords, RecordingsError
 class Model:
     """What the recordings are compared with: the task's ``[parameters]`` and ``[[probes]]``
     (``probes_given`` False when the task has no ``[[probes]]``: every probe then uses the
-    task-wide parameters and the offsets of the records, or zero)."""
+    task-wide parameters and the offsets of the records, or zero), and the artefact's temperature
+    (``workpiece``, the task's ``[workpiece]``: the factor W of docs/workpiece.md, acting with each
+    record's ``temperature_C``, or the task's T where the records have none)."""
 
     params: pc.Parameters
     probes: tuple[pc.Probe, ...] = (pc.Probe("P1"),)
     probes_given: bool = False
+    workpiece: Workpiece | None = None
 
 
 def _probe_label(p: np.ndarray, model: Model) -> str:
@@ -203,7 +207,15 @@ def prepare(rec: LengthRecords | PointRecords, model: Model, structured: bool | 
         k1 = np.array([index[p] for p in ids_per_end[0]], dtype=int)
         k2 = np.array([index[p] for p in ids_per_end[1]], dtype=int)
         X, N, K, I, J = _unique_probings(rec, k1, k2)
-        cloud = pc.PointCloud(X, N, K, probes, tuple(f"Q{q + 1}" for q in range(len(X))))
+        t_probing = None
+        if model.workpiece is not None and T is not None:
+            # a probing's temperature: that of the last record using it (as the simulator draws it)
+            last = np.full(len(X), -1)
+            np.maximum.at(last, I, np.arange(rec.n))
+            np.maximum.at(last, J, np.arange(rec.n))
+            t_probing = T[last]
+        cloud = pc.PointCloud(X, N, K, probes, tuple(f"Q{q + 1}" for q in range(len(X))),
+                              workpiece=model.workpiece, temperature_C=t_probing)
         P1, P2 = offsets[k1], offsets[k2]
         delta = rec.X2_mm - rec.X1_mm
         na = delta / np.linalg.norm(delta, axis=1)[:, None]
@@ -234,7 +246,8 @@ def prepare(rec: LengthRecords | PointRecords, model: Model, structured: bool | 
     design = fx.Design("point", probe_ids, offsets_given, T=T, t=t, Y=Y, U=Y - P, N=rec.N, k=k, P=P,
                        c=c, dims=dims,
                        extent_mm=float(np.max(np.linalg.norm(Y - c, axis=1))) or 1.0)
-    cloud = pc.PointCloud(rec.X_mm, N, k, probes, tuple(rec.ids))
+    cloud = pc.PointCloud(rec.X_mm, N, k, probes, tuple(rec.ids), workpiece=model.workpiece,
+                          temperature_C=T if model.workpiece is not None else None)
     if uses_structured(rec, model, structured):
         from .structured import StructuredCovariance
 

@@ -9,11 +9,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..distributions import chi2_logsf, f_logcdf, f_logsf
 from . import effects as fx
 from .linalg import Whitener, gls, psd_chi2
 from .model import Prepared, group_labels, is_structured
 from .search import Candidate, Search, record_obs, refit
-from .stats import chi2_logsf, f_logcdf, f_logsf
 
 
 @dataclass

@@ -10,10 +10,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..distributions import chi2_logsf, f_logsf
 from . import effects as fx
 from .linalg import Whitener, cancorr, gls, orth, project_out
 from .model import Prepared, is_structured
-from .stats import chi2_logsf, f_logsf
 
 ALIAS_CORR = 0.98           # docs/recordings.md section 3.3
 EXACT_ALIAS = 1.0 - 1e-5    # "exact" aliases: canonical correlation 1 up to the noise of indicated

@@ -38,9 +38,22 @@ from .. import lowrank as lr
 from .. import pointcloud as pc
 from ..errors import ModelError
 from ..model import G_S, skew
+from ..model.hyperparameters import PROBE_OVERRIDES
 
 #: points per block of the passes over U
 BLOCK_POINTS = 4096
+
+#: the factor W is not (yet) a block of U: what the structured operators answer a task with it
+NO_WORKPIECE = ("the factor W (the workpiece's temperature, [workpiece]) is not in the structured record "
+                "covariance of large recordings: use the dense covariance (--exact; diagnose: at most "
+                "6,000 point observations by default, calibrate: --covariance dense) or leave [workpiece] "
+                "out of the task (or set [workpiece] enabled = false)")
+
+
+def refuse_workpiece(cloud: pc.PointCloud) -> None:
+    """:data:`NO_WORKPIECE` as a ModelError when the cloud carries the factor W, switched on."""
+    if cloud.W_on:
+        raise ModelError(NO_WORKPIECE)
 
 
 @dataclass
@@ -58,6 +71,7 @@ class StructuredCovariance:
         p = self.params
         if p.sigma_R_um <= 0:
             raise ModelError("the structured record covariance needs sigma_R_um > 0")
+        refuse_workpiece(self.cloud)
         self.d = p.sigma_R_um ** 2
         cloud = self.cloud
         self.pa = pc.probe_arrays(cloud, p)
@@ -158,7 +172,7 @@ class StructuredCovariance:
         if "ER" in self.facs:
             LER = self.facs["ER"][0].rows(self.U_ram[sl]).T * (p.sigma_ER_urad * pc.MILLI)
         N = cloud.N[sl]
-        sPQ, s0, sp = (self.pa[n][sl] for n in ("sigma_PQ_um", "sigma_P0_um", "sigma_P_um"))
+        sPQ, s0, sp = (self.pa[n][sl] for n in PROBE_OVERRIDES[:3])   # sigma_PQ_um, sigma_P0_um, sigma_P_um
         offsets = np.array([pr.offset_mm for pr in cloud.probes], dtype=float).reshape(-1, 3)
         for q in range(len(cloud.probes)):
             here = np.flatnonzero(kp == q)

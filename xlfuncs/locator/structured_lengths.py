@@ -49,7 +49,7 @@ from ..errors import ModelError
 from ..execution import ThreadBackend
 from ..memory import ResourceError, available_bytes
 from ..model import scale_rows
-from .structured import GramWhitener
+from .structured import GramWhitener, refuse_workpiece
 
 #: records per block of the passes over U
 BLOCK_RECORDS = 4096
@@ -96,6 +96,7 @@ class LengthCovariance:
         p, cloud = self.params, self.cloud
         if p.sigma_R_um <= 0:
             raise ModelError("the structured record covariance needs sigma_R_um > 0")
+        refuse_workpiece(cloud)
         self.I = np.asarray(self.I, dtype=int)
         self.J = np.asarray(self.J, dtype=int)
         why = structure_check(self.I, self.J, cloud.m)

@@ -1,4 +1,4 @@
-"""The six factor covariances of Forbes 2025 eq. (28), defined once (µm²).
+"""The six factor covariances of Forbes 2025 eq. (28), and the workpiece's W, defined once (µm²).
 
 ====  ==========================================  =====================
 R     repeatability                               eq. (8)
@@ -7,6 +7,7 @@ S     scale and squareness, G(x_i - p_k(i))       eqs. (10)-(14)
 ET    spatially correlated location errors (GP)   eqs. (20)-(21), 5.3
 ER    spatially correlated rotation errors (GP)   eqs. (22)-(25)
 P     probing: radius + direction-correlated GP   eqs. (26)-(27)
+W     workpiece expansion about the fixture       docs/workpiece.md
 ====  ==========================================  =====================
 
 The spatial kernels of ET and ER act on the machine (ram) positions ``x_i - p_k(i)``
@@ -32,23 +33,35 @@ import numpy as np
 
 from ..errors import ModelError
 from .geometry import G_S, skew, sq_dists
+from .hyperparameters import PROBE_OVERRIDES, S_COLUMNS
 from .parameters import FACTORS, MILLI, Parameters, PointCloud
 
 
 def V_S_diag_um_per_mm2(params: Parameters) -> np.ndarray:
     """Diagonal of V_B of eq. (13), converted from ppm² to (µm/mm)²."""
-    s = np.array([params.sigma_S_ppm, params.sigma_Sa_ppm, params.sigma_Sa_ppm, params.sigma_Sa_ppm,
-                  params.sigma_Q_ppm, params.sigma_Q_ppm, params.sigma_Q_ppm]) * MILLI
+    s = np.array([getattr(params, n) for n in S_COLUMNS]) * MILLI
     return s**2
 
 
 def probe_arrays(cloud: PointCloud, params: Parameters) -> dict[str, np.ndarray]:
-    """Per point (length m): the sigma_PQ_um, sigma_P0_um, sigma_P_um and lambda_P of its probe,
-    per-probe overrides resolved against the task-wide defaults."""
+    """Per point (length m): the hyper-parameters a probe may override (``PROBE_OVERRIDES``:
+    sigma_PQ_um, sigma_P0_um, sigma_P_um, lambda_P) of its probe, per-probe overrides resolved
+    against the task-wide defaults."""
     probes = [p.resolved(params) for p in cloud.probes]
     k = cloud.probe_index
-    return {n: np.array([getattr(p, n) for p in probes], dtype=float)[k]
-            for n in ("sigma_PQ_um", "sigma_P0_um", "sigma_P_um", "lambda_P")}
+    return {n: np.array([getattr(p, n) for p in probes], dtype=float)[k] for n in PROBE_OVERRIDES}
+
+
+def workpiece_columns(cloud: PointCloud, params: Parameters) -> np.ndarray:
+    """K of V_W = K K^T, per point (m x 3 x 3, µm): (x_i - x0) times the three coefficients of
+    :meth:`xlfuncs.model.workpiece.Workpiece.coefficients_ppm` (10^-6; ppm x mm = 10^-3 µm).
+    Zeros without a workpiece or with W switched off."""
+    wp = cloud.workpiece
+    if wp is None or not wp.enabled:
+        return np.zeros((cloud.m, 3, 3))
+    c = wp.coefficients_ppm(params.u_alpha_ppm_per_K, params.u_T_K, cloud.temperature_C, cloud.m)
+    w = cloud.X_mm - np.asarray(wp.fixture_mm)
+    return w[:, :, None] * (c * MILLI)[:, None, :]
 
 
 def gauss_kernel(D2: np.ndarray, lam2, d_log_lambda: bool = False) -> np.ndarray:
@@ -138,6 +151,10 @@ def factor_block(cloud: PointCloud, params: Parameters, I=None, J=None, factors:
             V_DP = same * (radius + spp * kern)
             NN = np.einsum("ia,jb->iajb", N[I], N[J]).reshape(shape)
             out[f] = np.kron(V_DP, np.ones((3, 3))) * NN
+        elif f == "W":
+            # docs/workpiece.md: u^2(eps) (x_i - x0)(x_j - x0)^T, as K_I K_J^T
+            K = workpiece_columns(cloud, params)
+            out[f] = K[I].reshape(-1, 3) @ K[J].reshape(-1, 3).T
     return out
 
 
@@ -169,4 +186,7 @@ def factor_diagonal(cloud: PointCloud, params: Parameters, factors: Sequence[str
             sP, s0 = pa["sigma_P_um"], pa["sigma_P0_um"]
             v = (0.0 if d_log_lambda else s0**2) + sP**2 * k0
             out[f] = v[:, None, None] * np.einsum("ia,ib->iab", cloud.N, cloud.N)
+        elif f == "W":
+            K = workpiece_columns(cloud, params)
+            out[f] = K @ K.transpose(0, 2, 1)
     return out

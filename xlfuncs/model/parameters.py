@@ -14,8 +14,10 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from ..errors import ModelError
+from .hyperparameters import FACTORS, MACHINE_SIGMAS, PARTNER, PROBE_OVERRIDES
+from .workpiece import Workpiece
 
-FACTORS: tuple[str, ...] = ("R", "PQ", "S", "ET", "ER", "P")
+__all__ = ["FACTORS", "MILLI", "MAX_PARAMETER", "MIN_LENGTH_SCALE", "Parameters", "Probe", "PointCloud"]
 
 #: conversion of ppm*mm (or µrad*mm) to µm
 MILLI = 1e-3
@@ -36,7 +38,8 @@ def _check_length_scale(lam_name: str, lam: float, sigma_name: str, sigma: float
 class Parameters:
     """Statistical hyper-parameters of Forbes 2025, Tables 1 and 3 (task-file names and units).
 
-    ``sigma_PQ_um``, ``sigma_P0_um``, ``sigma_P_um`` and ``lambda_P`` are defaults that a
+    One field per record of :data:`xlfuncs.model.hyperparameters.HYPERPARAMETERS`, in its order
+    (checked by ``tests/core/test_hyperparameters.py``); those with ``per_probe`` are defaults that a
     probe may override.
     """
 
@@ -52,12 +55,11 @@ class Parameters:
     sigma_P0_um: float = 0.0
     sigma_P_um: float = 0.0
     lambda_P: float = 0.0
+    u_alpha_ppm_per_K: float = 0.0
+    u_T_K: float = 0.0
 
-    #: names of the standard-deviation parameters, rescaled by C_max (section 6.8)
-    SIGMAS = (
-        "sigma_R_um", "sigma_S_ppm", "sigma_Sa_ppm", "sigma_Q_ppm", "sigma_PQ_um",
-        "sigma_ET_um", "sigma_ER_urad", "sigma_P0_um", "sigma_P_um",
-    )
+    #: names of the machine's standard-deviation parameters, rescaled by C_max (section 6.8)
+    SIGMAS = MACHINE_SIGMAS
 
     def __post_init__(self) -> None:
         for name in self.__dataclass_fields__:
@@ -68,8 +70,7 @@ class Parameters:
                 raise ModelError(f"{name} must not be negative, got {value!r}")
             if value > MAX_PARAMETER:
                 raise ModelError(f"{name} = {value!r} is beyond any CMM (at most {MAX_PARAMETER:g})")
-        for sigma, lam in (("sigma_ET_um", "lambda_ET_mm"), ("sigma_ER_urad", "lambda_ER_mm"),
-                           ("sigma_P_um", "lambda_P")):
+        for lam, sigma in PARTNER.items():
             _check_length_scale(lam, getattr(self, lam), sigma, getattr(self, sigma))
 
     def scaled(self, factor: float) -> "Parameters":
@@ -94,11 +95,13 @@ class Probe:
     def resolved(self, params: Parameters) -> "Probe":
         """A copy with every ``None`` replaced by the task-wide default."""
         vals = {n: getattr(params, n) if getattr(self, n) is None else getattr(self, n)
-                for n in ("sigma_PQ_um", "sigma_P0_um", "sigma_P_um", "lambda_P")}
+                for n in PROBE_OVERRIDES}
         for n, v in vals.items():
             if not math.isfinite(v) or v < 0 or v > MAX_PARAMETER:
                 raise ModelError(f"probe {self.id}: {n} must be a finite number from 0 to {MAX_PARAMETER:g}")
-        _check_length_scale(f"probe {self.id}: lambda_P", vals["lambda_P"], "sigma_P_um", vals["sigma_P_um"])
+        for lam, sigma in PARTNER.items():
+            if lam in vals:
+                _check_length_scale(f"probe {self.id}: {lam}", vals[lam], sigma, vals[sigma])
         return replace(self, **vals)
 
 
@@ -106,7 +109,9 @@ class Probe:
 class PointCloud:
     """Measured points x_i (mm), outward unit normals n_i and the probe used for each point.
 
-    ``probe_index[i]`` indexes ``probes``.  ``labels`` are the point ids.
+    ``probe_index[i]`` indexes ``probes``.  ``labels`` are the point ids.  ``workpiece``: the part's
+    thermal state (the factor W, :mod:`xlfuncs.model.workpiece`; None: no W), ``temperature_C``
+    the temperature at each point's probing (records of a calibration; None: the part's T).
     """
 
     X_mm: np.ndarray
@@ -114,6 +119,8 @@ class PointCloud:
     probe_index: np.ndarray
     probes: tuple[Probe, ...]
     labels: tuple[str, ...] = field(default=())
+    workpiece: Workpiece | None = None
+    temperature_C: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         X = np.asarray(self.X_mm, dtype=float)
@@ -134,6 +141,16 @@ class PointCloud:
         object.__setattr__(self, "probe_index", k)
         if not self.labels:
             object.__setattr__(self, "labels", tuple(f"X{i + 1}" for i in range(X.shape[0])))
+        if self.temperature_C is not None:
+            t = np.asarray(self.temperature_C, dtype=float)
+            if t.shape != (X.shape[0],) or not np.all(np.isfinite(t)):
+                raise ModelError("temperatures must be one finite number (°C) per point")
+            object.__setattr__(self, "temperature_C", t)
+
+    @property
+    def W_on(self) -> bool:
+        """Whether the factor W acts (a workpiece, switched on)."""
+        return self.workpiece is not None and self.workpiece.enabled
 
     @property
     def m(self) -> int:
