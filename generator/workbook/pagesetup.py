@@ -84,7 +84,10 @@ def fit_widths(ws: Worksheet) -> None:
                 if not (bold and boxed) and right is None:
                     continue   # free text overflows into the empty cells to its right
                 if c.alignment is not None and c.alignment.wrap_text:
-                    continue
+                    if not (bold and boxed):
+                        continue
+                    # a wrapped header: its longest word must fit (the words wrap, a word is cut)
+                    text = max(text.split() or [""], key=len)
                 n = min(len(text), 40) * (1.1 if bold else 1.0)
             want[c.column] = max(want.get(c.column, 0.0), n)
     for column, n in want.items():
