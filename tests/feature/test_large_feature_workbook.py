@@ -156,9 +156,9 @@ def test_live_addin_layout_and_notes(bore):
                        "V_A", "Budget", large_book.LIVE, "Results", "xlwings.conf", "Summary"]   # no V_X sheets
     assert [c.value for c in wb["xlwings.conf"][1]] == ["UDF Modules", "cmmwb.xlfuncs.udf"]
     live = wb[large_book.LIVE]
-    args = '"cylinder",Points!$A$2:$H$121,Inputs!$A$17:$H$18,Inputs!$A$2:$B$13'
+    args = '"cylinder",Points!$A$2:$H$121,Inputs!$A$30:$H$31,Inputs!$A$2:$B$26'   # parameters with W's (issue 35)
     opts = '"",Local!$B$2:$B$121,$L$3:$N$3,$L$4:$N$4)'
-    assert live["A3"].value.text == f"=cmm_feature({args},{opts}" and live["A3"].value.ref == "A3:I9"
+    assert live["A3"].value.text == f"=cmm_feature({args},{opts}" and live["A3"].value.ref == "A3:J9"   # the u column of each factor, W included
     L, Gl = va_sheets.v_a_layout(5, 7)["ET"]
     c = live.cell(row=Gl.row, column=Gl.column).value
     assert c.text == f'=cmm_feature_va({args},"ET",{opts}' and c.ref == "I43:O49"
