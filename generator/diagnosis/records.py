@@ -86,14 +86,15 @@ POINT_MM_COLUMNS = frozenset({"x_nom", "y_nom", "z_nom", "x", "y", "z", "px", "p
 def shown(key: str, mm_columns) -> str:
     """The header a person reads for column ``key``: ``x1_mm`` for a coordinate of the
     recordings; an effect's design column ``name:label`` with its unit, µm of the record per unit
-    of the effect (``squareness_xy:squareness_xy (µm per µrad)``); other keys carry their unit
-    already (``residual_um``) or have none (``z``, ``n1x``)."""
+    of the effect (``squareness_xy: squareness_xy (µm per µrad)``, a space after the colon so that
+    a narrow column wraps it); other keys carry their unit already (``residual_um``) or have none
+    (``z``, ``n1x``)."""
     if key in mm_columns:
         return f"{key}_mm"
     if ":" in key:
         name = key.split(":", 1)[0]
         unit = "µm" if name == "outlier" else display_unit(fx.BY_NAME[name].unit)
-        return f"{key} (µm per {unit})"
+        return f"{key.replace(':', ': ', 1)} (µm per {unit})"
     return key
 
 
@@ -133,7 +134,7 @@ def _record_sheet(book: Book, rec, sheet: str, columns: list[str], derived: list
     heads = ([shown(h, mm_columns) for h in cols] + [f"{h} (recordings)" if h in taken else h for h in extras]
              + [shown(h, mm_columns) for h in derived])
     book.header(ws, 1, 1, heads, [notes.get(h) for h in cols] + [None] * len(extras) + [notes.get(h) for h in derived])
-    # the headers wrap (an effect's column is named "squareness_xy:squareness_xy (µm per µrad)"):
+    # the headers wrap (an effect's column is named "squareness_xy: squareness_xy (µm per µrad)"):
     # the columns are as wide as their numbers, fewer pages across
     for c in range(1, len(heads) + 1):
         cell_ = ws.cell(row=1, column=c)

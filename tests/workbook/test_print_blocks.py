@@ -72,5 +72,7 @@ def test_a_feature_book_breaks_its_v_a_before_a_block(tmp_path):
     build_task(EXAMPLES / "feature_cylinder_bore.toml", tmp_path, plots=False)
     ws = openpyxl.load_workbook(tmp_path / "cylinder_bore.xlsx")["V_A"]
     rows = [b.id + 1 for b in ws.row_breaks.brk]
-    captions = {c.row for c in ws["A"] if isinstance(c.value, str) and ": V_A," in c.value}
+    # the blocks' captions: one per factor (R ... W) and the total
+    captions = {c.row for c in ws["A"] if isinstance(c.value, str)
+                and (": V_A," in c.value or c.value.startswith("total: "))}
     assert rows and set(rows) <= captions
