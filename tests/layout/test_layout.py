@@ -356,14 +356,21 @@ def test_the_gum_modules_do_not_import_the_locator():
     bad = []
     for gum in GUM_MODULES:
         assert gum in graph, gum
-        reach = _reachable(graph, gum)
-        for m in reach:
-            if m == "xlfuncs.locator" or m.startswith("xlfuncs.locator."):
-                chain = [m]
-                while reach[chain[-1]]:
-                    chain.append(reach[chain[-1]])
-                bad.append(" <- ".join(chain))
+        bad += _locator_chains(_reachable(graph, gum))
     assert not bad, bad
+
+
+def _locator_chains(reach: dict) -> list[str]:
+    """Each module of the locator in ``reach`` ({module: the module that imports it}) with the
+    chain of imports that reaches it."""
+    bad = []
+    for m in sorted(reach):
+        if m == "xlfuncs.locator" or m.startswith("xlfuncs.locator."):
+            chain = [m]
+            while reach[chain[-1]]:
+                chain.append(reach[chain[-1]])
+            bad.append(" <- ".join(chain))
+    return bad
 
 
 def test_build_and_the_core_it_uses_do_not_import_the_locator():
@@ -375,13 +382,7 @@ def test_build_and_the_core_it_uses_do_not_import_the_locator():
     core = {m for m in reach if m.startswith("xlfuncs.")}
     assert {"xlfuncs.model.hyperparameters", "xlfuncs.model.workpiece", "xlfuncs.pointcloud", "xlfuncs.budget",
             "xlfuncs.conformity", "xlfuncs.dof", "xlfuncs.distributions"} <= core
-    bad = []
-    for m in sorted(reach):
-        if m == "xlfuncs.locator" or m.startswith("xlfuncs.locator."):
-            chain = [m]
-            while reach[chain[-1]]:
-                chain.append(reach[chain[-1]])
-            bad.append(" <- ".join(chain))
+    bad = _locator_chains(reach)
     assert not bad, bad
 
 
