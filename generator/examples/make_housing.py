@@ -7,20 +7,10 @@ is the measurement's error, not the part's)."""
 from pathlib import Path
 
 import numpy as np
+from make_characteristic_plate import _stable_unit  # the same folder (run from it): one fixed-point normal
 
 HERE = Path(__file__).parent
 NAME = "housing_W"
-
-
-def _stable_unit(n):
-    """n normalised until normalising again changes no bit (build -> read -> build exact)."""
-    n = np.asarray(n, float)
-    for _ in range(10):
-        m = n / np.linalg.norm(n)
-        if np.array_equal(m, n):
-            break
-        n = m
-    return n
 
 
 def _bore(cx, cy, d, lobes, amp, phase, tilt):
